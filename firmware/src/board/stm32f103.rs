@@ -1,0 +1,340 @@
+//! The real board: STM32F103RB at 72 MHz.
+//!
+//! Pin map (see README.md):
+//!
+//! | pin | function |
+//! |---|---|
+//! | PA0 | Hall proximity switch (NPN, pulled up), TIM2 CH1 input capture, falling edge |
+//! | PA8 | drum motor PWM, TIM1 CH1, 20 kHz |
+//! | PB12 | drum driver enable (high = run) |
+//! | PB13 | drum driver direction (low = forward) |
+//! | PA6 / PA7 | drum motor encoder A/B, TIM3 encoder mode |
+//! | PA9 / PA10 | USART1 TX/RX, touchscreen, 115200 8N1 |
+//! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable, RS-485 to the motor driver, 9600 8N1 |
+//! | PC13 | status LED (low = on) |
+
+use stm32f1xx_hal::{
+    gpio::{Output, PushPull, PA1, PB12, PB13, PC13},
+    pac::{self, TIM1, TIM2, TIM3, USART1, USART2},
+    prelude::*,
+    rcc,
+    serial::{self, Rx, Tx},
+    timer::Timer,
+};
+
+use defmt_rtt as _;
+
+use super::{SensorSample, DRUM_PWM_HZ, HALL_TIMER_HZ};
+
+/// Transmit half of the touchscreen UART.
+pub type HmiTx = Tx<USART1>;
+/// Receive half of the touchscreen UART.
+pub type HmiRx = Rx<USART1>;
+
+/// System clock.
+pub const SYSCLK_HZ: u32 = 72_000_000;
+/// TIM1 runs from PCLK2 = 72 MHz, TIM2/TIM3 from 2 × PCLK1 = 72 MHz.
+const TIMER_CLOCK_HZ: u32 = 72_000_000;
+
+/// Everything the application owns after [`init`].
+pub struct Board {
+    /// Touchscreen transmitter.
+    pub hmi_tx: HmiTx,
+    /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
+    pub hmi_rx: HmiRx,
+    /// Drum motor PWM and driver pins.
+    pub drum: DrumDrive,
+    /// Encoder and other polled sensors.
+    pub sensors: Sensors,
+    /// Hall capture timer (its interrupt is TIM2).
+    pub hall: HallCapture,
+    /// RS-485 link to the motor driver. Configured and kept idle (receive)
+    /// until the driver's speed read-back is used (docs/firmware.md).
+    #[allow(dead_code)]
+    pub rs485: Rs485,
+    /// Status LED.
+    pub led: StatusLed,
+    /// SysTick input frequency for the monotonic.
+    pub sysclk_hz: u32,
+}
+
+/// The RS-485 transceiver on USART2.
+#[allow(dead_code)]
+pub struct Rs485 {
+    /// Transmitter.
+    pub tx: Tx<USART2>,
+    /// Receiver.
+    pub rx: Rx<USART2>,
+    /// Driver enable, low = receive.
+    pub de: PA1<Output<PushPull>>,
+}
+
+/// Brings up clocks and peripherals. Called once from `init`, interrupts off.
+pub fn init(dp: pac::Peripherals) -> Board {
+    let mut flash = dp.FLASH.constrain();
+    let mut rcc = dp.RCC.freeze(
+        rcc::Config::hse(8.MHz())
+            .sysclk(SYSCLK_HZ.Hz())
+            .pclk1(36.MHz())
+            .pclk2(72.MHz()),
+        &mut flash.acr,
+    );
+    // Keep the debug connection (RTT) alive while the core sleeps in `wfi`.
+    dp.DBGMCU.cr().modify(|_, w| w.dbg_sleep().set_bit());
+
+    let mut gpioa = dp.GPIOA.split(&mut rcc);
+    let mut gpiob = dp.GPIOB.split(&mut rcc);
+    let mut gpioc = dp.GPIOC.split(&mut rcc);
+
+    // Touchscreen, USART1 on PA9/PA10.
+    let tx_pin = gpioa.pa9.into_alternate_push_pull(&mut gpioa.crh);
+    let rx_pin = gpioa.pa10;
+    let hmi = dp.USART1.serial(
+        (tx_pin, rx_pin),
+        serial::Config::default()
+            .baudrate(115_200.bps())
+            .parity_none(),
+        &mut rcc,
+    );
+    let (hmi_tx, mut hmi_rx) = hmi.split();
+    hmi_rx.listen();
+
+    // RS-485, USART2 on PA2/PA3, DE on PA1.
+    let tx2 = gpioa.pa2.into_alternate_push_pull(&mut gpioa.crl);
+    let rx2 = gpioa.pa3;
+    let rs = dp.USART2.serial(
+        (tx2, rx2),
+        serial::Config::default()
+            .baudrate(9_600.bps())
+            .parity_none(),
+        &mut rcc,
+    );
+    let (tx, rx) = rs.split();
+    let de = gpioa.pa1.into_push_pull_output(&mut gpioa.crl);
+
+    // Drum PWM, TIM1 CH1 on PA8; driver enable and direction.
+    let _pwm_pin = gpioa.pa8.into_alternate_push_pull(&mut gpioa.crh);
+    let enable = gpiob.pb12.into_push_pull_output(&mut gpiob.crh);
+    let direction = gpiob.pb13.into_push_pull_output(&mut gpiob.crh);
+    let tim1 = Timer::new(dp.TIM1, &mut rcc).release();
+    let drum = DrumDrive::new(tim1, enable, direction);
+
+    // Hall input capture, TIM2 CH1 on PA0 (NPN switch: pull-up, falling edge).
+    let _hall_pin = gpioa.pa0.into_pull_up_input(&mut gpioa.crl);
+    let tim2 = Timer::new(dp.TIM2, &mut rcc).release();
+    let hall = HallCapture::new(tim2);
+
+    // Drum encoder, TIM3 encoder mode on PA6/PA7 (inputs are the reset state).
+    let _enc_a = gpioa.pa6.into_floating_input(&mut gpioa.crl);
+    let _enc_b = gpioa.pa7.into_floating_input(&mut gpioa.crl);
+    let tim3 = Timer::new(dp.TIM3, &mut rcc).release();
+    let sensors = Sensors::new(tim3);
+
+    let led = StatusLed(gpioc.pc13.into_push_pull_output(&mut gpioc.crh));
+
+    Board {
+        hmi_tx,
+        hmi_rx,
+        drum,
+        sensors,
+        hall,
+        rs485: Rs485 { tx, rx, de },
+        led,
+        sysclk_hz: SYSCLK_HZ,
+    }
+}
+
+/// Drum motor PWM (TIM1 CH1) with the driver's enable and direction pins.
+pub struct DrumDrive {
+    tim: TIM1,
+    enable: PB12<Output<PushPull>>,
+    _direction: PB13<Output<PushPull>>,
+}
+
+/// TIM1 auto-reload value: 72 MHz / 20 kHz − 1.
+const DRUM_ARR: u16 = (TIMER_CLOCK_HZ / DRUM_PWM_HZ - 1) as u16;
+
+impl DrumDrive {
+    fn new(
+        tim: TIM1,
+        mut enable: PB12<Output<PushPull>>,
+        mut direction: PB13<Output<PushPull>>,
+    ) -> Self {
+        enable.set_low();
+        direction.set_low();
+        // SAFETY: raw register values for PWM mode 1 on CH1, all documented in
+        // RM0008 §14.4; TIM1 is owned by this struct.
+        tim.psc().write(|w| w.psc().set(0));
+        tim.arr().write(|w| w.arr().set(DRUM_ARR));
+        tim.ccr1().write(|w| w.ccr().set(0));
+        // CCMR1: OC1M = 110 (PWM mode 1), OC1PE = 1 (preload).
+        tim.ccmr1_output()
+            .write(|w| unsafe { w.bits((0b110 << 4) | (1 << 3)) });
+        // CCER: CC1E = 1, active high.
+        tim.ccer().write(|w| unsafe { w.bits(1) });
+        // BDTR: MOE = 1 (advanced timer main output enable).
+        tim.bdtr().write(|w| unsafe { w.bits(1 << 15) });
+        tim.egr().write(|w| w.ug().set_bit());
+        // CR1: ARPE = 1, CEN = 1.
+        tim.cr1().write(|w| unsafe { w.bits((1 << 7) | 1) });
+        Self {
+            tim,
+            enable,
+            _direction: direction,
+        }
+    }
+
+    /// Compare value that gives 100 % duty (ARR + 1).
+    pub const fn period(&self) -> u16 {
+        DRUM_ARR + 1
+    }
+
+    /// Sets the compare value (duty = `ccr / period()`), clamped to the period.
+    pub fn set_compare(&mut self, ccr: u16) {
+        let ccr = ccr.min(self.period());
+        self.tim.ccr1().write(|w| w.ccr().set(ccr));
+    }
+
+    /// Switches the motor driver on or off; off also zeroes the duty.
+    pub fn set_enabled(&mut self, on: bool) {
+        if on {
+            self.enable.set_high();
+        } else {
+            self.set_compare(0);
+            self.enable.set_low();
+        }
+    }
+}
+
+/// Polled sensors: the drum encoder counter.
+pub struct Sensors {
+    tim3: TIM3,
+}
+
+impl Sensors {
+    fn new(tim3: TIM3) -> Self {
+        // SAFETY: raw register values for encoder mode 3 (RM0008 §15.3.12):
+        // CC1S = CC2S = 01 (TI1, TI2), input filter N = 8 at fDTS/4.
+        tim3.ccmr1_input()
+            .write(|w| unsafe { w.bits((0b0011 << 12) | (0b01 << 8) | (0b0011 << 4) | 0b01) });
+        tim3.ccer().write(|w| unsafe { w.bits(0) });
+        tim3.smcr().write(|w| unsafe { w.bits(0b011) });
+        tim3.arr().write(|w| w.arr().set(u16::MAX));
+        tim3.cr1().write(|w| unsafe { w.bits(1) });
+        Self { tim3 }
+    }
+
+    /// Reads the sensors for one control period.
+    pub fn sample(&mut self, _now_ms: u32) -> SensorSample {
+        SensorSample {
+            drum_encoder: self.tim3.cnt().read().cnt().bits(),
+            hall_edges: heapless::Vec::new(),
+        }
+    }
+}
+
+/// TIM2 CH1 input capture of Hall edges at 1 MHz, extended to 32 bits with
+/// the timer's update (overflow) events.
+pub struct HallCapture {
+    tim2: TIM2,
+    overflows: u16,
+}
+
+impl HallCapture {
+    fn new(tim2: TIM2) -> Self {
+        let psc = (TIMER_CLOCK_HZ / HALL_TIMER_HZ - 1) as u16;
+        tim2.psc().write(|w| w.psc().set(psc));
+        tim2.arr().write(|w| w.arr().set(u16::MAX));
+        // SAFETY: raw register values (RM0008 §15.4): CCMR1 CC1S = 01 (IC1 on
+        // TI1), IC1F = 1111 (fDTS/32, N = 8: 3.6 µs of debounce); CCER CC1E,
+        // CC1P (falling edge); DIER CC1IE and UIE.
+        tim2.ccmr1_input()
+            .write(|w| unsafe { w.bits((0b1111 << 4) | 0b01) });
+        tim2.ccer().write(|w| unsafe { w.bits(0b11) });
+        tim2.egr().write(|w| w.ug().set_bit());
+        tim2.sr().write(|w| unsafe { w.bits(0) });
+        tim2.dier().write(|w| unsafe { w.bits(0b11) });
+        tim2.cr1().write(|w| unsafe { w.bits(1) });
+        Self { tim2, overflows: 0 }
+    }
+
+    /// Handles the TIM2 interrupt: returns the edge captured, if any, as a
+    /// 32-bit timestamp in 1 µs ticks.
+    pub fn on_interrupt(&mut self) -> Option<u32> {
+        let sr = self.tim2.sr().read().bits();
+        let overflowed = sr & 1 != 0;
+        let captured = sr & 0b10 != 0;
+        // Clear what we saw (rc_w0 bits: write 0 to clear, 1 to keep).
+        self.tim2
+            .sr()
+            .write(|w| unsafe { w.bits(!(sr & 0b11) & 0xFFFF) });
+        let mut edge = None;
+        if captured {
+            let ccr = self.tim2.ccr1().read().bits() as u16;
+            // An overflow pending together with a capture in the upper half
+            // happened after the capture: the capture still belongs to the
+            // old epoch.
+            let epoch = if overflowed && ccr >= 0x8000 {
+                self.overflows
+            } else if overflowed {
+                self.overflows.wrapping_add(1)
+            } else {
+                self.overflows
+            };
+            edge = Some((u32::from(epoch) << 16) | u32::from(ccr));
+        }
+        if overflowed {
+            self.overflows = self.overflows.wrapping_add(1);
+        }
+        edge
+    }
+}
+
+/// The status LED on PC13 (active low).
+pub struct StatusLed(PC13<Output<PushPull>>);
+
+impl StatusLed {
+    /// Lights or darkens the LED.
+    pub fn set(&mut self, on: bool) {
+        if on {
+            self.0.set_low();
+        } else {
+            self.0.set_high();
+        }
+    }
+}
+
+/// Drives the outputs to their safe state with raw register writes, from any
+/// context (panic, HardFault): drum PWM compare 0, TIM1 outputs off, driver
+/// enable low.
+pub fn safe_state() {
+    // SAFETY: single writes to TIM1 and GPIOB registers from a context that
+    // will never return to the application; stealing is sound because the
+    // owners are never used again.
+    unsafe {
+        let tim1 = &*TIM1::ptr();
+        tim1.ccr1().write(|w| w.ccr().set(0));
+        tim1.bdtr().write(|w| w.bits(0));
+        let gpiob = &*pac::GPIOB::ptr();
+        gpiob.bsrr().write(|w| w.bits(1 << (12 + 16)));
+    }
+}
+
+/// Ends the program after a fatal error: a breakpoint for an attached probe
+/// (probe-rs reports it), otherwise a spin until the watchdog resets the MCU.
+pub fn fatal() -> ! {
+    safe_state();
+    loop {
+        cortex_m::asm::udf();
+    }
+}
+
+/// The real board runs until it is switched off.
+pub fn run_limit_ms() -> Option<u32> {
+    None
+}
+
+/// Ends a run that reached its limit (never on the real board).
+pub fn exit_success() -> ! {
+    fatal()
+}

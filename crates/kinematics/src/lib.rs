@@ -1,3 +1,33 @@
-//! Placeholder: the crate's contents are an issue of their own.
+//! Kinematics of the transplanter (SPEC §2–4 and §8), `no_std`, fixed point,
+//! no heap and no reachable panics.
+//!
+//! * [`consts`]: machine constants and gear presets (typed and `f64`).
+//! * [`units`]: typed units (m/s, km/h, r/min, metres, ticks, …).
 #![no_std]
 #![cfg_attr(not(test), forbid(unsafe_code))]
+
+#[cfg(test)]
+extern crate std;
+
+pub mod consts;
+mod fx;
+pub mod units;
+
+/// Errors of the kinematic computations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Error {
+    /// An intermediate or final value does not fit its fixed-point type.
+    Overflow,
+    /// A divisor was zero (zero spacing, zero time, zero n_max, …).
+    DivisionByZero,
+}
+
+impl core::fmt::Display for Error {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Error::Overflow => f.write_str("value out of fixed-point range"),
+            Error::DivisionByZero => f.write_str("division by zero"),
+        }
+    }
+}

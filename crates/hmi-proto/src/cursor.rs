@@ -1,0 +1,71 @@
+//! A bounds-checked write cursor over the caller's buffer (internal).
+
+use crate::encoder::EncodeError;
+
+/// Writes bytes into a borrowed buffer; every write is checked, nothing panics.
+pub(crate) struct Cursor<'b> {
+    buf: &'b mut [u8],
+    pos: usize,
+}
+
+impl<'b> Cursor<'b> {
+    pub(crate) fn new(buf: &'b mut [u8]) -> Self {
+        Self { buf, pos: 0 }
+    }
+
+    /// Bytes written so far.
+    pub(crate) fn len(&self) -> usize {
+        self.pos
+    }
+
+    pub(crate) fn put(&mut self, bytes: &[u8]) -> Result<(), EncodeError> {
+        let end = self
+            .pos
+            .checked_add(bytes.len())
+            .ok_or(EncodeError::BufferTooSmall)?;
+        let dst = self
+            .buf
+            .get_mut(self.pos..end)
+            .ok_or(EncodeError::BufferTooSmall)?;
+        dst.copy_from_slice(bytes);
+        self.pos = end;
+        Ok(())
+    }
+
+    pub(crate) fn byte(&mut self, b: u8) -> Result<(), EncodeError> {
+        self.put(&[b])
+    }
+
+    /// Decimal ASCII, no leading zeros.
+    pub(crate) fn u32(&mut self, mut n: u32) -> Result<(), EncodeError> {
+        let mut digits = [0u8; 10];
+        let mut count = 0usize;
+        loop {
+            let d = u8::try_from(n.wrapping_rem(10)).unwrap_or(0);
+            if let Some(slot) = digits.get_mut(count) {
+                *slot = b'0'.wrapping_add(d);
+            }
+            count = count.saturating_add(1);
+            n = n.wrapping_div(10);
+            if n == 0 || count >= digits.len() {
+                break;
+            }
+        }
+        let used = digits.get_mut(..count).ok_or(EncodeError::BufferTooSmall)?;
+        used.reverse();
+        self.put(used)
+    }
+
+    /// Signed decimal ASCII (`-` then digits); handles `i32::MIN`.
+    pub(crate) fn i32(&mut self, n: i32) -> Result<(), EncodeError> {
+        if n < 0 {
+            self.byte(b'-')?;
+        }
+        self.u32(n.unsigned_abs())
+    }
+
+    /// The Nextion terminator `0xFF 0xFF 0xFF`.
+    pub(crate) fn terminator(&mut self) -> Result<(), EncodeError> {
+        self.put(&crate::TERMINATOR)
+    }
+}

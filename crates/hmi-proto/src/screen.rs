@@ -1,0 +1,1 @@
+//! Screen contract (placeholder).

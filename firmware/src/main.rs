@@ -225,7 +225,6 @@ mod app {
         let mut next = Mono::now();
         let mut runs: u32 = 0;
         loop {
-            runs = runs.wrapping_add(1);
             let uptime_ms = super::uptime_ms();
             cx.local.led.set(runs % 2 == 0);
             if runs % STATUS_LOG_EVERY == 0 {
@@ -246,6 +245,7 @@ mod app {
                     board::exit_success();
                 }
             }
+            runs = runs.wrapping_add(1);
             next += STATUS_PERIOD_MS.millis();
             Mono::delay_until(next).await;
         }

@@ -1,1 +1,356 @@
-//! QEMU harness.
+//! Runs the firmware's QEMU board and talks to it like the machine does.
+//!
+//! [`Firmware::boot`] starts `qemu-system-arm -machine stm32vldiscovery` with
+//! the firmware ELF, connects the emulated USART1 to a TCP socket on the
+//! loopback interface (the touchscreen side), and decodes the firmware's
+//! defmt log (semihosting on QEMU's stdout) with `defmt-print`.
+//!
+//! Used by the integration tests in `tests/tests/` and by `cargo xtask qemu`.
+
+use std::io::{self, BufRead, BufReader, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::sync::{Mutex, OnceLock};
+use std::thread;
+use std::time::{Duration, Instant};
+
+/// The Nextion/TJC frame terminator.
+pub const TERMINATOR: [u8; 3] = [0xFF; 3];
+
+/// Splits what the firmware sent into complete instructions (terminator
+/// removed); an unterminated tail is left out.
+pub fn instructions(bytes: &[u8]) -> Vec<&[u8]> {
+    let mut out = Vec::new();
+    let mut rest = bytes;
+    while let Some(end) = rest.windows(3).position(|w| w == TERMINATOR) {
+        let (head, tail) = rest.split_at(end);
+        out.push(head);
+        rest = tail.get(3..).unwrap_or(&[]);
+    }
+    out
+}
+
+/// The workspace root (this crate lives in `<root>/tests`).
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// Where the QEMU board's release build is kept (its own target directory,
+/// so that it never fights a host build for cargo's lock).
+pub fn qemu_target_dir() -> PathBuf {
+    workspace_root().join("target").join("qemu")
+}
+
+/// Builds the QEMU board (release) once per process and returns the ELF path.
+///
+/// `FIRMWARE_QEMU_ELF` overrides the build (used by `cargo xtask test`,
+/// which has just built it).
+pub fn qemu_firmware_elf() -> io::Result<PathBuf> {
+    static BUILT: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    if let Some(elf) = std::env::var_os("FIRMWARE_QEMU_ELF") {
+        return Ok(PathBuf::from(elf));
+    }
+    BUILT
+        .get_or_init(|| build_qemu_firmware().map_err(|e| e.to_string()))
+        .clone()
+        .map_err(io::Error::other)
+}
+
+/// Runs `cargo build` for the QEMU board and returns the ELF path.
+pub fn build_qemu_firmware() -> io::Result<PathBuf> {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(workspace_root())
+        .args([
+            "build",
+            "--package",
+            "firmware",
+            "--release",
+            "--target",
+            "thumbv7m-none-eabi",
+            "--no-default-features",
+            "--features",
+            "board-qemu",
+            "--target-dir",
+        ])
+        .arg(qemu_target_dir())
+        .status()?;
+    if !status.success() {
+        return Err(io::Error::other(format!(
+            "building the QEMU firmware failed: {status}"
+        )));
+    }
+    Ok(qemu_target_dir()
+        .join("thumbv7m-none-eabi")
+        .join("release")
+        .join("firmware"))
+}
+
+/// How to start the emulation.
+#[derive(Clone, Debug)]
+pub struct BootOptions {
+    /// Firmware-side time limit (`run_ms=` on the semihosting command line):
+    /// the firmware exits by itself when its uptime reaches it.
+    pub run_ms: Option<u32>,
+    /// Print each decoded log line to stderr as it arrives.
+    pub echo_logs: bool,
+}
+
+impl Default for BootOptions {
+    fn default() -> Self {
+        Self {
+            run_ms: Some(10_000),
+            echo_logs: false,
+        }
+    }
+}
+
+/// A running emulation of the QEMU board.
+pub struct Firmware {
+    qemu: Child,
+    printer: Child,
+    serial: TcpStream,
+    serial_in: Vec<u8>,
+    logs_rx: Receiver<String>,
+    logs: Mutex<Vec<String>>,
+}
+
+fn tool_missing(tool: &str, hint: &str) -> io::Error {
+    io::Error::new(
+        io::ErrorKind::NotFound,
+        format!("`{tool}` was not found on PATH: {hint}"),
+    )
+}
+
+impl Firmware {
+    /// Starts QEMU with `elf`, connects USART1 and the log decoder.
+    pub fn boot(elf: &Path, options: &BootOptions) -> io::Result<Self> {
+        // We listen; QEMU connects as the client, so there is no port race.
+        let listener = TcpListener::bind("127.0.0.1:0")?;
+        let port = listener.local_addr()?.port();
+        let mut semihosting = String::from("enable=on,target=native,arg=firmware");
+        if let Some(ms) = options.run_ms {
+            semihosting.push_str(&format!(",arg=run_ms={ms}"));
+        }
+        let mut qemu = Command::new("qemu-system-arm")
+            .args(["-machine", "stm32vldiscovery", "-cpu", "cortex-m3"])
+            .args(["-display", "none", "-monitor", "none"])
+            .args(["-semihosting-config", &semihosting])
+            .arg("-chardev")
+            .arg(format!(
+                "socket,id=hmi,host=127.0.0.1,port={port},server=off"
+            ))
+            .args(["-serial", "chardev:hmi"])
+            .arg("-kernel")
+            .arg(elf)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| match e.kind() {
+                io::ErrorKind::NotFound => tool_missing(
+                    "qemu-system-arm",
+                    "install it with `apt-get install qemu-system-arm` (bash .ci/run does)",
+                ),
+                _ => e,
+            })?;
+        let qemu_out = qemu
+            .stdout
+            .take()
+            .ok_or_else(|| io::Error::other("no QEMU stdout"))?;
+        let mut printer = Command::new("defmt-print")
+            .arg("-e")
+            .arg(elf)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| match e.kind() {
+                io::ErrorKind::NotFound => tool_missing(
+                    "defmt-print",
+                    "install it with `cargo install defmt-print --locked` (bash .ci/run does)",
+                ),
+                _ => e,
+            })?;
+        let mut printer_in = printer
+            .stdin
+            .take()
+            .ok_or_else(|| io::Error::other("no defmt-print stdin"))?;
+        thread::spawn(move || {
+            let mut qemu_out = qemu_out;
+            let _ = io::copy(&mut qemu_out, &mut printer_in);
+        });
+        let printer_out = printer
+            .stdout
+            .take()
+            .ok_or_else(|| io::Error::other("no defmt-print stdout"))?;
+        let (tx, logs_rx) = mpsc::channel();
+        let echo = options.echo_logs;
+        thread::spawn(move || {
+            for line in BufReader::new(printer_out).lines().map_while(Result::ok) {
+                if echo {
+                    eprintln!("{line}");
+                }
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+
+        listener.set_nonblocking(true)?;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let serial = loop {
+            match listener.accept() {
+                Ok((stream, _)) => break stream,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    if let Some(status) = qemu.try_wait()? {
+                        return Err(io::Error::other(format!(
+                            "QEMU exited before connecting its USART1: {status}"
+                        )));
+                    }
+                    if Instant::now() > deadline {
+                        let _ = qemu.kill();
+                        return Err(io::Error::other("QEMU did not connect its USART1"));
+                    }
+                    thread::sleep(Duration::from_millis(10));
+                }
+                Err(e) => return Err(e),
+            }
+        };
+        serial.set_nonblocking(false)?;
+        serial.set_nodelay(true)?;
+        Ok(Self {
+            qemu,
+            printer,
+            serial,
+            serial_in: Vec::new(),
+            logs_rx,
+            logs: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// Sends bytes into the firmware's USART1 (the touchscreen's TX line).
+    pub fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.serial.write_all(bytes)?;
+        self.serial.flush()
+    }
+
+    /// Reads what the firmware sent on USART1 until `done` accepts the bytes
+    /// received so far (all of them, from the start of the run), or `timeout`.
+    pub fn read_serial_until(
+        &mut self,
+        timeout: Duration,
+        mut done: impl FnMut(&[u8]) -> bool,
+    ) -> io::Result<Vec<u8>> {
+        let deadline = Instant::now() + timeout;
+        let mut chunk = [0u8; 256];
+        while !done(&self.serial_in) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(io::Error::new(
+                    io::ErrorKind::TimedOut,
+                    format!(
+                        "no matching reply within {timeout:?}; received {:02x?}",
+                        self.serial_in
+                    ),
+                ));
+            }
+            self.serial
+                .set_read_timeout(Some(left.min(Duration::from_millis(100))))?;
+            match self.serial.read(&mut chunk) {
+                Ok(0) => {
+                    return Err(io::Error::new(
+                        io::ErrorKind::UnexpectedEof,
+                        "QEMU closed USART1",
+                    ))
+                }
+                Ok(n) => self
+                    .serial_in
+                    .extend_from_slice(chunk.get(..n).unwrap_or(&[])),
+                Err(e)
+                    if e.kind() == io::ErrorKind::WouldBlock
+                        || e.kind() == io::ErrorKind::TimedOut => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(self.serial_in.clone())
+    }
+
+    /// Every byte the firmware has sent on USART1 so far (as read by
+    /// [`Self::read_serial_until`]).
+    pub fn serial_received(&self) -> &[u8] {
+        &self.serial_in
+    }
+
+    fn drain_logs(&self, wait: Duration) -> Option<String> {
+        match self.logs_rx.recv_timeout(wait) {
+            Ok(line) => {
+                if let Ok(mut logs) = self.logs.lock() {
+                    logs.push(line.clone());
+                }
+                Some(line)
+            }
+            Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => None,
+        }
+    }
+
+    /// Waits for a decoded log line that satisfies `pred`.
+    pub fn wait_log(&self, timeout: Duration, pred: impl Fn(&str) -> bool) -> Option<String> {
+        let deadline = Instant::now() + timeout;
+        if let Ok(logs) = self.logs.lock() {
+            if let Some(line) = logs.iter().find(|l| pred(l)) {
+                return Some(line.clone());
+            }
+        }
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return None;
+            }
+            if let Some(line) = self.drain_logs(left) {
+                if pred(&line) {
+                    return Some(line);
+                }
+            }
+        }
+    }
+
+    /// Waits for QEMU to exit by itself (the firmware's run limit), then
+    /// returns its exit status and every decoded log line.
+    pub fn wait_exit(mut self, timeout: Duration) -> io::Result<(ExitStatus, Vec<String>)> {
+        let deadline = Instant::now() + timeout;
+        let status = loop {
+            if let Some(status) = self.qemu.try_wait()? {
+                break status;
+            }
+            if Instant::now() > deadline {
+                let _ = self.qemu.kill();
+                let _ = self.qemu.wait();
+                return Err(io::Error::new(
+                    io::ErrorKind::TimedOut,
+                    "the firmware did not end its run in time",
+                ));
+            }
+            let _ = self.drain_logs(Duration::from_millis(20));
+        };
+        // QEMU is gone: the decoder sees end of input and finishes.
+        let _ = self.printer.wait();
+        while self.drain_logs(Duration::from_millis(200)).is_some() {}
+        let logs = self.logs.lock().map(|l| l.clone()).unwrap_or_default();
+        Ok((status, logs))
+    }
+}
+
+impl Drop for Firmware {
+    fn drop(&mut self) {
+        let _ = self.qemu.kill();
+        let _ = self.qemu.wait();
+        let _ = self.printer.kill();
+        let _ = self.printer.wait();
+    }
+}

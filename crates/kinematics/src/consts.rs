@@ -186,3 +186,15 @@ impl core::fmt::Display for Gear {
         f.write_str(self.preset().name)
     }
 }
+
+/// Geometry in the working precision (`U32F32`), so that the calibration
+/// arithmetic reproduces the paper's tables to their printed digits.
+pub(crate) mod w {
+    use crate::fx::W;
+    /// D1 + 2·H1.
+    pub(crate) const WHEEL_D: W = W::lit("0.2");
+    /// D2 + 2·H2.
+    pub(crate) const DRUM_D: W = W::lit("0.07");
+    /// Lclap.
+    pub(crate) const L_CLAP: W = W::lit("0.05");
+}

@@ -25,12 +25,10 @@ pub(crate) fn try_narrow<T: Fixed>(w: W) -> Result<T, Error> {
     T::checked_from_num(w).ok_or(Error::Overflow)
 }
 
-#[allow(dead_code)]
 pub(crate) fn mul(a: W, b: W) -> Result<W, Error> {
     a.checked_mul(b).ok_or(Error::Overflow)
 }
 
-#[allow(dead_code)]
 pub(crate) fn div(a: W, b: W) -> Result<W, Error> {
     if b == W::ZERO {
         return Err(Error::DivisionByZero);
@@ -46,11 +44,9 @@ pub(crate) fn div_int(a: W, b: u64) -> Result<W, Error> {
     a.checked_div_int(b).ok_or(Error::DivisionByZero)
 }
 
-#[allow(dead_code)]
 pub(crate) fn add(a: W, b: W) -> Result<W, Error> {
     a.checked_add(b).ok_or(Error::Overflow)
 }
 
 /// π with the precision of [`W`].
-#[allow(dead_code)]
 pub(crate) const PI: W = W::lit("3.14159265358979323846");

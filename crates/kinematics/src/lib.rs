@@ -9,8 +9,12 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod calib;
 pub mod consts;
+pub mod drum;
 mod fx;
+pub mod table;
+pub mod travel;
 pub mod units;
 
 /// Errors of the kinematic computations.
@@ -31,3 +35,5 @@ impl core::fmt::Display for Error {
         }
     }
 }
+
+impl core::error::Error for Error {}

@@ -1,1 +1,497 @@
-fn main() {}
+//! `cargo xtask`: the project's one entry point.
+//!
+//! ```text
+//! cargo xtask qemu [--seconds N]   the firmware in QEMU against the simulated machine, with its logs
+//! cargo xtask test                 all host tests, then the firmware in QEMU driven from tests/
+//! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
+//! cargo xtask size                 flash and RAM of both boards against their budgets
+//! cargo xtask flash                build and flash a real board with probe-rs
+//! ```
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode, Stdio};
+use std::time::{Duration, Instant};
+
+use qemu_tests::{workspace_root, BootOptions, Firmware};
+
+type Result<T = ()> = std::result::Result<T, String>;
+
+const TARGET: &str = "thumbv7m-none-eabi";
+
+/// Flash and static-RAM budgets of the real board (issue: foundation).
+const STM32F103_FLASH_BUDGET: u64 = 32 * 1024;
+const STM32F103_RAM_BUDGET: u64 = 8 * 1024;
+/// The QEMU board has 8 KB of RAM in all; statics must leave room for the
+/// stack (interrupt frames of four priority levels plus the async tasks).
+const QEMU_RAM_SIZE: u64 = 8 * 1024;
+const QEMU_STACK_RESERVE: u64 = 2 * 1024;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (cmd, rest) = match args.split_first() {
+        Some((cmd, rest)) => (cmd.as_str(), rest),
+        None => ("help", &[][..]),
+    };
+    let result = match cmd {
+        "qemu" => qemu(rest),
+        "test" => test().map(|_| ()),
+        "ci" => ci(),
+        "size" => size(),
+        "flash" => flash(),
+        "help" | "--help" | "-h" => {
+            println!("{}", include_str!("usage.txt"));
+            Ok(())
+        }
+        other => Err(format!(
+            "unknown command `{other}`\n\n{}",
+            include_str!("usage.txt")
+        )),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn root() -> PathBuf {
+    workspace_root()
+}
+
+fn cargo() -> Command {
+    let mut cmd = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    cmd.current_dir(root());
+    cmd
+}
+
+fn run(what: &str, cmd: &mut Command) -> Result {
+    eprintln!("xtask: {what}");
+    let status = cmd
+        .status()
+        .map_err(|e| format!("{what}: cannot start: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{what}: {status}"))
+    }
+}
+
+/// The two boards.
+#[derive(Clone, Copy, Debug)]
+enum Board {
+    Stm32f103,
+    Qemu,
+}
+
+impl Board {
+    const ALL: [Board; 2] = [Board::Stm32f103, Board::Qemu];
+
+    fn name(self) -> &'static str {
+        match self {
+            Board::Stm32f103 => "stm32f103",
+            Board::Qemu => "qemu",
+        }
+    }
+
+    fn features(self) -> &'static [&'static str] {
+        match self {
+            Board::Stm32f103 => &[],
+            Board::Qemu => &["--no-default-features", "--features", "board-qemu"],
+        }
+    }
+
+    /// Each board has its own target directory, so switching boards never
+    /// rebuilds the other.
+    fn target_dir(self) -> PathBuf {
+        match self {
+            Board::Stm32f103 => root().join("target").join("stm32f103"),
+            Board::Qemu => qemu_tests::qemu_target_dir(),
+        }
+    }
+
+    fn elf(self) -> PathBuf {
+        self.target_dir()
+            .join(TARGET)
+            .join("release")
+            .join("firmware")
+    }
+
+    fn build(self) -> Result<PathBuf> {
+        run(
+            &format!("build firmware, board {}", self.name()),
+            cargo()
+                .args(["build", "-p", "firmware", "--release", "--target", TARGET])
+                .args(self.features())
+                .arg("--target-dir")
+                .arg(self.target_dir()),
+        )?;
+        Ok(self.elf())
+    }
+
+    fn clippy(self) -> Result {
+        run(
+            &format!("clippy firmware, board {}", self.name()),
+            cargo()
+                .args(["clippy", "-p", "firmware", "--release", "--target", TARGET])
+                .args(self.features())
+                .arg("--target-dir")
+                .arg(self.target_dir())
+                .args(["--", "-D", "warnings"]),
+        )
+    }
+}
+
+fn have(tool: &str) -> bool {
+    Command::new(tool)
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok()
+}
+
+/// Installs the host tools the QEMU runs need when they are missing, so that
+/// the README's two commands work on a fresh machine: QEMU from Debian's
+/// packages (as root) and `defmt-print` from crates.io.
+fn ensure_tools() -> Result {
+    if !have("qemu-system-arm") {
+        let root = Command::new("id")
+            .arg("-u")
+            .output()
+            .map(|o| o.stdout.starts_with(b"0"))
+            .unwrap_or(false);
+        if !root {
+            return Err(
+                "qemu-system-arm is missing: `sudo apt-get install qemu-system-arm`".into(),
+            );
+        }
+        run(
+            "apt-get update",
+            Command::new("apt-get").args(["update", "-qq"]),
+        )?;
+        run(
+            "apt-get install qemu-system-arm",
+            Command::new("apt-get")
+                .args(["install", "-y", "-qq", "qemu-system-arm"])
+                .env("DEBIAN_FRONTEND", "noninteractive"),
+        )?;
+    }
+    if !have("defmt-print") {
+        run(
+            "cargo install defmt-print (once, about 3 minutes)",
+            Command::new("cargo").args(["install", "defmt-print", "--locked"]),
+        )?;
+    }
+    Ok(())
+}
+
+/// `cargo xtask qemu`: the main job.
+fn qemu(args: &[String]) -> Result {
+    ensure_tools()?;
+    let mut seconds: u32 = 10;
+    let mut it = args.iter();
+    while let Some(arg) = it.next() {
+        match arg.as_str() {
+            "--seconds" => {
+                seconds = it
+                    .next()
+                    .and_then(|s| s.parse().ok())
+                    .ok_or("--seconds takes a whole number")?;
+            }
+            other => return Err(format!("qemu: unknown argument `{other}`")),
+        }
+    }
+    let elf = Board::Qemu.build()?;
+    eprintln!(
+        "xtask: booting {} in qemu-system-arm -machine stm32vldiscovery for {seconds} s of firmware time",
+        elf.display()
+    );
+    let run_ms = seconds.saturating_mul(1000);
+    let options = BootOptions {
+        run_ms: Some(run_ms),
+        echo_logs: true,
+    };
+    let mut fw = Firmware::boot(&elf, &options).map_err(|e| e.to_string())?;
+    // The touchscreen side: announce a ready screen, as a Nextion does at power-up.
+    fw.send(&[0x88, 0xFF, 0xFF, 0xFF])
+        .map_err(|e| e.to_string())?;
+    let (status, _logs) = fw
+        .wait_exit(Duration::from_secs(u64::from(seconds) * 3 + 30))
+        .map_err(|e| e.to_string())?;
+    if status.success() {
+        eprintln!("xtask: the firmware ended its run: {status}");
+        Ok(())
+    } else {
+        Err(format!("QEMU exited with {status}"))
+    }
+}
+
+/// Test totals parsed from the runners' `test result:` lines.
+#[derive(Default)]
+struct Totals {
+    passed: u64,
+    failed: u64,
+    ignored: u64,
+}
+
+impl Totals {
+    fn absorb(&mut self, line: &str) {
+        // "test result: ok. 12 passed; 0 failed; 0 ignored; 0 measured; ..."
+        let Some(rest) = line.trim().strip_prefix("test result: ") else {
+            return;
+        };
+        for part in rest.split(';') {
+            let mut words = part.split_whitespace().rev();
+            let (Some(kind), Some(n)) = (words.next(), words.next()) else {
+                continue;
+            };
+            let Ok(n) = n.parse::<u64>() else { continue };
+            match kind {
+                "passed" => self.passed += n,
+                "failed" => self.failed += n,
+                "ignored" => self.ignored += n,
+                _ => {}
+            }
+        }
+    }
+}
+
+/// Runs a test command, echoing its output and adding up its results.
+fn run_tests(what: &str, cmd: &mut Command, totals: &mut Totals) -> Result {
+    eprintln!("xtask: {what}");
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("{what}: cannot start: {e}"))?;
+    if let Some(out) = child.stdout.take() {
+        for line in BufReader::new(out)
+            .lines()
+            .map_while(std::result::Result::ok)
+        {
+            println!("{line}");
+            totals.absorb(&line);
+        }
+    }
+    let status = child.wait().map_err(|e| e.to_string())?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{what}: {status}"))
+    }
+}
+
+/// `cargo xtask test`: host tests (unit, property, doc), then the QEMU tests.
+fn test() -> Result<Totals> {
+    ensure_tools()?;
+    let mut totals = Totals::default();
+    run_tests(
+        "host tests (logic crates, xtask)",
+        cargo().args([
+            "test",
+            "--workspace",
+            "--exclude",
+            "firmware",
+            "--exclude",
+            "qemu-tests",
+        ]),
+        &mut totals,
+    )?;
+    let elf = Board::Qemu.build()?;
+    run_tests(
+        "QEMU tests (tests/)",
+        cargo()
+            .args(["test", "-p", "qemu-tests"])
+            .env("FIRMWARE_QEMU_ELF", &elf),
+        &mut totals,
+    )?;
+    println!(
+        "xtask test: {} passed, {} failed",
+        totals.passed, totals.failed
+    );
+    if totals.passed == 0 {
+        return Err("no test ran".into());
+    }
+    Ok(totals)
+}
+
+/// `cargo xtask ci`: everything a submission must pass.
+fn ci() -> Result {
+    let started = Instant::now();
+    run("rustfmt check", cargo().args(["fmt", "--all", "--check"]))?;
+    run(
+        "clippy host (all targets)",
+        cargo().args([
+            "clippy",
+            "--workspace",
+            "--exclude",
+            "firmware",
+            "--all-targets",
+            "--",
+            "-D",
+            "warnings",
+        ]),
+    )?;
+    run(
+        "clippy logic crates for thumbv7m",
+        cargo().args([
+            "clippy",
+            "-p",
+            "kinematics",
+            "-p",
+            "fuzzy-pid",
+            "-p",
+            "hmi-proto",
+            "--features",
+            "kinematics/defmt,fuzzy-pid/defmt,hmi-proto/defmt",
+            "--target",
+            TARGET,
+            "--",
+            "-D",
+            "warnings",
+        ]),
+    )?;
+    for board in Board::ALL {
+        board.clippy()?;
+    }
+    run(
+        "rustdoc (warnings denied)",
+        cargo()
+            .args([
+                "doc",
+                "--no-deps",
+                "-p",
+                "kinematics",
+                "-p",
+                "fuzzy-pid",
+                "-p",
+                "hmi-proto",
+            ])
+            .env("RUSTDOCFLAGS", "-D warnings"),
+    )?;
+    let totals = test()?;
+    size()?;
+    eprintln!("xtask: QEMU smoke run (main job, 3 s)");
+    qemu(&["--seconds".into(), "3".into()])?;
+    eprintln!("xtask ci: all green in {:.0?}", started.elapsed());
+    println!(
+        "ci: {} passed, {} failed, {} skipped",
+        totals.passed, totals.failed, totals.ignored
+    );
+    Ok(())
+}
+
+/// Section sizes of an ELF, from `llvm-size -A` (rustup's llvm-tools).
+fn sections(elf: &Path) -> Result<Vec<(String, u64)>> {
+    let sysroot = Command::new("rustc")
+        .current_dir(root())
+        .args(["--print", "sysroot"])
+        .output()
+        .map_err(|e| e.to_string())?;
+    let sysroot = String::from_utf8_lossy(&sysroot.stdout).trim().to_string();
+    let host = Command::new("rustc")
+        .current_dir(root())
+        .args(["--print", "host-tuple"])
+        .output()
+        .map_err(|e| e.to_string())?;
+    let host = String::from_utf8_lossy(&host.stdout).trim().to_string();
+    let llvm_size = Path::new(&sysroot)
+        .join("lib/rustlib")
+        .join(host)
+        .join("bin/llvm-size");
+    let out = Command::new(&llvm_size)
+        .arg("-A")
+        .arg(elf)
+        .output()
+        .map_err(|e| {
+            format!(
+                "{}: {e} (rust-toolchain.toml installs the llvm-tools component)",
+                llvm_size.display()
+            )
+        })?;
+    if !out.status.success() {
+        return Err(format!("llvm-size failed on {}", elf.display()));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| {
+            let mut w = l.split_whitespace();
+            let name = w.next()?;
+            let size = w.next()?.parse().ok()?;
+            name.starts_with('.').then(|| (name.to_string(), size))
+        })
+        .collect())
+}
+
+/// Flash (code, read-only data, initialised data) and static RAM (data, bss,
+/// uninit) of an ELF.
+fn footprint(elf: &Path) -> Result<(u64, u64)> {
+    let mut flash = 0;
+    let mut ram = 0;
+    for (name, size) in sections(elf)? {
+        match name.as_str() {
+            ".vector_table" | ".text" | ".rodata" | ".gnu.sgstubs" => flash += size,
+            ".data" => {
+                flash += size;
+                ram += size;
+            }
+            ".bss" | ".uninit" => ram += size,
+            _ => {}
+        }
+    }
+    Ok((flash, ram))
+}
+
+/// `cargo xtask size`.
+fn size() -> Result {
+    let mut over = Vec::new();
+    println!("| board | flash | flash budget | static RAM | RAM budget |");
+    println!("|---|---|---|---|---|");
+    for board in Board::ALL {
+        let elf = board.build()?;
+        let (flash, ram) = footprint(&elf)?;
+        let (flash_budget, ram_budget) = match board {
+            Board::Stm32f103 => (STM32F103_FLASH_BUDGET, STM32F103_RAM_BUDGET),
+            Board::Qemu => (120 * 1024, QEMU_RAM_SIZE - QEMU_STACK_RESERVE),
+        };
+        println!(
+            "| {} | {flash} B | {flash_budget} B | {ram} B | {ram_budget} B |",
+            board.name()
+        );
+        if flash > flash_budget {
+            over.push(format!(
+                "{}: flash {flash} B > {flash_budget} B",
+                board.name()
+            ));
+        }
+        if ram > ram_budget {
+            over.push(format!("{}: RAM {ram} B > {ram_budget} B", board.name()));
+        }
+    }
+    if over.is_empty() {
+        Ok(())
+    } else {
+        Err(format!("over budget: {}", over.join("; ")))
+    }
+}
+
+/// `cargo xtask flash`: a real board on a debug probe.
+fn flash() -> Result {
+    let probe_rs = Command::new("probe-rs").arg("--version").output();
+    if probe_rs.is_err() {
+        return Err(
+            "probe-rs is not installed: `cargo install probe-rs-tools --locked`, \
+             connect an ST-Link or CMSIS-DAP probe to the board's SWD header, then run again"
+                .into(),
+        );
+    }
+    let elf = Board::Stm32f103.build()?;
+    run(
+        "probe-rs run (flash, then stream defmt logs; Ctrl-C to stop)",
+        Command::new("probe-rs")
+            .args(["run", "--chip", "STM32F103RB"])
+            .arg(elf),
+    )
+}

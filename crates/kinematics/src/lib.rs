@@ -13,6 +13,7 @@ pub mod calib;
 pub mod consts;
 pub mod drum;
 mod fx;
+pub mod speed;
 pub mod table;
 pub mod travel;
 pub mod units;

@@ -1,0 +1,627 @@
+//! Travel-speed measurement from the Hall gear (SPEC §2).
+//!
+//! * [`m_method_gear_speed`]: the paper's M-method (eq. 1–2), kept for comparison.
+//! * [`CaptureExtender`]: 16-bit input captures + timer update events → monotonic
+//!   32-bit [`Ticks`].
+//! * [`MtEstimator`]: the M/T method on captured edge timestamps with glitch
+//!   rejection, tooth-pitch compensation, optional median of 3 and a
+//!   zero-speed timeout that decays the estimate by the elapsed time.
+//!
+//! # M/T method
+//!
+//! Every accepted Hall edge is timestamped (1 µs). At each [`MtEstimator::update`]
+//! the speed is the angle of the `m` gaps that ended since the previous
+//! window's last edge, divided by the exact time between that edge and the
+//! newest one: `n = 60·f_timer·angle / (t_last − t_ref)`. No time is lost
+//! between windows, and when a window holds no edge (slow travel) the next
+//! edge simply closes a longer window.
+//!
+//! *Resolution*: one timer tick over the window, i.e. 1 µs / T (1e-5 at a
+//! 100 ms window; the ±5 µs capture jitter gives ±1e-4). *Latency*: the value
+//! is the mean speed over the window that ended at the newest edge, so it lags
+//! by about half a window plus the time from that edge to the update — at
+//! 4 km/h (22.6 ms per tooth, 100 ms updates) ≈ 50–70 ms; at 0.3 km/h (302 ms
+//! per tooth) ≈ 150 ms + up to one tooth period.
+//!
+//! *Tooth-pitch compensation*: a gear with ±1 % pitch errors makes single
+//! gaps ±1 % (and more) wrong, which at low speed (one gap per window) is the
+//! dominant error. The estimator learns each gap's share of a revolution from
+//! complete revolutions (`share = gap·Z / T_rev`, exact at steady speed), with
+//! an IIR (1/4 per revolution) and a ±4 % plausibility guard, and weighs
+//! every gap by its learned share. Until a revolution has been seen all gaps
+//! count as 1/Z. It assumes no real edge is lost (a lost edge shifts the tooth
+//! index; the table then re-learns within a few revolutions).
+//!
+//! *Zero speed*: when no edge came for longer than the next gap should take,
+//! the speed can be at most that gap's angle over the elapsed time, so the
+//! output decays as `1/elapsed` instead of holding a stale value; after
+//! `stop_timeout` it is 0 and the next edge starts a new window (the first
+//! speed after a stop needs two edges).
+//!
+//! *Glitches*: an edge closer than `min_edge_gap` or than 1/2^`glitch_shift`
+//! of the last period (default ¼) is dropped and counted.
+
+use crate::units::{RevPerMin, Seconds, Ticks};
+use crate::{fx, Error};
+use fixed::types::U12F20;
+
+/// Largest tooth count the estimator supports.
+pub const MAX_TEETH: usize = 32;
+const RING: usize = MAX_TEETH + 1;
+/// Q16 unity for the learned tooth shares.
+const ONE_Q16: u32 = 1 << 16;
+
+/// Paper A eq. 1: the M-method window `t = (PSC+1)(ARR1+1)/Hclk`.
+pub fn m_method_window(psc: u16, arr: u16, hclk_hz: u32) -> Result<Seconds, Error> {
+    let counts = u64::from(psc)
+        .saturating_add(1)
+        .saturating_mul(u64::from(arr).saturating_add(1));
+    Seconds::try_from_w(fx::div_int(fx::W::from_num(counts), u64::from(hclk_hz))?)
+}
+
+/// Paper A eq. 2 without k1: `n = 60·N/(Z1·t)` r/min for `pulses` counted in `window`.
+///
+/// ```
+/// use kinematics::speed::{m_method_gear_speed, m_method_window};
+/// // 1 s window (PSC = 7199, ARR1 = 9999 at 72 MHz); 3 pulses ⇒ 60·3/25 = 7.2 r/min,
+/// // 4 pulses ⇒ 9.6 r/min: at Low 1 (8.2 r/min) the M-method can only say 7.2 or 9.6.
+/// let t = m_method_window(7199, 9999, 72_000_000)?;
+/// assert!((m_method_gear_speed(3, t, 25)?.to_f64() - 7.2).abs() < 1e-5);
+/// assert!((m_method_gear_speed(4, t, 25)?.to_f64() - 9.6).abs() < 1e-5);
+/// # Ok::<(), kinematics::Error>(())
+/// ```
+pub fn m_method_gear_speed(pulses: u32, window: Seconds, teeth: u8) -> Result<RevPerMin, Error> {
+    let den = fx::mul_int(window.w(), u64::from(teeth))?;
+    RevPerMin::try_from_w(fx::div(
+        fx::W::from_num(u64::from(pulses).saturating_mul(60)),
+        den,
+    )?)
+}
+
+/// Extends 16-bit input-capture values to monotonic 32-bit ticks using the
+/// timer's update (overflow) events.
+///
+/// Call order in the timer interrupt (capture and update share one IRQ on
+/// TIM2–4 of the F103): read the status register; for a capture, read the
+/// capture value and call [`extend`](Self::extend) with `overflow_pending =
+/// UIF`; *then*, if UIF was set, clear it and call
+/// [`on_overflow`](Self::on_overflow). If an overflow is pending while a
+/// capture is processed, a capture value in the lower half of the range was
+/// taken after the wrap (it belongs to the next period), one in the upper
+/// half before it. This assumes the interrupt is serviced within half a wrap
+/// (32 ms).
+///
+/// ```
+/// use kinematics::speed::CaptureExtender;
+/// let mut x = CaptureExtender::new();
+/// x.on_overflow(); // counter wrapped once: now in 65536 … 131071
+/// assert_eq!(x.extend(100, false).0, 65_536 + 100);
+/// // The counter wrapped again, the update is still pending:
+/// assert_eq!(x.extend(65_530, true).0, 65_536 + 65_530); // captured before the wrap
+/// assert_eq!(x.extend(3, true).0, 2 * 65_536 + 3); // captured after the wrap
+/// x.on_overflow();
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CaptureExtender {
+    high: u16,
+}
+
+impl CaptureExtender {
+    /// Starts at tick 0.
+    #[must_use]
+    pub const fn new() -> Self {
+        Self { high: 0 }
+    }
+
+    /// Accounts one timer update (overflow) event.
+    pub fn on_overflow(&mut self) {
+        self.high = self.high.wrapping_add(1);
+    }
+
+    /// Extends a 16-bit capture (or counter) value; `overflow_pending` is the
+    /// timer's update flag not yet passed to [`on_overflow`](Self::on_overflow).
+    #[must_use]
+    pub fn extend(&self, capture: u16, overflow_pending: bool) -> Ticks {
+        let high = if overflow_pending && capture < 0x8000 {
+            self.high.wrapping_add(1)
+        } else {
+            self.high
+        };
+        Ticks((u32::from(high) << 16) | u32::from(capture))
+    }
+
+    /// The current time from the free-running counter (same rule as `extend`).
+    #[must_use]
+    pub fn now(&self, counter: u16, overflow_pending: bool) -> Ticks {
+        self.extend(counter, overflow_pending)
+    }
+}
+
+/// Estimator settings; [`EstimatorSettings::build`] validates them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EstimatorSettings {
+    /// Teeth on the gear (2 … [`MAX_TEETH`]; SPEC: 25).
+    pub teeth: u8,
+    /// Timer tick rate, Hz (board: 1 MHz).
+    pub timer_hz: u32,
+    /// No edge for this long ⇒ speed 0 (default 1.5 s ⇒ lowest speed
+    /// 25.13 mm / 1.5 s = 0.06 km/h).
+    pub stop_timeout_ticks: u32,
+    /// Edges closer than this are always glitches (default 500 µs, half the
+    /// 1 kHz limit of the switch).
+    pub min_edge_gap_ticks: u32,
+    /// An edge closer than `last period >> glitch_shift` is a glitch
+    /// (default 2, i.e. ¼ period).
+    pub glitch_shift: u8,
+    /// Median of the last 3 measurements (adds about one window of latency).
+    pub median_of_3: bool,
+    /// Learn and compensate the tooth-pitch errors.
+    pub pitch_compensation: bool,
+}
+
+impl Default for EstimatorSettings {
+    fn default() -> Self {
+        Self {
+            teeth: crate::consts::Z1,
+            timer_hz: crate::consts::CAPTURE_TIMER_HZ,
+            stop_timeout_ticks: 1_500_000,
+            min_edge_gap_ticks: 500,
+            glitch_shift: 2,
+            median_of_3: false,
+            pitch_compensation: true,
+        }
+    }
+}
+
+/// Why [`EstimatorSettings::build`] refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EstimatorConfigError {
+    /// Teeth outside 2 … [`MAX_TEETH`].
+    Teeth,
+    /// Timer rate zero.
+    TimerRate,
+    /// Timeout zero or not above the minimum edge gap, or above 2³¹ ticks.
+    Timeout,
+    /// Glitch shift outside 1 … 8.
+    GlitchShift,
+}
+
+impl core::fmt::Display for EstimatorConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            EstimatorConfigError::Teeth => "tooth count outside 2 .. 32",
+            EstimatorConfigError::TimerRate => "timer rate is zero",
+            EstimatorConfigError::Timeout => "stop timeout invalid",
+            EstimatorConfigError::GlitchShift => "glitch shift outside 1 .. 8",
+        })
+    }
+}
+
+impl core::error::Error for EstimatorConfigError {}
+
+impl EstimatorSettings {
+    /// Validates and creates the estimator.
+    pub fn build(self) -> Result<MtEstimator, EstimatorConfigError> {
+        if self.teeth < 2 || usize::from(self.teeth) > MAX_TEETH {
+            return Err(EstimatorConfigError::Teeth);
+        }
+        if self.timer_hz == 0 {
+            return Err(EstimatorConfigError::TimerRate);
+        }
+        if self.stop_timeout_ticks <= self.min_edge_gap_ticks || self.stop_timeout_ticks > 1 << 31 {
+            return Err(EstimatorConfigError::Timeout);
+        }
+        if !(1..=8).contains(&self.glitch_shift) {
+            return Err(EstimatorConfigError::GlitchShift);
+        }
+        Ok(MtEstimator {
+            cfg: self,
+            z: usize::from(self.teeth),
+            stamps: [0; RING],
+            head: 0,
+            tooth: 0,
+            has_last: false,
+            edges_total: 0,
+            valid_run: 0,
+            last_gap: 0,
+            ref_stamp: 0,
+            ref_edges: 0,
+            ref_valid: false,
+            learned_upto: 0,
+            learned_mask: 0,
+            weights: [ONE_Q16; MAX_TEETH],
+            weight_sum: u32::from(self.teeth).saturating_mul(ONE_Q16),
+            held: 0,
+            history: [0; 3],
+            history_len: 0,
+            glitches: 0,
+        })
+    }
+}
+
+/// What an update saw.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MotionState {
+    /// No edge for longer than the timeout (or never): speed 0.
+    Stopped,
+    /// First edge after a stop: moving, speed not known yet (reported 0).
+    Starting,
+    /// New edges closed a window: a fresh measurement.
+    Measured,
+    /// No new edge, but not overdue: last measurement held.
+    Holding,
+    /// No new edge for longer than the next gap should take: speed capped
+    /// at one gap over the elapsed time.
+    Decaying,
+}
+
+/// One update of the estimator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TravelMeasurement {
+    /// Gear speed without k1 (feed into [`crate::travel::travel_speed`]).
+    pub gear_speed: RevPerMin,
+    /// How the value was obtained.
+    pub state: MotionState,
+    /// Gaps in the window that closed (0 unless `Measured`).
+    pub edges: u32,
+    /// Window length in ticks (0 unless `Measured`).
+    pub window_ticks: u32,
+    /// Ticks since the newest edge.
+    pub since_edge_ticks: u32,
+    /// Glitches dropped since start (wrapping).
+    pub glitches: u32,
+}
+
+/// Verdict on one pushed edge.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EdgeVerdict {
+    /// Accepted.
+    Accepted,
+    /// Accepted as the first edge after a stop or at start.
+    Restart,
+    /// Dropped as a glitch.
+    Glitch,
+}
+
+/// M/T speed estimator on 32-bit edge timestamps (wrapping arithmetic).
+///
+/// ```
+/// use kinematics::speed::{EstimatorSettings, MotionState};
+/// use kinematics::units::Ticks;
+/// let mut est = EstimatorSettings::default().build()?;
+/// // 10 r/min on 25 teeth: one edge every 60 s / 250 = 240 000 µs.
+/// for k in 0..6u32 {
+///     est.push_edge(Ticks(1_000 + k * 240_000));
+/// }
+/// let m = est.update(Ticks(1_000 + 5 * 240_000 + 50_000));
+/// assert_eq!(m.state, MotionState::Measured);
+/// assert!((m.gear_speed.to_f64() - 10.0).abs() < 1e-4);
+/// // 1.2 s after the last edge (5 gaps' worth) the speed is at most 1/25 rev over 1.2 s = 2 r/min.
+/// let m = est.update(Ticks(1_000 + 5 * 240_000 + 1_200_000));
+/// assert_eq!(m.state, MotionState::Decaying);
+/// assert!((m.gear_speed.to_f64() - 2.0).abs() < 1e-4);
+/// # Ok::<(), kinematics::speed::EstimatorConfigError>(())
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MtEstimator {
+    cfg: EstimatorSettings,
+    z: usize,
+    /// Ring of the last accepted edge stamps; `head` is the newest.
+    stamps: [u32; RING],
+    head: usize,
+    /// Tooth index (0 … z−1) of the gap that ended at the newest edge.
+    tooth: usize,
+    has_last: bool,
+    edges_total: u32,
+    /// Accepted edges since the last restart (saturating).
+    valid_run: u32,
+    last_gap: u32,
+    ref_stamp: u32,
+    ref_edges: u32,
+    ref_valid: bool,
+    learned_upto: u32,
+    learned_mask: u32,
+    /// Learned share of each gap, Q16 (1.0 = 1/z of a revolution).
+    weights: [u32; MAX_TEETH],
+    weight_sum: u32,
+    /// Last measurement, U12F20 bits.
+    held: u32,
+    history: [u32; 3],
+    history_len: u8,
+    glitches: u32,
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for MtEstimator {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(
+            f,
+            "MtEstimator(edges={=u32}, held={=u32}, glitches={=u32})",
+            self.edges_total,
+            self.held,
+            self.glitches
+        );
+    }
+}
+
+fn ring_prev(i: usize, back: usize) -> usize {
+    // (i − back) mod RING, for back ≤ RING.
+    let back = back % RING;
+    if i >= back {
+        i.saturating_sub(back)
+    } else {
+        RING.saturating_sub(back.saturating_sub(i))
+    }
+}
+
+fn median3(a: u32, b: u32, c: u32) -> u32 {
+    a.max(b).min(a.min(b).max(c))
+}
+
+impl MtEstimator {
+    /// The settings in use.
+    #[must_use]
+    pub const fn settings(&self) -> &EstimatorSettings {
+        &self.cfg
+    }
+
+    /// Learned share of each gap relative to 1/Z (Q16 bits: 65536 = nominal).
+    #[must_use]
+    pub fn tooth_weights(&self) -> &[u32] {
+        self.weights.get(..self.z).unwrap_or(&[])
+    }
+
+    /// Records one Hall edge (call from the capture interrupt). O(1), no division.
+    pub fn push_edge(&mut self, t: Ticks) -> EdgeVerdict {
+        let t = t.0;
+        let mut verdict = EdgeVerdict::Accepted;
+        if self.has_last {
+            let last = self.stamps.get(self.head).copied().unwrap_or(0);
+            let dt = t.wrapping_sub(last);
+            let expected_min = if self.last_gap == 0 {
+                0
+            } else {
+                self.last_gap >> self.cfg.glitch_shift
+            };
+            if dt < self.cfg.min_edge_gap_ticks || dt < expected_min {
+                self.glitches = self.glitches.wrapping_add(1);
+                return EdgeVerdict::Glitch;
+            }
+            if dt > self.cfg.stop_timeout_ticks {
+                self.restart();
+                verdict = EdgeVerdict::Restart;
+            } else {
+                self.last_gap = dt;
+            }
+        } else {
+            verdict = EdgeVerdict::Restart;
+        }
+        self.head = self.head.checked_add(1).filter(|&h| h < RING).unwrap_or(0);
+        if let Some(s) = self.stamps.get_mut(self.head) {
+            *s = t;
+        }
+        if self.has_last {
+            self.tooth = self
+                .tooth
+                .checked_add(1)
+                .filter(|&h| h < self.z)
+                .unwrap_or(0);
+        }
+        self.has_last = true;
+        self.edges_total = self.edges_total.wrapping_add(1);
+        self.valid_run = self.valid_run.saturating_add(1);
+        verdict
+    }
+
+    fn restart(&mut self) {
+        self.valid_run = 0;
+        self.last_gap = 0;
+        self.ref_valid = false;
+        self.history_len = 0;
+        self.held = 0;
+    }
+
+    fn newest(&self) -> u32 {
+        self.stamps.get(self.head).copied().unwrap_or(0)
+    }
+
+    /// Sum of the weights of the `m` gaps ending at the newest edge (Q16).
+    fn window_weight(&self, m: u32) -> u64 {
+        let z = u32::try_from(self.z).unwrap_or(1).max(1);
+        let full = u64::from(m.checked_div(z).unwrap_or(0));
+        let rem = usize::try_from(m.checked_rem(z).unwrap_or(0)).unwrap_or(0);
+        let mut sum = full.saturating_mul(u64::from(self.weight_sum));
+        let mut idx = self.tooth;
+        for _ in 0..rem {
+            sum = sum.saturating_add(u64::from(self.weights.get(idx).copied().unwrap_or(ONE_Q16)));
+            idx = if idx == 0 {
+                self.z.saturating_sub(1)
+            } else {
+                idx.saturating_sub(1)
+            };
+        }
+        sum
+    }
+
+    /// r/min (U12F20 bits, saturating) for an angle `w` (Q16 shares) over `ticks`.
+    fn rpm_bits(&self, w: u64, ticks: u32) -> u32 {
+        let den = u128::from(self.weight_sum).saturating_mul(u128::from(ticks));
+        if den == 0 {
+            return u32::MAX;
+        }
+        // n = 60·f·(w/S)/T r/min; ·2^20 for U12F20; the weights carry z·2^16 per rev in S.
+        let num = u128::from(w)
+            .saturating_mul(60)
+            .saturating_mul(u128::from(self.cfg.timer_hz))
+            .saturating_mul(1 << 20);
+        u32::try_from(num.checked_div(den).unwrap_or(0)).unwrap_or(u32::MAX)
+    }
+
+    fn learn(&mut self) {
+        let z = self.z;
+        let z32 = u32::try_from(z).unwrap_or(u32::MAX);
+        if self.valid_run <= z32 {
+            self.learned_upto = self.edges_total;
+            return;
+        }
+        let newest = self.newest();
+        let rev_start = self
+            .stamps
+            .get(ring_prev(self.head, z))
+            .copied()
+            .unwrap_or(newest);
+        let t_rev = newest.wrapping_sub(rev_start);
+        if t_rev == 0 {
+            return;
+        }
+        let recip = (u64::from(z32) << 48)
+            .checked_div(u64::from(t_rev))
+            .unwrap_or(0);
+        let fresh = self.edges_total.wrapping_sub(self.learned_upto).min(z32);
+        let tol = ONE_Q16 / 25; // ±4 %
+        let mut pos = self.head;
+        let mut tooth = self.tooth;
+        for _ in 0..fresh {
+            let prev = ring_prev(pos, 1);
+            let gap = self
+                .stamps
+                .get(pos)
+                .copied()
+                .unwrap_or(0)
+                .wrapping_sub(self.stamps.get(prev).copied().unwrap_or(0));
+            let w_new =
+                u32::try_from(u64::from(gap).saturating_mul(recip) >> 32).unwrap_or(u32::MAX);
+            if w_new.abs_diff(ONE_Q16) <= tol {
+                let bit = 1u32
+                    .checked_shl(u32::try_from(tooth).unwrap_or(0))
+                    .unwrap_or(0);
+                if let Some(w) = self.weights.get_mut(tooth) {
+                    if self.learned_mask & bit == 0 {
+                        *w = w_new;
+                    } else if w_new >= *w {
+                        *w = w.saturating_add((w_new.saturating_sub(*w)) >> 2);
+                    } else {
+                        *w = w.saturating_sub((w.saturating_sub(w_new)) >> 2);
+                    }
+                }
+                self.learned_mask |= bit;
+            }
+            pos = prev;
+            tooth = if tooth == 0 {
+                z.saturating_sub(1)
+            } else {
+                tooth.saturating_sub(1)
+            };
+        }
+        self.learned_upto = self.edges_total;
+        self.weight_sum = self
+            .weights
+            .get(..z)
+            .unwrap_or(&[])
+            .iter()
+            .fold(0u32, |a, &w| a.saturating_add(w));
+    }
+
+    /// Computes the speed at `now` (call periodically from the control task).
+    pub fn update(&mut self, now: Ticks) -> TravelMeasurement {
+        let newest = self.newest();
+        let since = now.0.wrapping_sub(newest);
+        let since_edge_ticks = if !self.has_last || since > 1 << 31 {
+            0
+        } else {
+            since
+        };
+        let mut out = TravelMeasurement {
+            gear_speed: RevPerMin::ZERO,
+            state: MotionState::Stopped,
+            edges: 0,
+            window_ticks: 0,
+            since_edge_ticks,
+            glitches: self.glitches,
+        };
+        if !self.has_last {
+            return out;
+        }
+        let new = self.edges_total.wrapping_sub(self.ref_edges);
+        if new > 0 && self.valid_run > 0 {
+            if self.cfg.pitch_compensation {
+                self.learn();
+            }
+            // Window start: the previous window's last edge, or after a
+            // restart the oldest edge still in the ring.
+            let (m, start) = if self.ref_valid && new < self.valid_run {
+                (new, self.ref_stamp)
+            } else {
+                let back = self
+                    .valid_run
+                    .saturating_sub(1)
+                    .min(u32::try_from(RING).unwrap_or(1).saturating_sub(1));
+                let start = self
+                    .stamps
+                    .get(ring_prev(self.head, usize::try_from(back).unwrap_or(0)))
+                    .copied()
+                    .unwrap_or(newest);
+                (back, start)
+            };
+            self.ref_stamp = newest;
+            self.ref_edges = self.edges_total;
+            self.ref_valid = true;
+            let window = newest.wrapping_sub(start);
+            if m == 0 || window == 0 {
+                out.state = MotionState::Starting;
+                return out;
+            }
+            let rpm = self.rpm_bits(self.window_weight(m), window);
+            self.push_history(rpm);
+            self.held = if self.cfg.median_of_3 && self.history_len >= 3 {
+                let [a, b, c] = self.history;
+                median3(a, b, c)
+            } else {
+                rpm
+            };
+            out.state = MotionState::Measured;
+            out.edges = m;
+            out.window_ticks = window;
+            out.gear_speed = RevPerMin::from_fixed(U12F20::from_bits(self.held));
+            return out;
+        }
+        if !self.ref_valid || since_edge_ticks > self.cfg.stop_timeout_ticks {
+            if self.ref_valid {
+                self.restart();
+            }
+            out.state = if self.ref_valid || self.valid_run == 0 {
+                MotionState::Stopped
+            } else {
+                MotionState::Starting
+            };
+            return out;
+        }
+        // No new edge: cap at one (learned) gap over the elapsed time.
+        let next = self
+            .tooth
+            .checked_add(1)
+            .filter(|&t| t < self.z)
+            .unwrap_or(0);
+        let w_next = u64::from(self.weights.get(next).copied().unwrap_or(ONE_Q16));
+        let cap = self.rpm_bits(w_next, since_edge_ticks);
+        if cap < self.held {
+            out.state = MotionState::Decaying;
+            out.gear_speed = RevPerMin::from_fixed(U12F20::from_bits(cap));
+        } else {
+            out.state = MotionState::Holding;
+            out.gear_speed = RevPerMin::from_fixed(U12F20::from_bits(self.held));
+        }
+        out
+    }
+
+    fn push_history(&mut self, v: u32) {
+        self.history = [self.history[1], self.history[2], v];
+        self.history_len = self.history_len.saturating_add(1).min(3);
+    }
+}

@@ -236,6 +236,9 @@ impl BaudRate {
 pub struct ScreenText<'a>(&'a str);
 
 impl<'a> ScreenText<'a> {
+    /// The empty text.
+    pub const EMPTY: ScreenText<'static> = ScreenText("");
+
     /// Checked construction.
     pub fn new(text: &'a str) -> Result<Self, EncodeError> {
         if text.chars().count() > MAX_TEXT_LEN {

@@ -1,1 +1,527 @@
-//! Application layer (placeholder).
+//! The application layer: a sans-IO state machine between the UART and the
+//! machine, on top of [`Decoder`] and [`Instruction`].
+//!
+//! Data flow (documented in `docs/hmi.md`):
+//! * buttons send "Send Component ID" on release (`0x65 page id 0x00`);
+//! * an *Apply* button makes the MCU read the input with `get name.val`; the
+//!   `0x71` reply is validated into a [`Command`] or rejected with a message in
+//!   the page's `tmsg` box and the old value written back (nothing changes);
+//! * while a `get` reply is awaited, further touch events are queued (up to
+//!   [`TOUCH_QUEUE`]), never lost; *Stop* bypasses the queue;
+//! * the MCU drives navigation (`page N`) and writes settings and live status.
+//!
+//! Boot handshake: until the screen answers, [`Hmi::tick`] sends a lone
+//! terminator (to end any partial instruction) and `sendme` every
+//! [`HANDSHAKE_RETRY_MS`]. The first `0x66` reply, or a `0x88` ready frame,
+//! connects: the MCU sends `bkcmd=2`, `dims=…`, shows the mode page and
+//! reports [`Event::Connected`]. A later `0x88`/startup frame (screen reset)
+//! repeats this.
+//!
+//! ```
+//! use hmi_proto::hmi::{Event, Hmi};
+//! use hmi_proto::screen::{Command, Settings, Spacing};
+//!
+//! let mut hmi = Hmi::new(Settings::default(), "v0.1");
+//! let mut tx = [0u8; 256];
+//! hmi.tick(0);
+//! assert_eq!(&tx[..hmi.poll_transmit(&mut tx)], b"\xff\xff\xffsendme\xff\xff\xff");
+//! // Screen: "current page is 0".
+//! for b in [0x66, 0x00, 0xFF, 0xFF, 0xFF] { hmi.push(b); }
+//! assert_eq!(hmi.poll_event(), Some(Event::Connected));
+//! hmi.poll_transmit(&mut tx); // bkcmd=2, dims=100, page 1, ncoef.val=100
+//! hmi.show_page(hmi_proto::screen::Page::Adaptive);
+//! hmi.poll_transmit(&mut tx);
+//! // Operator releases "Apply" (page 3, id 2): the MCU asks for the spacing.
+//! for b in [0x65, 0x03, 0x02, 0x00, 0xFF, 0xFF, 0xFF] { hmi.push(b); }
+//! assert_eq!(&tx[..hmi.poll_transmit(&mut tx)], b"get nspacing.val\xff\xff\xff");
+//! // Screen answers 180 (mm).
+//! for b in [0x71, 180, 0, 0, 0, 0xFF, 0xFF, 0xFF] { hmi.push(b); }
+//! assert_eq!(hmi.poll_event(), Some(Event::Command(Command::SetSpacing(Spacing::new(180).unwrap()))));
+//! ```
+
+use core::fmt;
+
+use crate::decoder::{Decoder, DecoderStats};
+use crate::encoder::{Attr, BkCmd, Instruction, ScreenText, MAX_INSTRUCTION_LEN};
+use crate::frame::{ErrorCode, Frame, TouchEvent};
+use crate::screen::{
+    page_instructions, status_instructions, Action, Command, Component, Field, Page, ParamError,
+    Role, Settings, Status,
+};
+
+/// Bytes the transmit queue holds (a page refresh plus a message fits).
+pub const TX_CAPACITY: usize = 256;
+/// Touch events held while a `get` reply is awaited.
+pub const TOUCH_QUEUE: usize = 4;
+/// Events held until [`Hmi::poll_event`].
+pub const EVENT_QUEUE: usize = 8;
+/// A `get` unanswered for this long is abandoned.
+pub const GET_TIMEOUT_MS: u32 = 200;
+/// Handshake retry period while the screen is silent.
+pub const HANDSHAKE_RETRY_MS: u32 = 500;
+
+/// What the application layer reports to the firmware.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Event {
+    /// The operator asked for something (already validated).
+    Command(Command),
+    /// An operator value was out of range; the screen shows the message and
+    /// nothing changed.
+    Rejected(ParamError),
+    /// The screen answered the handshake (or restarted and was set up again);
+    /// the firmware may write its settings with [`Hmi::set_settings`].
+    Connected,
+    /// The screen reported an error (typed; `0x1A`, `0x24`, …).
+    ScreenError(ErrorCode),
+    /// A `get` for this field got no reply in [`GET_TIMEOUT_MS`].
+    ReplyTimeout(Field),
+}
+
+/// The transmit queue had no room; the instruction was dropped (counted).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TxFull;
+
+impl fmt::Display for TxFull {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("screen transmit queue full")
+    }
+}
+
+/// Counters of the application layer (wrapping).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HmiStats {
+    /// Instructions dropped because the transmit queue was full.
+    pub tx_dropped: u32,
+    /// Events dropped because nobody polled them.
+    pub events_dropped: u32,
+    /// Touch events dropped because the touch queue was full.
+    pub touches_dropped: u32,
+    /// Touch events naming no component of the contract.
+    pub unknown_touches: u32,
+    /// `0x71`/`0x70` replies nobody asked for.
+    pub unexpected_replies: u32,
+    /// `get` requests that timed out.
+    pub timeouts: u32,
+    /// Frames the decoder dropped (see [`Hmi::decoder_stats`] for bytes).
+    pub decode_errors: u32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Pending {
+    field: Field,
+    since_ms: u32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Link {
+    Connecting { last_try_ms: Option<u32> },
+    Connected,
+}
+
+/// The screen link: feed it received bytes and the time; drain events and bytes.
+///
+/// Fixed size (≈ 0.5 KB: see the `*_QUEUE` and [`TX_CAPACITY`] consts), no heap.
+#[derive(Debug)]
+pub struct Hmi {
+    decoder: Decoder,
+    link: Link,
+    page: Page,
+    page_before_alarm: Page,
+    settings: Settings,
+    version: ScreenText<'static>,
+    pending: Option<Pending>,
+    now_ms: u32,
+    touches: heapless::Deque<(u8, u8), TOUCH_QUEUE>,
+    events: heapless::Deque<Event, EVENT_QUEUE>,
+    tx: heapless::Deque<u8, TX_CAPACITY>,
+    stats: HmiStats,
+}
+
+impl Hmi {
+    /// A link that will start the handshake at the first [`tick`](Self::tick).
+    /// `version` (≤ 40 characters, else shown empty) goes to the `tver` boxes.
+    pub fn new(settings: Settings, version: &'static str) -> Self {
+        Self {
+            decoder: Decoder::new(),
+            link: Link::Connecting { last_try_ms: None },
+            page: Page::Boot,
+            page_before_alarm: Page::Mode,
+            settings,
+            version: ScreenText::new(version).unwrap_or(ScreenText::EMPTY),
+            pending: None,
+            now_ms: 0,
+            touches: heapless::Deque::new(),
+            events: heapless::Deque::new(),
+            tx: heapless::Deque::new(),
+            stats: HmiStats::default(),
+        }
+    }
+
+    /// `true` once the screen has answered.
+    pub fn is_connected(&self) -> bool {
+        self.link == Link::Connected
+    }
+
+    /// The page the MCU believes is shown.
+    pub fn page(&self) -> Page {
+        self.page
+    }
+
+    /// The settings as displayed.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// `true` while a `get` reply is awaited.
+    pub fn awaiting_reply(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> HmiStats {
+        self.stats
+    }
+
+    /// The frame decoder's counters.
+    pub fn decoder_stats(&self) -> DecoderStats {
+        self.decoder.stats()
+    }
+
+    /// Bytes waiting to be sent.
+    pub fn tx_pending(&self) -> usize {
+        self.tx.len()
+    }
+
+    /// Feeds one received byte.
+    pub fn push(&mut self, byte: u8) {
+        match self.decoder.push(byte) {
+            Some(Ok(frame)) => self.on_frame(frame),
+            Some(Err(_)) => {
+                self.stats.decode_errors = self.stats.decode_errors.wrapping_add(1);
+            }
+            None => {}
+        }
+    }
+
+    /// Feeds received bytes.
+    pub fn push_slice(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.push(b);
+        }
+    }
+
+    /// Advances time (milliseconds, wrapping): handshake retries and `get` timeouts.
+    pub fn tick(&mut self, now_ms: u32) {
+        self.now_ms = now_ms;
+        if let Link::Connecting { last_try_ms } = self.link {
+            let due = match last_try_ms {
+                None => true,
+                Some(t) => now_ms.wrapping_sub(t) >= HANDSHAKE_RETRY_MS,
+            };
+            if due {
+                self.link = Link::Connecting {
+                    last_try_ms: Some(now_ms),
+                };
+                // Drop stale handshake bytes not yet sent.
+                self.tx.clear();
+                let _ = self.send(&Instruction::Flush);
+                let _ = self.send(&Instruction::SendMe);
+            }
+        }
+        if let Some(p) = self.pending {
+            if now_ms.wrapping_sub(p.since_ms) >= GET_TIMEOUT_MS {
+                self.pending = None;
+                self.stats.timeouts = self.stats.timeouts.wrapping_add(1);
+                self.event(Event::ReplyTimeout(p.field));
+                self.drain_touches();
+            }
+        }
+    }
+
+    /// Next event for the firmware.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    /// Moves queued bytes to `buf`; returns how many (0 when idle).
+    pub fn poll_transmit(&mut self, buf: &mut [u8]) -> usize {
+        let mut n = 0usize;
+        for slot in buf.iter_mut() {
+            match self.tx.pop_front() {
+                Some(b) => {
+                    *slot = b;
+                    n = n.saturating_add(1);
+                }
+                None => break,
+            }
+        }
+        n
+    }
+
+    /// Next byte to send (for an interrupt-driven transmitter).
+    pub fn pop_tx(&mut self) -> Option<u8> {
+        self.tx.pop_front()
+    }
+
+    /// Shows `page` with its settings values.
+    pub fn show_page(&mut self, page: Page) -> Result<(), TxFull> {
+        self.page = page;
+        self.send(&Instruction::Page(page.id()))?;
+        for ins in page_instructions(page, &self.settings, self.version) {
+            self.send(&ins)?;
+        }
+        Ok(())
+    }
+
+    /// Replaces the displayed settings, rewriting those shown on the current page.
+    pub fn set_settings(&mut self, settings: Settings) -> Result<(), TxFull> {
+        let old = self.settings;
+        self.settings = settings;
+        if old != settings && self.is_connected() {
+            for ins in page_instructions(self.page, &self.settings, self.version) {
+                if let Instruction::SetText(_, t) = ins {
+                    if t == self.version {
+                        continue;
+                    }
+                }
+                self.send(&ins)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the live values shown on the current page.
+    pub fn write_status(&mut self, status: &Status) -> Result<(), TxFull> {
+        if !self.is_connected() {
+            return Ok(());
+        }
+        for ins in status_instructions(self.page, status) {
+            self.send(&ins)?;
+        }
+        Ok(())
+    }
+
+    /// Shows `text` in the current page's message box (if it has one).
+    pub fn show_message(&mut self, text: &str) -> Result<(), TxFull> {
+        let Some(comp) = Component::on_page(self.page).find(|c| c.role == Role::Message) else {
+            return Ok(());
+        };
+        let t = ScreenText::new(text).or_else(|_| ScreenText::new("?"));
+        match t {
+            Ok(t) => self.send(&Instruction::SetText(comp.obj(), t)),
+            Err(_) => Ok(()),
+        }
+    }
+
+    /// Shows the alarm page with `text` (≤ 40 characters; longer is cut).
+    /// Acknowledging returns to the page shown before.
+    pub fn show_alarm(&mut self, text: &str) -> Result<(), TxFull> {
+        if self.page != Page::Alarm {
+            self.page_before_alarm = self.page;
+        }
+        self.show_page(Page::Alarm)?;
+        let cut = text
+            .char_indices()
+            .nth(crate::encoder::MAX_TEXT_LEN)
+            .map_or(text, |(i, _)| text.get(..i).unwrap_or(""));
+        if let (Ok(t), Some(comp)) = (
+            ScreenText::new(cut),
+            Component::on_page(Page::Alarm).find(|c| c.role == Role::AlarmText),
+        ) {
+            self.send(&Instruction::SetText(comp.obj(), t))?;
+        }
+        Ok(())
+    }
+
+    fn send(&mut self, ins: &Instruction<'_>) -> Result<(), TxFull> {
+        let mut buf = [0u8; MAX_INSTRUCTION_LEN];
+        let n = match ins.emit(&mut buf) {
+            Ok(n) => n,
+            Err(_) => return Ok(()), // invalid argument: nothing to send
+        };
+        let free = self.tx.capacity().saturating_sub(self.tx.len());
+        if n > free {
+            self.stats.tx_dropped = self.stats.tx_dropped.wrapping_add(1);
+            return Err(TxFull);
+        }
+        for &b in buf.get(..n).unwrap_or(&[]) {
+            let _ = self.tx.push_back(b);
+        }
+        Ok(())
+    }
+
+    fn event(&mut self, e: Event) {
+        if self.events.push_back(e).is_err() {
+            self.stats.events_dropped = self.stats.events_dropped.wrapping_add(1);
+        }
+    }
+
+    fn connect(&mut self) {
+        self.link = Link::Connected;
+        self.pending = None;
+        self.touches.clear();
+        let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
+        let _ = self.send(&Instruction::Dims(self.settings.brightness.raw()));
+        let _ = self.show_page(Page::Mode);
+        self.event(Event::Connected);
+    }
+
+    fn on_frame(&mut self, frame: Frame) {
+        match frame {
+            Frame::CurrentPage(p) => match self.link {
+                Link::Connecting { .. } => self.connect(),
+                Link::Connected => {
+                    if let Some(page) = Page::from_id(p) {
+                        self.page = page;
+                    }
+                }
+            },
+            // The screen restarted: its `0x88` follows; wait for it (or retry).
+            Frame::Startup => {
+                self.link = Link::Connecting {
+                    last_try_ms: Some(self.now_ms),
+                };
+                self.page = Page::Boot;
+            }
+            Frame::Ready => self.connect(),
+            Frame::Touch {
+                page,
+                component,
+                event: TouchEvent::Release,
+            } if self.is_connected() => self.on_touch(page, component),
+            Frame::Number(v) => match self.pending.take() {
+                Some(p) => {
+                    self.on_value(p.field, v);
+                    self.drain_touches();
+                }
+                None => {
+                    self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
+                }
+            },
+            Frame::Text(_) => {
+                self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
+            }
+            Frame::Error(code) => self.event(Event::ScreenError(code)),
+            _ => {}
+        }
+    }
+
+    fn on_touch(&mut self, page: u8, id: u8) {
+        let Some(comp) = Component::lookup(page, id) else {
+            self.stats.unknown_touches = self.stats.unknown_touches.wrapping_add(1);
+            return;
+        };
+        if comp.role == Role::Action(Action::Stop) {
+            // Safety first: Stop never waits behind a pending `get`.
+            self.event(Event::Command(Command::Stop));
+            return;
+        }
+        if self.pending.is_some() {
+            if self.touches.push_back((page, id)).is_err() {
+                self.stats.touches_dropped = self.stats.touches_dropped.wrapping_add(1);
+            }
+            return;
+        }
+        self.act(comp);
+    }
+
+    fn drain_touches(&mut self) {
+        while self.pending.is_none() {
+            let Some((page, id)) = self.touches.pop_front() else {
+                break;
+            };
+            if let Some(comp) = Component::lookup(page, id) {
+                self.act(comp);
+            }
+        }
+    }
+
+    fn act(&mut self, comp: &'static Component) {
+        // The screen is the truth about which page is shown.
+        self.page = comp.page;
+        let Role::Action(action) = comp.role else {
+            return;
+        };
+        let cmd = match action {
+            Action::ShowPage(p) => {
+                let _ = self.show_page(p);
+                None
+            }
+            Action::SelectMode(m) => {
+                let _ = self.show_page(m.page());
+                Some(Command::SelectMode(m))
+            }
+            Action::Apply(field) => {
+                if let Some(input) = Component::input(comp.page, field) {
+                    if self.send(&Instruction::Get(input.obj(), Attr::Val)).is_ok() {
+                        self.pending = Some(Pending {
+                            field,
+                            since_ms: self.now_ms,
+                        });
+                    }
+                }
+                None
+            }
+            Action::Start => Some(Command::Start),
+            Action::Stop => Some(Command::Stop),
+            Action::GearDown | Action::GearUp => {
+                let g = if action == Action::GearUp {
+                    self.settings.gear.next()
+                } else {
+                    self.settings.gear.prev()
+                };
+                let mut s = self.settings;
+                s.gear = g;
+                let _ = self.set_settings(s);
+                Some(Command::SelectGear(g))
+            }
+            Action::CalibrationStart => Some(Command::CalibrationStart),
+            Action::CalibrationStop => Some(Command::CalibrationStop),
+            Action::CalibrationAccept => Some(Command::CalibrationAccept),
+            Action::AcknowledgeAlarm => {
+                let _ = self.show_page(self.page_before_alarm);
+                Some(Command::AcknowledgeAlarm)
+            }
+            Action::SaveSettings => Some(Command::SaveSettings),
+        };
+        if let Some(c) = cmd {
+            self.event(Event::Command(c));
+        }
+    }
+
+    fn on_value(&mut self, field: Field, raw: i32) {
+        match field.validate(raw) {
+            Ok(cmd) => {
+                let mut s = self.settings;
+                match cmd {
+                    Command::SetSpacing(v) => s.spacing = v,
+                    Command::SetFixedDrumSpeed(v) => s.fixed_drum_speed = v,
+                    Command::SetMotorCoefficient(v) => s.motor_coefficient = v,
+                    Command::CalibrationActualDistance(v) => s.calibration_distance = v,
+                    Command::SetCalibrationCoefficient(v) => s.calibration_coefficient = v,
+                    Command::SetBrightness(v) => {
+                        s.brightness = v;
+                        let _ = self.send(&Instruction::Dims(v.raw()));
+                    }
+                    _ => {}
+                }
+                self.settings = s;
+                let _ = self.show_message("");
+                self.event(Event::Command(cmd));
+            }
+            Err(e) => {
+                let _ = self.show_message(e.message());
+                if let Some(input) = Component::input(self.page, field) {
+                    let _ = self.send(&Instruction::SetValue(
+                        input.obj(),
+                        field.current(&self.settings),
+                    ));
+                }
+                self.event(Event::Rejected(e));
+            }
+        }
+    }
+}

@@ -13,6 +13,7 @@ pub mod calib;
 pub mod consts;
 pub mod drum;
 mod fx;
+pub mod profile_b;
 pub mod speed;
 pub mod table;
 pub mod travel;

@@ -141,8 +141,9 @@ impl ProfileBSettings {
 /// assert!((n1.to_f64() - 12.0).abs() < 1e-3);
 /// // n2 at j = 0: 60·0.3·0.10/(2π·0.25·0.025) = 45.837 r/min.
 /// assert!((b.feeding_motor_speed(vm, 0)?.to_f64() - 45.837).abs() < 1e-3);
-/// // after 10 roller turns r' = 0.035 m: 32.740 r/min.
-/// assert!((b.feeding_motor_speed(vm, 10)?.to_f64() - 32.740).abs() < 1e-3);
+/// // after 10 roller turns r' = 0.035 m: 1.8/(2π·0.25·0.035) = 32.740 r/min (h = 1 mm is
+/// // stored to 1 µm: ±0.05 %, hence 5e-3).
+/// assert!((b.feeding_motor_speed(vm, 10)?.to_f64() - 32.740).abs() < 5e-3);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -24,7 +24,8 @@
 //! let mut hmi = Hmi::new(Settings::default(), "v0.1");
 //! let mut tx = [0u8; 256];
 //! hmi.tick(0);
-//! assert_eq!(&tx[..hmi.poll_transmit(&mut tx)], b"\xff\xff\xffsendme\xff\xff\xff");
+//! let n = hmi.poll_transmit(&mut tx);
+//! assert_eq!(&tx[..n], b"\xff\xff\xffsendme\xff\xff\xff");
 //! // Screen: "current page is 0".
 //! for b in [0x66, 0x00, 0xFF, 0xFF, 0xFF] { hmi.push(b); }
 //! assert_eq!(hmi.poll_event(), Some(Event::Connected));
@@ -33,7 +34,8 @@
 //! hmi.poll_transmit(&mut tx);
 //! // Operator releases "Apply" (page 3, id 2): the MCU asks for the spacing.
 //! for b in [0x65, 0x03, 0x02, 0x00, 0xFF, 0xFF, 0xFF] { hmi.push(b); }
-//! assert_eq!(&tx[..hmi.poll_transmit(&mut tx)], b"get nspacing.val\xff\xff\xff");
+//! let n = hmi.poll_transmit(&mut tx);
+//! assert_eq!(&tx[..n], b"get nspacing.val\xff\xff\xff");
 //! // Screen answers 180 (mm).
 //! for b in [0x71, 180, 0, 0, 0, 0xFF, 0xFF, 0xFF] { hmi.push(b); }
 //! assert_eq!(hmi.poll_event(), Some(Event::Command(Command::SetSpacing(Spacing::new(180).unwrap()))));

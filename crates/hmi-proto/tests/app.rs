@@ -1,0 +1,384 @@
+//! Application layer against the virtual screen: handshake, commands,
+//! validation, the known pitfalls of Nextion libraries, and split streams.
+#![allow(clippy::unwrap_used, clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+
+use hmi_proto::hmi::{Event, Hmi, GET_TIMEOUT_MS, HANDSHAKE_RETRY_MS};
+use hmi_proto::screen::*;
+use hmi_proto::virtual_screen::VirtualScreen;
+use hmi_proto::{ErrorCode, Frame};
+use proptest::prelude::*;
+
+/// Moves bytes both ways until both sides are quiet; returns the events.
+fn pump(hmi: &mut Hmi, screen: &mut VirtualScreen) -> Vec<Event> {
+    let mut events = Vec::new();
+    let mut buf = [0u8; 512];
+    loop {
+        let n = hmi.poll_transmit(&mut buf);
+        screen.feed(&buf[..n]);
+        let back = screen.take_output();
+        hmi.push_slice(&back);
+        while let Some(e) = hmi.poll_event() {
+            events.push(e);
+        }
+        if n == 0 && back.is_empty() {
+            return events;
+        }
+    }
+}
+
+fn connected() -> (Hmi, VirtualScreen) {
+    let mut screen = VirtualScreen::with_contract();
+    let mut hmi = Hmi::new(Settings::default(), "fw 0.1.0");
+    screen.boot();
+    hmi.tick(0);
+    let ev = pump(&mut hmi, &mut screen);
+    assert!(ev.contains(&Event::Connected), "{ev:?}");
+    (hmi, screen)
+}
+
+fn cmd(c: Command) -> Event {
+    Event::Command(c)
+}
+
+#[test]
+fn handshake_when_screen_boots_first_or_later() {
+    // Screen already running (its 0x88 was missed): sendme gets a 0x66 answer.
+    let mut screen = VirtualScreen::with_contract();
+    let mut hmi = Hmi::new(Settings::default(), "fw 0.1.0");
+    hmi.tick(0);
+    assert_eq!(pump(&mut hmi, &mut screen), vec![Event::Connected]);
+    assert!(hmi.is_connected());
+    assert_eq!(screen.page(), Page::Mode.id());
+    assert_eq!(screen.value("ncoef"), Some(100));
+    assert_eq!(screen.bkcmd(), 2);
+    assert_eq!(
+        &screen.instructions()[..5],
+        ["", "sendme", "bkcmd=2", "dims=100", "page 1"]
+    );
+
+    // Screen silent: the MCU retries every HANDSHAKE_RETRY_MS, nothing else.
+    let mut hmi = Hmi::new(Settings::default(), "fw");
+    let mut tx = [0u8; 256];
+    hmi.tick(0);
+    let n = hmi.poll_transmit(&mut tx);
+    assert_eq!(&tx[..n], b"\xff\xff\xffsendme\xff\xff\xff");
+    hmi.tick(HANDSHAKE_RETRY_MS - 1);
+    assert_eq!(hmi.poll_transmit(&mut tx), 0);
+    hmi.tick(HANDSHAKE_RETRY_MS);
+    let n = hmi.poll_transmit(&mut tx);
+    assert_eq!(&tx[..n], b"\xff\xff\xffsendme\xff\xff\xff");
+
+    // Screen resets while connected: startup + 0x88 set it up again.
+    let (mut hmi, mut screen) = connected();
+    screen.feed(b"rest\xff\xff\xff");
+    let ev = pump(&mut hmi, &mut screen);
+    assert_eq!(ev, vec![Event::Connected]);
+    assert_eq!(screen.page(), Page::Mode.id());
+}
+
+#[test]
+fn operator_sets_spacing_and_starts() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::SelectMode(Mode::SpeedAdaptive))]);
+    assert_eq!(screen.page(), Page::Adaptive.id());
+    assert_eq!(screen.value("nspacing"), Some(70));
+    assert_eq!(screen.text("tgear"), Some("Low 1"));
+
+    screen.set_value("nspacing", 180).unwrap();
+    screen.release("bapply").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetSpacing(Spacing::new(180).unwrap()))]
+    );
+    assert_eq!(hmi.settings().spacing.raw(), 180);
+
+    screen.release("bgearup").unwrap();
+    screen.release("bgearup").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SelectGear(Gear::Low2)), cmd(Command::SelectGear(Gear::Low3))]
+    );
+    assert_eq!(screen.text("tgear"), Some("Low 3"));
+
+    screen.release("bstart").unwrap();
+    screen.release("bstop").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start), cmd(Command::Stop)]);
+
+    let status = Status {
+        travel_speed_kmh_x100: 52,
+        target_drum_rpm_x100: 1234,
+        actual_drum_rpm_x100: 1230,
+        plants: 99,
+        distance_dm: 4567,
+        ..Status::default()
+    };
+    hmi.write_status(&status).unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.value("xtravel"), Some(52));
+    assert_eq!(screen.value("xtarget"), Some(1234));
+    assert_eq!(screen.value("xdrum"), Some(1230));
+    assert_eq!(screen.value("nplants"), Some(99));
+    assert_eq!(screen.value("xdist"), Some(4567));
+    // Only the current page is written: nothing on the screen raised an error.
+    assert_eq!(hmi.stats().tx_dropped, 0);
+}
+
+#[test]
+fn out_of_range_value_shows_message_and_changes_nothing() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("bfixed").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.set_value("nspeed", 4471).unwrap(); // 44.71 r/min > n_max
+    screen.release("bapply").unwrap();
+    let ev = pump(&mut hmi, &mut screen);
+    assert_eq!(
+        ev,
+        vec![Event::Rejected(ParamError { field: Field::FixedDrumSpeed, value: 4471 })]
+    );
+    assert_eq!(screen.text("tmsg"), Some("Drum speed must be 0-44.70 r/min"));
+    assert_eq!(screen.value("nspeed"), Some(2521)); // old value written back
+    assert_eq!(hmi.settings().fixed_drum_speed, DrumSpeed::DEFAULT);
+    // -1 (0x71 FF FF FF FF) is rejected the same way, not misread.
+    screen.set_value("nspeed", -1).unwrap();
+    screen.release("bapply").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![Event::Rejected(ParamError { field: Field::FixedDrumSpeed, value: -1 })]
+    );
+    // A valid value clears the message.
+    screen.set_value("nspeed", 4470).unwrap();
+    screen.release("bapply").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetFixedDrumSpeed(DrumSpeed::new(4470).unwrap()))]
+    );
+    assert_eq!(screen.text("tmsg"), Some(""));
+}
+
+#[test]
+fn validation_ranges_match_the_spec() {
+    assert!(Spacing::new(29).is_err() && Spacing::new(30).is_ok());
+    assert!(Spacing::new(500).is_ok() && Spacing::new(501).is_err());
+    assert!(DrumSpeed::new(-1).is_err() && DrumSpeed::new(0).is_ok());
+    assert!(DrumSpeed::new(4470).is_ok() && DrumSpeed::new(4471).is_err());
+    assert!(MotorCoefficient::new(49).is_err() && MotorCoefficient::new(50).is_ok());
+    assert!(MotorCoefficient::new(200).is_ok() && MotorCoefficient::new(201).is_err());
+    assert!(CalibrationCoefficient::new(799).is_err() && CalibrationCoefficient::new(800).is_ok());
+    assert!(CalibrationCoefficient::new(1200).is_ok() && CalibrationCoefficient::new(1201).is_err());
+    assert!(Spacing::new(i32::MIN).is_err() && Spacing::new(i32::MAX).is_err());
+    // k1 = actual / monitored (spec §4, Table 11: Low 1 0.33 / 0.32 = 1.031).
+    assert_eq!(CalibrationCoefficient::from_distances(3300, 3200).unwrap().raw(), 1031);
+    assert!(CalibrationCoefficient::from_distances(5000, 0).is_err());
+    assert!(CalibrationCoefficient::from_distances(5000, 3000).is_err());
+    assert_eq!(
+        Field::Spacing.validate(20).unwrap_err().to_string(),
+        "Spacing must be 3.0-50.0 cm"
+    );
+}
+
+#[test]
+fn pitfall_touch_during_get_is_not_lost() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.set_value("nspacing", 150).unwrap();
+    screen.release("bapply").unwrap();
+    // Deliver the touch; the MCU sends `get` but the reply is not there yet.
+    hmi.push_slice(&screen.take_output());
+    let mut buf = [0u8; 128];
+    let n = hmi.poll_transmit(&mut buf);
+    assert_eq!(&buf[..n], b"get nspacing.val\xff\xff\xff");
+    assert!(hmi.awaiting_reply());
+    // The operator presses Start before the screen answers: its touch frame
+    // arrives first, the number after.
+    screen.release("bstart").unwrap();
+    screen.feed(&buf[..n]);
+    hmi.push_slice(&screen.take_output());
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert_eq!(
+        ev,
+        vec![cmd(Command::SetSpacing(Spacing::new(150).unwrap())), cmd(Command::Start)]
+    );
+}
+
+#[test]
+fn stop_is_never_delayed_and_queued_touches_survive_a_timeout() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("bfixed").unwrap();
+    pump(&mut hmi, &mut screen);
+    hmi.tick(1000);
+    screen.release("bapply").unwrap();
+    hmi.push_slice(&screen.take_output());
+    assert!(hmi.awaiting_reply());
+    // The reply is lost. Start is queued, Stop goes through at once.
+    screen.release("bstart").unwrap();
+    screen.release("bstop").unwrap();
+    hmi.push_slice(&screen.take_output());
+    assert_eq!(hmi.poll_event(), Some(cmd(Command::Stop)));
+    assert_eq!(hmi.poll_event(), None);
+    hmi.tick(1000 + GET_TIMEOUT_MS - 1);
+    assert_eq!(hmi.poll_event(), None);
+    hmi.tick(1000 + GET_TIMEOUT_MS);
+    assert_eq!(hmi.poll_event(), Some(Event::ReplyTimeout(Field::FixedDrumSpeed)));
+    assert_eq!(hmi.poll_event(), Some(cmd(Command::Start)));
+    assert!(!hmi.awaiting_reply());
+}
+
+#[test]
+fn pitfall_screen_errors_are_typed_events() {
+    let (mut hmi, mut screen) = connected();
+    screen.feed(b"nosuch.val=1\xff\xff\xff"); // the screen itself answers 0x1A
+    screen.send(&Frame::Error(ErrorCode::BufferOverflow));
+    hmi.push_slice(&screen.take_output());
+    assert_eq!(hmi.poll_event(), Some(Event::ScreenError(ErrorCode::InvalidVariable)));
+    assert_eq!(hmi.poll_event(), Some(Event::ScreenError(ErrorCode::BufferOverflow)));
+}
+
+#[test]
+fn alarm_and_acknowledge_return_to_the_page() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("bfixed").unwrap();
+    pump(&mut hmi, &mut screen);
+    hmi.show_alarm("Too fast for spacing: slow down").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), Page::Alarm.id());
+    assert_eq!(screen.text("talarm"), Some("Too fast for spacing: slow down"));
+    screen.release("bok").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::AcknowledgeAlarm)]);
+    assert_eq!(screen.page(), Page::Fixed.id());
+    assert_eq!(screen.value("nspeed"), Some(2521));
+}
+
+#[test]
+fn calibration_and_settings_pages() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("bcalib").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![]);
+    assert_eq!(screen.page(), Page::Calibration.id());
+    screen.release("bcstart").unwrap();
+    screen.release("bcstop").unwrap();
+    screen.set_value("nactual", 4950).unwrap();
+    screen.release("bactual").unwrap();
+    screen.set_value("nk", 966).unwrap();
+    screen.release("bk").unwrap();
+    screen.release("bsave").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![
+            cmd(Command::CalibrationStart),
+            cmd(Command::CalibrationStop),
+            cmd(Command::CalibrationActualDistance(CalibrationDistance::new(4950).unwrap())),
+            cmd(Command::SetCalibrationCoefficient(CalibrationCoefficient::new(966).unwrap())),
+            cmd(Command::CalibrationAccept),
+        ]
+    );
+    hmi.write_status(&Status { measured_distance_cm: 5010, calibration_result_x1000: 988, ..Status::default() })
+        .unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.value("xmeas"), Some(5010));
+    assert_eq!(screen.value("xk"), Some(988));
+
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bset").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tver"), Some("fw 0.1.0"));
+    screen.set_value("ndim", 40).unwrap();
+    screen.release("bdim").unwrap();
+    screen.release("bsave").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetBrightness(Brightness::new(40).unwrap())), cmd(Command::SaveSettings)]
+    );
+    assert_eq!(screen.brightness(), 40);
+}
+
+#[test]
+fn virtual_screen_answers_like_the_real_one() {
+    let mut s = VirtualScreen::with_contract();
+    s.feed(b"page 2\xff\xff\xffnspeed.val=-1\xff\xff\xffget nspeed.val\xff\xff\xff");
+    assert_eq!(s.take_output(), b"\x71\xff\xff\xff\xff\xff\xff\xff");
+    s.feed(b"tmsg.txt=\"a\\\"b\\\\c\\rd\"\xff\xff\xffget tmsg.txt\xff\xff\xff");
+    assert_eq!(s.text("tmsg"), Some("a\"b\\c\nd"));
+    assert_eq!(s.take_output(), b"\x70a\"b\\c\nd\xff\xff\xff");
+    s.feed(b"page 9\xff\xff\xffget nspeed.txt\xff\xff\xffbogus\xff\xff\xff");
+    assert_eq!(s.take_output(), b"\x03\xff\xff\xff\x1a\xff\xff\xff\x00\xff\xff\xff");
+    s.feed(b"bkcmd=3\xff\xff\xffsendme\xff\xff\xffpage adaptive\xff\xff\xff");
+    assert_eq!(s.take_output(), b"\x01\xff\xff\xff\x66\x02\xff\xff\xff\x01\xff\xff\xff");
+    assert_eq!(s.page(), 3);
+    s.feed(b"tsw bstart,0\xff\xff\xff");
+    assert!(s.release("bstart").is_err());
+    assert!(s.release("nosuch").is_err());
+    s.feed(b"baud=115200\xff\xff\xffbaud=1234\xff\xff\xff");
+    assert_eq!(s.take_output(), b"\x01\xff\xff\xff\x01\xff\xff\xff\x11\xff\xff\xff");
+    // Overflow of the serial buffer.
+    s.feed(&vec![b'a'; hmi_proto::virtual_screen::SERIAL_BUFFER + 4]);
+    assert_eq!(s.take_output(), b"\x24\xff\xff\xff");
+}
+
+#[test]
+fn docs_list_every_component() {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/hmi.md"))
+        .expect("docs/hmi.md");
+    for p in Page::ALL {
+        let row = format!("### Page {} `{}`", p.id(), p.name());
+        assert!(doc.contains(&row), "missing {row}");
+    }
+    for c in COMPONENTS {
+        let row = format!("| {} | `{}` |", c.id, c.name);
+        assert!(doc.contains(&row), "missing {row} ({:?})", c.page);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    /// The same session gives the same events however both directions are chunked.
+    #[test]
+    fn session_is_split_invariant(chunks in proptest::collection::vec(1usize..9, 1..40)) {
+        let run = |chunks: &[usize]| {
+            let mut screen = VirtualScreen::with_contract();
+            let mut hmi = Hmi::new(Settings::default(), "fw");
+            screen.boot();
+            hmi.tick(0);
+            let mut events = Vec::new();
+            let mut k = 0usize;
+            let mut buf = [0u8; 512];
+            let script: &[&dyn Fn(&mut VirtualScreen)] = &[
+                &|s| { let _ = s.release("badapt"); },
+                &|s| { let _ = s.set_value("nspacing", 250); let _ = s.release("bapply"); let _ = s.release("bstart"); },
+                &|s| { let _ = s.set_value("nspacing", 5); let _ = s.release("bapply"); },
+                &|s| { let _ = s.release("bgeardn"); let _ = s.release("bstop"); },
+            ];
+            for step in 0..=script.len() {
+                for _ in 0..50 {
+                    let n = hmi.poll_transmit(&mut buf);
+                    let mut i = 0;
+                    while i < n {
+                        let c = chunks[k % chunks.len()]; k += 1;
+                        let end = (i + c).min(n);
+                        screen.feed(&buf[i..end]);
+                        i = end;
+                    }
+                    let back = screen.take_output();
+                    let mut i = 0;
+                    while i < back.len() {
+                        let c = chunks[k % chunks.len()]; k += 1;
+                        let end = (i + c).min(back.len());
+                        hmi.push_slice(&back[i..end]);
+                        i = end;
+                    }
+                    while let Some(e) = hmi.poll_event() { events.push(e); }
+                }
+                if let Some(f) = script.get(step) { f(&mut screen); }
+            }
+            events
+        };
+        let reference = run(&[usize::MAX / 2]);
+        prop_assert_eq!(reference.len(), 7);
+        prop_assert_eq!(run(&chunks), reference);
+    }
+}

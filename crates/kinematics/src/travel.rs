@@ -53,7 +53,7 @@ pub const PAPER_K2: [(&str, &str); 6] = [
     ("0.8618", "0.963"),
     ("1.4233", "0.956"),
     ("2.2794", "0.952"),
-    ("3.8052", "0.941"),
+    ("3.8053", "0.941"),
 ];
 /// k3 table of paper A Table 13: (set drum r/min, k3).
 pub const PAPER_K3: [(&str, &str); 5] = [

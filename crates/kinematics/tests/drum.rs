@@ -1,6 +1,7 @@
 //! Eq. 7 and eq. 10 against hand-computed values, and the whole chain
 //! against an independent f64 model (proptest).
 #![allow(
+    clippy::arithmetic_side_effects,
     clippy::unwrap_used,
     clippy::float_arithmetic,
     clippy::indexing_slicing,

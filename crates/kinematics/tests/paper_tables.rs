@@ -1,6 +1,7 @@
 //! Reproduces paper A Tables 11, 12 and 13 (SPEC §4) from their raw columns
 //! with the crate's calibration functions, to the printed precision.
 #![allow(
+    clippy::arithmetic_side_effects,
     clippy::unwrap_used,
     clippy::float_arithmetic,
     clippy::indexing_slicing

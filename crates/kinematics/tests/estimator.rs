@@ -1,0 +1,338 @@
+//! The M/T estimator on synthetic Hall edge streams: 25 teeth with ±1 %
+//! tooth-pitch error, ±5 µs capture jitter, 1 MHz timer with 16-bit
+//! captures, wrap and interrupt latency (the capture/overflow race), 100 ms
+//! updates. Reference: the exact simulated speed.
+#![allow(
+    clippy::unwrap_used,
+    clippy::float_arithmetic,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_precision_loss,
+    clippy::cast_possible_wrap
+)]
+
+use kinematics::speed::{CaptureExtender, EstimatorSettings, MotionState, MtEstimator};
+use kinematics::units::Ticks;
+use proptest::prelude::*;
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    /// Uniform in [-1, 1).
+    fn sym(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
+/// Tooth pitch errors: uniform ±1 %, closed over a revolution (sum 0).
+fn pitch_errors(rng: &mut Rng) -> [f64; 25] {
+    let mut e = [0.0; 25];
+    for v in &mut e {
+        *v = 0.01 * rng.sym();
+    }
+    let mean = e.iter().sum::<f64>() / 25.0;
+    for v in &mut e {
+        *v -= mean;
+    }
+    e
+}
+
+struct Run {
+    /// (time s, estimate r/min, state) per update after warm-up.
+    samples: Vec<(f64, f64, MotionState)>,
+    truth_rpm: f64,
+}
+
+/// Simulates `secs` seconds at `kmh`, returns the samples after `warm` s.
+/// Edges with `glitch_every` > 0 get an extra bounce edge 40–240 µs later.
+fn simulate(
+    kmh: f64,
+    secs: f64,
+    warm: f64,
+    settings: EstimatorSettings,
+    seed: u64,
+    glitch_every: usize,
+) -> Run {
+    let mut rng = Rng(seed);
+    let pitch = pitch_errors(&mut rng);
+    let rev_per_s = kmh / 3.6 / (std::f64::consts::PI * 0.2);
+    // Edge capture times in µs (f64), starting at a random phase.
+    let mut edges: Vec<u64> = Vec::new();
+    let mut angle = 0.0;
+    let t0 = 1000.0 + (rng.next() % 50_000) as f64;
+    let mut k = (rng.next() % 25) as usize;
+    loop {
+        angle += (1.0 + pitch[k % 25]) / 25.0;
+        k += 1;
+        let t = t0 + angle / rev_per_s * 1e6 + 5.0 * rng.sym();
+        if t > secs * 1e6 {
+            break;
+        }
+        edges.push(t.round() as u64);
+        if glitch_every > 0 && edges.len() % glitch_every == 0 {
+            edges.push(t.round() as u64 + 40 + rng.next() % 200);
+        }
+    }
+    let mut est = settings.build().unwrap();
+    let mut ext = CaptureExtender::new();
+    let mut serviced: u64 = 0; // overflows accounted
+    let mut samples = Vec::new();
+    let mut next_update: u64 = 100_000;
+    let mut ei = 0;
+    let mut next_ovf_isr = 65_536 + rng.next() % 20;
+    loop {
+        let edge_isr = edges.get(ei).map(|&t| t + rng.next() % 20);
+        let t_next = [edge_isr.unwrap_or(u64::MAX), next_ovf_isr, next_update]
+            .into_iter()
+            .min()
+            .unwrap();
+        if t_next as f64 > secs * 1e6 {
+            break;
+        }
+        let happened = t_next / 65_536; // overflows that occurred by now
+        if Some(t_next) == edge_isr {
+            let cap = edges[ei];
+            let pending = happened > serviced;
+            let ticks = ext.extend((cap % 65_536) as u16, pending);
+            assert_eq!(ticks.0, cap as u32, "extended capture");
+            if pending {
+                ext.on_overflow();
+                serviced += 1;
+            }
+            est.push_edge(ticks);
+            ei += 1;
+        } else if t_next == next_ovf_isr {
+            if serviced < happened {
+                ext.on_overflow();
+                serviced += 1;
+            }
+            next_ovf_isr = (happened + 1) * 65_536 + rng.next() % 20;
+        } else {
+            let now = ext.now((t_next % 65_536) as u16, happened > serviced);
+            assert_eq!(now.0, t_next as u32, "extended now");
+            let m = est.update(now);
+            if t_next as f64 >= warm * 1e6 {
+                samples.push((t_next as f64 / 1e6, m.gear_speed.to_f64(), m.state));
+            }
+            next_update += 100_000;
+        }
+    }
+    Run {
+        samples,
+        truth_rpm: rev_per_s * 60.0,
+    }
+}
+
+fn max_rel_error(run: &Run) -> f64 {
+    let mut measured = 0;
+    let mut worst: f64 = 0.0;
+    for &(_, v, s) in &run.samples {
+        assert!(
+            matches!(
+                s,
+                MotionState::Measured | MotionState::Holding | MotionState::Decaying
+            ),
+            "unexpected state {s:?}"
+        );
+        if s == MotionState::Measured {
+            measured += 1;
+        }
+        worst = worst.max((v - run.truth_rpm).abs() / run.truth_rpm);
+    }
+    assert!(measured > 10, "too few measurements: {measured}");
+    worst
+}
+
+/// Warm-up: three revolutions (tooth learning) plus 1 s.
+fn warm_for(kmh: f64) -> f64 {
+    3.0 * (std::f64::consts::PI * 0.2) / (kmh / 3.6) + 1.0
+}
+
+#[test]
+fn steady_speeds_within_half_a_percent() {
+    for (i, kmh) in [0.3, 0.5, 0.85, 1.4, 2.2, 3.0, 4.0].into_iter().enumerate() {
+        let warm = warm_for(kmh);
+        let run = simulate(
+            kmh,
+            warm + 30.0,
+            warm,
+            EstimatorSettings::default(),
+            0x9e37_79b9 + i as u64,
+            0,
+        );
+        let e = max_rel_error(&run);
+        eprintln!("{kmh} km/h: worst error {:.4} %", e * 100.0);
+        assert!(e <= 0.005, "{kmh} km/h: worst error {:.3} %", e * 100.0);
+    }
+}
+
+#[test]
+fn median_of_three_also_within_half_a_percent() {
+    let s = EstimatorSettings {
+        median_of_3: true,
+        ..EstimatorSettings::default()
+    };
+    for kmh in [0.3, 4.0] {
+        let warm = warm_for(kmh);
+        let e = max_rel_error(&simulate(kmh, warm + 20.0, warm, s, 77, 0));
+        assert!(e <= 0.005, "{kmh} km/h: {:.3} %", e * 100.0);
+    }
+}
+
+#[test]
+fn glitches_are_rejected() {
+    let warm = warm_for(1.4);
+    let run = simulate(1.4, warm + 20.0, warm, EstimatorSettings::default(), 5, 3);
+    let e = max_rel_error(&run);
+    assert!(e <= 0.005, "with bounces: {:.3} %", e * 100.0);
+}
+
+/// Why the pitch compensation exists: without it, single gaps at 0.3 km/h
+/// carry the ±1 % pitch error (and the difference of two edges' errors).
+#[test]
+fn without_pitch_compensation_low_speed_exceeds_the_bound() {
+    let s = EstimatorSettings {
+        pitch_compensation: false,
+        ..EstimatorSettings::default()
+    };
+    let warm = warm_for(0.3);
+    let e = max_rel_error(&simulate(0.3, warm + 30.0, warm, s, 11, 0));
+    assert!(
+        e > 0.005,
+        "expected > 0.5 % without compensation, got {:.3} %",
+        e * 100.0
+    );
+}
+
+#[test]
+fn decays_then_stops() {
+    let mut est = EstimatorSettings::default().build().unwrap();
+    // 10 r/min: 240 ms per tooth.
+    for k in 0..30u32 {
+        est.push_edge(Ticks(k * 240_000));
+    }
+    let last = 29 * 240_000u32;
+    let m = est.update(Ticks(last + 100_000));
+    assert_eq!(m.state, MotionState::Measured);
+    assert!((m.gear_speed.to_f64() - 10.0).abs() < 1e-3);
+    // Not overdue yet (< 240 ms): held.
+    assert_eq!(
+        est.update(Ticks(last + 200_000)).state,
+        MotionState::Holding
+    );
+    // 480 ms without an edge: at most 1/25 rev in 0.48 s = 5 r/min.
+    let m = est.update(Ticks(last + 480_000));
+    assert_eq!(m.state, MotionState::Decaying);
+    assert!((m.gear_speed.to_f64() - 5.0).abs() < 1e-3);
+    // Monotone decay to the timeout, then 0.
+    let mut prev = m.gear_speed;
+    for dt in (580_000..1_500_000).step_by(100_000) {
+        let m = est.update(Ticks(last + dt));
+        assert!(m.gear_speed <= prev);
+        prev = m.gear_speed;
+    }
+    let m = est.update(Ticks(last + 1_600_000));
+    assert_eq!(m.state, MotionState::Stopped);
+    assert_eq!(m.gear_speed.to_f64(), 0.0);
+    // Restart: first edge ⇒ Starting, second ⇒ measured again.
+    est.push_edge(Ticks(last + 3_000_000));
+    assert_eq!(
+        est.update(Ticks(last + 3_050_000)).state,
+        MotionState::Starting
+    );
+    est.push_edge(Ticks(last + 3_200_000));
+    let m = est.update(Ticks(last + 3_250_000));
+    assert_eq!(m.state, MotionState::Measured);
+    // One gap of 200 ms with the learned share of that tooth (uniform here): 12 r/min.
+    assert!((m.gear_speed.to_f64() - 12.0).abs() < 1e-3);
+}
+
+#[test]
+fn timestamps_wrap_at_2_pow_32() {
+    let mut est = EstimatorSettings::default().build().unwrap();
+    let start = u32::MAX - 500_000;
+    for k in 0..10u32 {
+        est.push_edge(Ticks(start.wrapping_add(k * 100_000)));
+    }
+    let m = est.update(Ticks(start.wrapping_add(950_000)));
+    // 100 ms per tooth: 60/(25·0.1) = 24 r/min.
+    assert!(
+        (m.gear_speed.to_f64() - 24.0).abs() < 1e-3,
+        "{}",
+        m.gear_speed
+    );
+}
+
+#[test]
+fn settings_are_validated() {
+    let d = EstimatorSettings::default();
+    assert!(EstimatorSettings { teeth: 1, ..d }.build().is_err());
+    assert!(EstimatorSettings { teeth: 33, ..d }.build().is_err());
+    assert!(EstimatorSettings { timer_hz: 0, ..d }.build().is_err());
+    assert!(EstimatorSettings {
+        stop_timeout_ticks: 100,
+        ..d
+    }
+    .build()
+    .is_err());
+    assert!(EstimatorSettings {
+        glitch_shift: 0,
+        ..d
+    }
+    .build()
+    .is_err());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    #[test]
+    fn arbitrary_timestamps_never_panic(
+        ops in proptest::collection::vec((any::<bool>(), any::<u32>()), 0..400),
+        teeth in 2u8..=32,
+        median in any::<bool>(),
+        comp in any::<bool>(),
+        timeout in 1_000u32..=2_000_000_000,
+    ) {
+        let mut est: MtEstimator = EstimatorSettings {
+            teeth,
+            median_of_3: median,
+            pitch_compensation: comp,
+            stop_timeout_ticks: timeout,
+            ..EstimatorSettings::default()
+        }
+        .build()
+        .unwrap();
+        let mut ext = CaptureExtender::new();
+        for (is_edge, v) in ops {
+            if is_edge {
+                let t = ext.extend(v as u16, v & 0x1_0000 != 0);
+                let _ = est.push_edge(Ticks(v ^ t.0));
+            } else {
+                if v % 7 == 0 {
+                    ext.on_overflow();
+                }
+                let _ = est.update(Ticks(v));
+            }
+        }
+    }
+
+    #[test]
+    fn increasing_edges_give_plausible_speeds(gaps in proptest::collection::vec(500u32..2_000_000, 2..200)) {
+        let mut est = EstimatorSettings::default().build().unwrap();
+        let mut t = 0u32;
+        for g in gaps {
+            t = t.wrapping_add(g);
+            est.push_edge(Ticks(t));
+            let m = est.update(Ticks(t.wrapping_add(10)));
+            // A gear rev needs ≥ 25 edges ≥ 500 µs apart: ≤ 4800 r/min, saturated to the U12F20 max.
+            prop_assert!(m.gear_speed.to_f64() < 4096.0);
+        }
+    }
+}

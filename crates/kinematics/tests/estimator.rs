@@ -76,7 +76,7 @@ fn simulate(
             break;
         }
         edges.push(t.round() as u64);
-        if glitch_every > 0 && edges.len() % glitch_every == 0 {
+        if glitch_every > 0 && edges.len().is_multiple_of(glitch_every) {
             edges.push(t.round() as u64 + 40 + rng.next() % 200);
         }
     }
@@ -315,7 +315,7 @@ proptest! {
                 let t = ext.extend(v as u16, v & 0x1_0000 != 0);
                 let _ = est.push_edge(Ticks(v ^ t.0));
             } else {
-                if v % 7 == 0 {
+                if v.is_multiple_of(7) {
                     ext.on_overflow();
                 }
                 let _ = est.update(Ticks(v));

@@ -226,8 +226,8 @@ mod app {
         let mut runs: u32 = 0;
         loop {
             let uptime_ms = super::uptime_ms();
-            cx.local.led.set(runs % 2 == 0);
-            if runs % STATUS_LOG_EVERY == 0 {
+            cx.local.led.set(runs.is_multiple_of(2));
+            if runs.is_multiple_of(STATUS_LOG_EVERY) {
                 defmt::info!(
                     "status: uptime {=u32} ms, control loops {=u32} (overruns {=u32}), hall edges {=u32}, drum {=u32} cr/min, hmi rx {=u32} B / {=u32} frames",
                     uptime_ms,
@@ -272,16 +272,18 @@ mod app {
     }
 }
 
-/// Panic: outputs to their safe state first, then the message, then stop.
+/// Panic: outputs to their safe state first, then the message, then a
+/// HardFault (an attached probe-rs halts there and prints the backtrace).
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::interrupt::disable();
     board::safe_state();
     defmt::error!("panic: {}", defmt::Display2Format(info));
-    board::fatal()
+    cortex_m::asm::udf()
 }
 
-/// HardFault: outputs to their safe state first, then stop.
+/// HardFault: outputs to their safe state first, then the board's end state
+/// (the real board waits for the watchdog; QEMU exits with a failure code).
 #[cortex_m_rt::exception]
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     board::safe_state();

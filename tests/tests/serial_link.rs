@@ -9,16 +9,13 @@ use qemu_tests::{instructions, qemu_firmware_elf, BootOptions, Firmware, TERMINA
 /// Finds the last complete `rxcount.val=N` instruction in what the firmware
 /// sent and returns N.
 fn last_rxcount(bytes: &[u8]) -> Option<u32> {
-    instructions(bytes)
-        .into_iter()
-        .filter_map(|i| {
-            std::str::from_utf8(i)
-                .ok()?
-                .strip_prefix("rxcount.val=")?
-                .parse()
-                .ok()
-        })
-        .last()
+    instructions(bytes).into_iter().rev().find_map(|i| {
+        std::str::from_utf8(i)
+            .ok()?
+            .strip_prefix("rxcount.val=")?
+            .parse()
+            .ok()
+    })
 }
 
 #[test]

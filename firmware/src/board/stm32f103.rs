@@ -320,12 +320,15 @@ pub fn safe_state() {
     }
 }
 
-/// Ends the program after a fatal error: a breakpoint for an attached probe
-/// (probe-rs reports it), otherwise a spin until the watchdog resets the MCU.
+/// The end state after a fatal error (called from the HardFault handler):
+/// outputs safe, then spin until the independent watchdog resets the MCU. At
+/// boot the drum stays stopped until the operator presses Start, so the reset
+/// cannot restart the machine by itself. (A probe attached with `probe-rs run`
+/// has already halted the core on the HardFault and printed a backtrace.)
 pub fn fatal() -> ! {
     safe_state();
     loop {
-        cortex_m::asm::udf();
+        cortex_m::asm::nop();
     }
 }
 

@@ -91,7 +91,8 @@ const MAX_FIXED: usize = 5;
 
 /// Streaming return-frame decoder.
 ///
-/// Its size is fixed (≈ 70 bytes with the default [`MAX_STRING_LEN`]); feed it
+/// Its size is fixed (≤ 80 bytes with [`MAX_STRING_LEN`] = 48, asserted by a
+/// test); feed it
 /// from the UART receive interrupt or from a byte queue.
 ///
 /// ```

@@ -125,7 +125,8 @@ enum Link {
 
 /// The screen link: feed it received bytes and the time; drain events and bytes.
 ///
-/// Fixed size (≈ 0.5 KB: see the `*_QUEUE` and [`TX_CAPACITY`] consts), no heap.
+/// Fixed size (≤ 640 bytes, asserted by a test: see the `*_QUEUE` and
+/// [`TX_CAPACITY`] consts), no heap.
 #[derive(Debug)]
 pub struct Hmi {
     decoder: Decoder,

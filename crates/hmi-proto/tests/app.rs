@@ -1,6 +1,10 @@
 //! Application layer against the virtual screen: handshake, commands,
 //! validation, the known pitfalls of Nextion libraries, and split streams.
-#![allow(clippy::unwrap_used, clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
 
 use hmi_proto::hmi::{Event, Hmi, GET_TIMEOUT_MS, HANDSHAKE_RETRY_MS};
 use hmi_proto::screen::*;
@@ -80,7 +84,10 @@ fn handshake_when_screen_boots_first_or_later() {
 fn operator_sets_spacing_and_starts() {
     let (mut hmi, mut screen) = connected();
     screen.release("badapt").unwrap();
-    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::SelectMode(Mode::SpeedAdaptive))]);
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SelectMode(Mode::SpeedAdaptive))]
+    );
     assert_eq!(screen.page(), Page::Adaptive.id());
     assert_eq!(screen.value("nspacing"), Some(70));
     assert_eq!(screen.text("tgear"), Some("Low 1"));
@@ -97,13 +104,19 @@ fn operator_sets_spacing_and_starts() {
     screen.release("bgearup").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
-        vec![cmd(Command::SelectGear(Gear::Low2)), cmd(Command::SelectGear(Gear::Low3))]
+        vec![
+            cmd(Command::SelectGear(Gear::Low2)),
+            cmd(Command::SelectGear(Gear::Low3))
+        ]
     );
     assert_eq!(screen.text("tgear"), Some("Low 3"));
 
     screen.release("bstart").unwrap();
     screen.release("bstop").unwrap();
-    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start), cmd(Command::Stop)]);
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::Start), cmd(Command::Stop)]
+    );
 
     let status = Status {
         travel_speed_kmh_x100: 52,
@@ -134,9 +147,15 @@ fn out_of_range_value_shows_message_and_changes_nothing() {
     let ev = pump(&mut hmi, &mut screen);
     assert_eq!(
         ev,
-        vec![Event::Rejected(ParamError { field: Field::FixedDrumSpeed, value: 4471 })]
+        vec![Event::Rejected(ParamError {
+            field: Field::FixedDrumSpeed,
+            value: 4471
+        })]
     );
-    assert_eq!(screen.text("tmsg"), Some("Drum speed must be 0-44.70 r/min"));
+    assert_eq!(
+        screen.text("tmsg"),
+        Some("Drum speed must be 0-44.70 r/min")
+    );
     assert_eq!(screen.value("nspeed"), Some(2521)); // old value written back
     assert_eq!(hmi.settings().fixed_drum_speed, DrumSpeed::DEFAULT);
     // -1 (0x71 FF FF FF FF) is rejected the same way, not misread.
@@ -144,14 +163,19 @@ fn out_of_range_value_shows_message_and_changes_nothing() {
     screen.release("bapply").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
-        vec![Event::Rejected(ParamError { field: Field::FixedDrumSpeed, value: -1 })]
+        vec![Event::Rejected(ParamError {
+            field: Field::FixedDrumSpeed,
+            value: -1
+        })]
     );
     // A valid value clears the message.
     screen.set_value("nspeed", 4470).unwrap();
     screen.release("bapply").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
-        vec![cmd(Command::SetFixedDrumSpeed(DrumSpeed::new(4470).unwrap()))]
+        vec![cmd(Command::SetFixedDrumSpeed(
+            DrumSpeed::new(4470).unwrap()
+        ))]
     );
     assert_eq!(screen.text("tmsg"), Some(""));
 }
@@ -165,10 +189,17 @@ fn validation_ranges_match_the_spec() {
     assert!(MotorCoefficient::new(49).is_err() && MotorCoefficient::new(50).is_ok());
     assert!(MotorCoefficient::new(200).is_ok() && MotorCoefficient::new(201).is_err());
     assert!(CalibrationCoefficient::new(799).is_err() && CalibrationCoefficient::new(800).is_ok());
-    assert!(CalibrationCoefficient::new(1200).is_ok() && CalibrationCoefficient::new(1201).is_err());
+    assert!(
+        CalibrationCoefficient::new(1200).is_ok() && CalibrationCoefficient::new(1201).is_err()
+    );
     assert!(Spacing::new(i32::MIN).is_err() && Spacing::new(i32::MAX).is_err());
     // k1 = actual / monitored (spec §4, Table 11: Low 1 0.33 / 0.32 = 1.031).
-    assert_eq!(CalibrationCoefficient::from_distances(3300, 3200).unwrap().raw(), 1031);
+    assert_eq!(
+        CalibrationCoefficient::from_distances(3300, 3200)
+            .unwrap()
+            .raw(),
+        1031
+    );
     assert!(CalibrationCoefficient::from_distances(5000, 0).is_err());
     assert!(CalibrationCoefficient::from_distances(5000, 3000).is_err());
     assert_eq!(
@@ -201,7 +232,10 @@ fn pitfall_touch_during_get_is_not_lost() {
     }
     assert_eq!(
         ev,
-        vec![cmd(Command::SetSpacing(Spacing::new(150).unwrap())), cmd(Command::Start)]
+        vec![
+            cmd(Command::SetSpacing(Spacing::new(150).unwrap())),
+            cmd(Command::Start)
+        ]
     );
 }
 
@@ -223,7 +257,10 @@ fn stop_is_never_delayed_and_queued_touches_survive_a_timeout() {
     hmi.tick(1000 + GET_TIMEOUT_MS - 1);
     assert_eq!(hmi.poll_event(), None);
     hmi.tick(1000 + GET_TIMEOUT_MS);
-    assert_eq!(hmi.poll_event(), Some(Event::ReplyTimeout(Field::FixedDrumSpeed)));
+    assert_eq!(
+        hmi.poll_event(),
+        Some(Event::ReplyTimeout(Field::FixedDrumSpeed))
+    );
     assert_eq!(hmi.poll_event(), Some(cmd(Command::Start)));
     assert!(!hmi.awaiting_reply());
 }
@@ -234,8 +271,14 @@ fn pitfall_screen_errors_are_typed_events() {
     screen.feed(b"nosuch.val=1\xff\xff\xff"); // the screen itself answers 0x1A
     screen.send(&Frame::Error(ErrorCode::BufferOverflow));
     hmi.push_slice(&screen.take_output());
-    assert_eq!(hmi.poll_event(), Some(Event::ScreenError(ErrorCode::InvalidVariable)));
-    assert_eq!(hmi.poll_event(), Some(Event::ScreenError(ErrorCode::BufferOverflow)));
+    assert_eq!(
+        hmi.poll_event(),
+        Some(Event::ScreenError(ErrorCode::InvalidVariable))
+    );
+    assert_eq!(
+        hmi.poll_event(),
+        Some(Event::ScreenError(ErrorCode::BufferOverflow))
+    );
 }
 
 #[test]
@@ -246,9 +289,15 @@ fn alarm_and_acknowledge_return_to_the_page() {
     hmi.show_alarm("Too fast for spacing: slow down").unwrap();
     pump(&mut hmi, &mut screen);
     assert_eq!(screen.page(), Page::Alarm.id());
-    assert_eq!(screen.text("talarm"), Some("Too fast for spacing: slow down"));
+    assert_eq!(
+        screen.text("talarm"),
+        Some("Too fast for spacing: slow down")
+    );
     screen.release("bok").unwrap();
-    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::AcknowledgeAlarm)]);
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::AcknowledgeAlarm)]
+    );
     assert_eq!(screen.page(), Page::Fixed.id());
     assert_eq!(screen.value("nspeed"), Some(2521));
 }
@@ -271,13 +320,21 @@ fn calibration_and_settings_pages() {
         vec![
             cmd(Command::CalibrationStart),
             cmd(Command::CalibrationStop),
-            cmd(Command::CalibrationActualDistance(CalibrationDistance::new(4950).unwrap())),
-            cmd(Command::SetCalibrationCoefficient(CalibrationCoefficient::new(966).unwrap())),
+            cmd(Command::CalibrationActualDistance(
+                CalibrationDistance::new(4950).unwrap()
+            )),
+            cmd(Command::SetCalibrationCoefficient(
+                CalibrationCoefficient::new(966).unwrap()
+            )),
             cmd(Command::CalibrationAccept),
         ]
     );
-    hmi.write_status(&Status { measured_distance_cm: 5010, calibration_result_x1000: 988, ..Status::default() })
-        .unwrap();
+    hmi.write_status(&Status {
+        measured_distance_cm: 5010,
+        calibration_result_x1000: 988,
+        ..Status::default()
+    })
+    .unwrap();
     pump(&mut hmi, &mut screen);
     assert_eq!(screen.value("xmeas"), Some(5010));
     assert_eq!(screen.value("xk"), Some(988));
@@ -292,7 +349,10 @@ fn calibration_and_settings_pages() {
     screen.release("bsave").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
-        vec![cmd(Command::SetBrightness(Brightness::new(40).unwrap())), cmd(Command::SaveSettings)]
+        vec![
+            cmd(Command::SetBrightness(Brightness::new(40).unwrap())),
+            cmd(Command::SaveSettings)
+        ]
     );
     assert_eq!(screen.brightness(), 40);
 }
@@ -306,15 +366,24 @@ fn virtual_screen_answers_like_the_real_one() {
     assert_eq!(s.text("tmsg"), Some("a\"b\\c\nd"));
     assert_eq!(s.take_output(), b"\x70a\"b\\c\nd\xff\xff\xff");
     s.feed(b"page 9\xff\xff\xffget nspeed.txt\xff\xff\xffbogus\xff\xff\xff");
-    assert_eq!(s.take_output(), b"\x03\xff\xff\xff\x1a\xff\xff\xff\x00\xff\xff\xff");
+    assert_eq!(
+        s.take_output(),
+        b"\x03\xff\xff\xff\x1a\xff\xff\xff\x00\xff\xff\xff"
+    );
     s.feed(b"bkcmd=3\xff\xff\xffsendme\xff\xff\xffpage adaptive\xff\xff\xff");
-    assert_eq!(s.take_output(), b"\x01\xff\xff\xff\x66\x02\xff\xff\xff\x01\xff\xff\xff");
+    assert_eq!(
+        s.take_output(),
+        b"\x01\xff\xff\xff\x66\x02\xff\xff\xff\x01\xff\xff\xff"
+    );
     assert_eq!(s.page(), 3);
     s.feed(b"tsw bstart,0\xff\xff\xff");
     assert!(s.release("bstart").is_err());
     assert!(s.release("nosuch").is_err());
     s.feed(b"baud=115200\xff\xff\xffbaud=1234\xff\xff\xff");
-    assert_eq!(s.take_output(), b"\x01\xff\xff\xff\x01\xff\xff\xff\x11\xff\xff\xff");
+    assert_eq!(
+        s.take_output(),
+        b"\x01\xff\xff\xff\x01\xff\xff\xff\x11\xff\xff\xff"
+    );
     // Overflow of the serial buffer.
     s.feed(&vec![b'a'; hmi_proto::virtual_screen::SERIAL_BUFFER + 4]);
     assert_eq!(s.take_output(), b"\x24\xff\xff\xff");

@@ -217,6 +217,7 @@ impl Hmi {
     }
 
     /// Advances time (milliseconds, wrapping): handshake retries and `get` timeouts.
+    /// Call it every 10–50 ms: a `get` is timed from the last `tick`.
     pub fn tick(&mut self, now_ms: u32) {
         self.now_ms = now_ms;
         if let Link::Connecting { last_try_ms } = self.link {

@@ -3,6 +3,16 @@
 //!
 //! * [`consts`]: machine constants and gear presets (typed and `f64`).
 //! * [`units`]: typed units (m/s, km/h, r/min, metres, ticks, …).
+//! * [`speed`]: M-method, [`speed::CaptureExtender`], [`speed::MtEstimator`].
+//! * [`travel`]: k1/k2 correction, travel speed V1, [`travel::Calibration`].
+//! * [`drum`]: target drum speed, duty, CCR and the feasibility limit.
+//! * [`table`]: validated piecewise-linear coefficient tables and their bytes.
+//! * [`calib`]: k1, k2, k3 calibration procedures.
+//! * [`profile_b`]: seedling-belt feeding/planting kinematics and linkage.
+//!
+//! Firmware flow (profile A): capture ISR → `CaptureExtender::extend` →
+//! `MtEstimator::push_edge`; control task → `MtEstimator::update` →
+//! `travel::travel_speed` → `DrumPlan::target` → PWM CCR.
 #![no_std]
 #![cfg_attr(not(test), forbid(unsafe_code))]
 

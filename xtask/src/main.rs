@@ -6,6 +6,7 @@
 //! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
 //! cargo xtask size                 flash and RAM of both boards against their budgets
 //! cargo xtask flash                build and flash a real board with probe-rs
+//! cargo xtask plan --spacing 7cm --speed 0.51km/h [--gear low2] [--arr N]
 //! ```
 
 use std::io::{BufRead, BufReader};
@@ -14,6 +15,8 @@ use std::process::{Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
 use qemu_tests::{workspace_root, BootOptions, Firmware};
+
+mod plan;
 
 type Result<T = ()> = std::result::Result<T, String>;
 
@@ -39,6 +42,7 @@ fn main() -> ExitCode {
         "ci" => ci(),
         "size" => size(),
         "flash" => flash(),
+        "plan" => plan::run(rest),
         "help" | "--help" | "-h" => {
             println!("{}", include_str!("usage.txt"));
             Ok(())

@@ -1,0 +1,151 @@
+//! Instruction counts of the control code on the Cortex-M3 ISA.
+//!
+//! Run by `cargo xtask bench` in `qemu-system-arm -machine stm32vldiscovery
+//! -icount shift=0`: every guest instruction then advances virtual time by
+//! exactly 1 ns, and SysTick (clocked at QEMU's fixed 24 MHz) counts virtual
+//! time, so one SysTick tick is 41⅔ instructions. Each case runs `N` times
+//! over varying inputs; the cost of the loop and of fetching the inputs,
+//! measured with an empty body, is subtracted. Results are printed over
+//! semihosting as `cost <name> <instructions per call ×10>` lines.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use cortex_m_rt::entry;
+use cortex_m_semihosting::{debug, hprintln};
+use fuzzy_pid::{Config, FuzzyConfig, FuzzyTuner, LutTuner, RuleBaseSize, Schedule, I16F16};
+
+/// Calls per case.
+const N: u32 = 1024;
+/// Varying inputs: drum speeds in r/min spread over and beyond the domains.
+const INPUTS: usize = 64;
+
+fn inputs() -> [(I16F16, I16F16); INPUTS] {
+    let mut out = [(I16F16::ZERO, I16F16::ZERO); INPUTS];
+    let mut x: u32 = 0x1234_5678;
+    for slot in out.iter_mut() {
+        // xorshift32
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        let a = I16F16::from_bits((x & 0x001F_FFFF) as i32); // 0..32 r/min
+        let b = I16F16::from_bits(((x >> 11) & 0x001F_FFFF) as i32);
+        *slot = (a, b);
+    }
+    out
+}
+
+/// SysTick ticks spent running `f` for `N` inputs.
+fn ticks(inputs: &[(I16F16, I16F16); INPUTS], mut f: impl FnMut(I16F16, I16F16)) -> u32 {
+    let start = SYST::get_current();
+    for i in 0..N {
+        let (a, b) = inputs[(i as usize) % INPUTS];
+        f(black_box(a), black_box(b));
+    }
+    let end = SYST::get_current();
+    // Down-counter, 24 bits.
+    start.wrapping_sub(end) & 0x00FF_FFFF
+}
+
+/// Prints instructions per call ×10 (1 tick = 1000/24 instructions).
+fn report(name: &str, ticks: u32, baseline: u32) {
+    let net = u64::from(ticks.saturating_sub(baseline));
+    let per_call_x10 = net * 10_000 / 24 / u64::from(N);
+    hprintln!("cost {} {}", name, per_call_x10);
+}
+
+/// One controller step (error, error change, gain schedule, PID, limits),
+/// built and measured in its own stack frame: the QEMU board has 8 KB of RAM.
+#[inline(never)]
+fn step_cost(
+    name: &str,
+    inputs: &[(I16F16, I16F16); INPUTS],
+    baseline: u32,
+    config: impl FnOnce() -> Config,
+) {
+    // Note(unwrap): the paper's configurations are valid.
+    let mut pid = config().build().unwrap();
+    pid.start();
+    let ff = I16F16::from_num(20);
+    let t = ticks(inputs, |target, measured| {
+        black_box(pid.step(target, measured, ff));
+    });
+    report(name, t, baseline);
+}
+
+/// Fuzzy inference alone, built and measured in its own stack frame.
+#[inline(never)]
+fn infer_cost(name: &str, inputs: &[(I16F16, I16F16); INPUTS], baseline: u32, size: RuleBaseSize) {
+    // Note(unwrap): the paper's tables are valid configuration.
+    let tuner = FuzzyTuner::new(&FuzzyConfig::paper(size)).unwrap();
+    let offset = I16F16::from_num(16);
+    let t = ticks(inputs, |e, ec| {
+        black_box(tuner.infer(e - offset, ec - offset));
+    });
+    report(name, t, baseline);
+}
+
+/// Lookup-table inference alone.
+#[inline(never)]
+fn lut_cost(name: &str, inputs: &[(I16F16, I16F16); INPUTS], baseline: u32) {
+    // Note(unwrap): the paper's tables are valid configuration.
+    let lut = LutTuner::new(&FuzzyConfig::paper(RuleBaseSize::Seven)).unwrap();
+    let offset = I16F16::from_num(16);
+    let t = ticks(inputs, |e, ec| {
+        black_box(lut.infer(e - offset, ec - offset));
+    });
+    report(name, t, baseline);
+}
+
+#[entry]
+fn main() -> ! {
+    // Note(unwrap): taken once at the top of the program.
+    let mut cp = cortex_m::Peripherals::take().unwrap();
+    cp.SYST.set_clock_source(SystClkSource::Core);
+    cp.SYST.set_reload(0x00FF_FFFF);
+    cp.SYST.clear_current();
+    cp.SYST.enable_counter();
+
+    let inputs = inputs();
+    let baseline = ticks(&inputs, |a, b| {
+        black_box((a, b));
+    });
+    hprintln!("baseline {}", baseline);
+
+    infer_cost("fuzzy_infer_3x3", &inputs, baseline, RuleBaseSize::Three);
+    infer_cost("fuzzy_infer_5x5", &inputs, baseline, RuleBaseSize::Five);
+    infer_cost("fuzzy_infer_7x7", &inputs, baseline, RuleBaseSize::Seven);
+    lut_cost("lut_infer_7x7", &inputs, baseline);
+
+    let fuzzy = |size| Config::with_schedule(Schedule::Fuzzy(FuzzyConfig::paper(size)));
+    step_cost("pid_step_conventional", &inputs, baseline, || {
+        Config::conventional(fuzzy_pid::pid::PAPER_BASE)
+    });
+    step_cost("pid_step_fuzzy_3x3", &inputs, baseline, || {
+        fuzzy(RuleBaseSize::Three)
+    });
+    step_cost("pid_step_fuzzy_5x5", &inputs, baseline, || {
+        fuzzy(RuleBaseSize::Five)
+    });
+    step_cost("pid_step_fuzzy_7x7", &inputs, baseline, Config::default);
+    // Not measured here: `pid_step_lut_7x7`. Building a lookup-table
+    // `Controller` needs more stack than the QEMU board's 8 KB of RAM
+    // (docs/PERFORMANCE.md); its step is the conventional step plus
+    // `lut_infer_7x7`.
+
+    debug::exit(debug::EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    hprintln!("panic: {}", info);
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}

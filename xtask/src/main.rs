@@ -334,6 +334,8 @@ fn ci() -> Result {
             "--workspace",
             "--exclude",
             "firmware",
+            "--exclude",
+            "bench",
             "--all-targets",
             "--",
             "-D",

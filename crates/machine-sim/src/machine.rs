@@ -21,7 +21,7 @@ const SPEED_NOISE: (f32, f32) = (0.05, 6.244_998);
 /// Belt speed noise, τ = 0.2 s: a = 0.005, c = √399.
 const BELT_NOISE: (f32, f32) = (0.005, 19.974_984);
 /// Slip variation, τ = 1 s: a = 0.001, c = √1999.
-const SLIP_NOISE: (f32, f32) = (0.001, 44.710_178);
+const SLIP_NOISE: (f32, f32) = (0.001, 44.710_18);
 
 /// What the controller drives during one step.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
@@ -358,7 +358,7 @@ impl Machine {
     #[allow(clippy::too_many_lines)]
     fn substep(&mut self, h: u32, inputs: &Inputs, sink: &mut impl FnMut(Event)) {
         let t0 = self.now_us;
-        if t0 % u64::from(GRID_US) == 0 {
+        if t0.is_multiple_of(u64::from(GRID_US)) {
             self.tick_grid(inputs);
         }
         let full = h == GRID_US;

@@ -43,16 +43,27 @@ pub fn k3_at(n_rpm: f32) -> f32 {
     interp(K3_TABLE.iter().copied(), n_rpm)
 }
 
+/// `(wheel speed km/h, slip 1 − k2)` per gear, built at compile time from
+/// the shared presets (Table 11 speeds, Table 12 k2), slowest first.
+pub const TRACK_SLIP_TABLE: [(f32, f32); 6] = [
+    slip_point(0),
+    slip_point(1),
+    slip_point(2),
+    slip_point(3),
+    slip_point(4),
+    slip_point(5),
+];
+
+const fn slip_point(i: usize) -> (f32, f32) {
+    let p = &GEAR_PRESETS[i];
+    (p.actual_kmh_f64 as f32, (1.0 - p.k2_f64) as f32)
+}
+
 /// Track slip `s = 1 − k2` at wheel (track rolling) speed `v_kmh`: Table 12
 /// over the gears' Table 11 speeds, piecewise linear, clamped at the ends.
 #[must_use]
 pub fn track_slip_at(v_kmh: f32) -> f32 {
-    interp(
-        GEAR_PRESETS
-            .iter()
-            .map(|p| (p.actual_kmh_f64 as f32, (1.0 - p.k2_f64) as f32)),
-        v_kmh,
-    )
+    interp(TRACK_SLIP_TABLE.iter().copied(), v_kmh)
 }
 
 #[cfg(test)]

@@ -1,10 +1,10 @@
 //! Paper A's measured slip data as piecewise-linear curves (SPEC §4).
 //!
-//! The gear speeds and k2 values come from [`kinematics::consts::GEAR_PRESETS`]
+//! The gear speeds and k2 values come from [`kinematics::consts::GEAR_PRESETS`](kinematics::consts::GEAR_PRESETS)
 //! (shared, not repeated); the k3 belt table (SPEC Table 13) is not a machine
 //! constant of the kinematics crate, so it lives here as the simulator's data.
 
-use kinematics::consts::GEAR_PRESETS;
+use kinematics::consts::Gear;
 
 /// SPEC Table 13: set drum speed (r/min) → measured belt coefficient k3.
 pub const K3_TABLE: [(f32, f32); 5] = [
@@ -46,16 +46,16 @@ pub fn k3_at(n_rpm: f32) -> f32 {
 /// `(wheel speed km/h, slip 1 − k2)` per gear, built at compile time from
 /// the shared presets (Table 11 speeds, Table 12 k2), slowest first.
 pub const TRACK_SLIP_TABLE: [(f32, f32); 6] = [
-    slip_point(0),
-    slip_point(1),
-    slip_point(2),
-    slip_point(3),
-    slip_point(4),
-    slip_point(5),
+    slip_point(Gear::Low1),
+    slip_point(Gear::Low2),
+    slip_point(Gear::Low3),
+    slip_point(Gear::High1),
+    slip_point(Gear::High2),
+    slip_point(Gear::High3),
 ];
 
-const fn slip_point(i: usize) -> (f32, f32) {
-    let p = &GEAR_PRESETS[i];
+const fn slip_point(g: Gear) -> (f32, f32) {
+    let p = g.preset();
     (p.actual_kmh_f64 as f32, (1.0 - p.k2_f64) as f32)
 }
 

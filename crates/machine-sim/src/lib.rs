@@ -5,7 +5,7 @@
 //! qualification rate). See `docs/machine-sim.md` for the model.
 //!
 //! `no_std`, no heap, f32/f64 soft-float (it never runs on the real board);
-//! the `std` feature adds [`Recorder`], a plant-position list for reports.
+//! the `std` feature adds `Recorder`, a plant-position list for reports.
 //!
 //! # Example: feed-forward drum duty in a 1 ms loop
 //!

@@ -1,6 +1,6 @@
 //! Paper A's measured slip data as piecewise-linear curves (SPEC §4).
 //!
-//! The gear speeds and k2 values come from [`kinematics::consts::GEAR_PRESETS`](kinematics::consts::GEAR_PRESETS)
+//! The gear speeds and k2 values come from [`kinematics::consts::GEAR_PRESETS`]
 //! (shared, not repeated); the k3 belt table (SPEC Table 13) is not a machine
 //! constant of the kinematics crate, so it lives here as the simulator's data.
 

@@ -582,9 +582,14 @@ impl Machine {
     }
 
     /// Multiplies the commanded speed by `1 + rel` (e.g. `0.1` for a +10 %
-    /// step, `-0.1` for −10 %), clamped to ±50 %; replaces an earlier step.
+    /// step, `-0.1` for −10 %), clamped to ±50 % (NaN: no step); replaces
+    /// an earlier step.
     pub fn inject_speed_step(&mut self, rel: f32) {
-        self.step_factor = 1.0 + sanitize(rel + 0.5, 1.0) - 0.5;
+        self.step_factor = if rel.is_finite() {
+            1.0 + rel.clamp(-0.5, 0.5)
+        } else {
+            1.0
+        };
     }
 
     /// Removes an injected speed step.

@@ -363,6 +363,12 @@ fn travel_commands_step_stop_and_override() {
     m.inject_speed_step(-0.1);
     run_ms(&mut m, 1, &Inputs::default());
     assert!((m.travel_speed_m_s() - 0.13).abs() < 1e-5);
+    m.inject_speed_step(f32::NAN); // no step: back to 0.14444
+    run_ms(&mut m, 1, &Inputs::default());
+    assert!((m.travel_speed_m_s() - 0.144_444).abs() < 1e-5);
+    m.inject_speed_step(0.8); // clamped to +50 %: 0.21667
+    run_ms(&mut m, 1, &Inputs::default());
+    assert!((m.travel_speed_m_s() - 0.216_667).abs() < 1e-5);
     m.clear_speed_step();
     m.stop_travel();
     let g = m.ground_position_m();

@@ -1,1 +1,453 @@
-//! Placeholder.
+//! The persisted settings and their versioned byte format.
+//!
+//! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
+//! multi-byte number is little endian. Format version 1:
+//!
+//! | offset | size | field | encoding |
+//! |---|---|---|---|
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 1 |
+//! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
+//! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
+//! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
+//! | 6 | 2 | [`Settings::motor_coefficient`] | u16, × 100, 50–200 |
+//! | 8 | 1 | [`Settings::gear`] | screen wire index 1–6 (Low 1 … High 3) |
+//! | 9 | 1 | [`Settings::brightness`] | u8, %, 10–100 |
+//! | 10 | 199 | [`Settings::calibration`] | [`Calibration::to_bytes`] (its own version byte, then k1, k2, k3 tables padded to 66 bytes each) |
+//!
+//! Total 209 bytes. Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! an erased (all `0xFF`) or zeroed buffer never decodes.
+//!
+//! [`decode`] checks the version first (so a record written by a newer
+//! firmware is reported as [`SettingsError::UnsupportedVersion`], not as
+//! corruption), then the length, then every field through its validating
+//! constructor.
+//!
+//! ```
+//! use supervisor::settings::{decode, Settings, SETTINGS_BYTES};
+//! use hmi_proto::screen::Spacing;
+//!
+//! let mut s = Settings::default();
+//! s.spacing = Spacing::new(120).unwrap();
+//! let bytes = s.encode();
+//! assert_eq!(bytes.len(), SETTINGS_BYTES);
+//! // version 1, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
+//! // brightness 100 (0x64).
+//! assert_eq!(
+//!     bytes[..10],
+//!     [1, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//! );
+//! assert_eq!(decode(&bytes).unwrap(), s);
+//! ```
+
+use core::fmt;
+
+use hmi_proto::screen::{self, Brightness, DrumSpeed, Mode, MotorCoefficient, ParamError, Spacing};
+use kinematics::consts::Gear;
+use kinematics::table::TableError;
+use kinematics::travel::{Calibration, CALIBRATION_BYTES};
+
+/// Version byte (offset 0) of the format [`Settings::encode`] writes.
+pub const SETTINGS_FORMAT_VERSION: u8 = 1;
+
+/// Bytes before the calibration block: version, mode, spacing, drum speed,
+/// motor coefficient, gear, brightness.
+const HEAD_BYTES: usize = 10;
+
+/// Size of an encoded [`Settings`] (format version 1): 10 + 199 = 209.
+pub const SETTINGS_BYTES: usize = HEAD_BYTES + CALIBRATION_BYTES;
+
+/// Everything the firmware persists: the operator's choices and the
+/// calibration tables.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Settings {
+    /// Operating mode. Default: Speed-Adaptive.
+    pub mode: Mode,
+    /// Plant spacing, mm. Default: 70 ([`Spacing::DEFAULT`]).
+    pub spacing: Spacing,
+    /// Fixed-mode drum speed, r/min × 100. Default: 2521 ([`DrumSpeed::DEFAULT`]).
+    pub fixed_drum_speed: DrumSpeed,
+    /// Transplanting-motor coefficient × 100. Default: 100 ([`MotorCoefficient::DEFAULT`]).
+    pub motor_coefficient: MotorCoefficient,
+    /// Selected gear. Default: Low 1, the screen's own default
+    /// ([`hmi_proto::screen::Gear::default`]) and the slowest, safest gear.
+    pub gear: Gear,
+    /// Screen brightness, %. Default: 100 ([`Brightness::DEFAULT`]).
+    pub brightness: Brightness,
+    /// The k1/k2/k3 tables. Default: [`Calibration::paper_defaults`].
+    pub calibration: Calibration,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            mode: Mode::SpeedAdaptive,
+            spacing: Spacing::DEFAULT,
+            fixed_drum_speed: DrumSpeed::DEFAULT,
+            motor_coefficient: MotorCoefficient::DEFAULT,
+            gear: gear_from_screen(screen::Gear::default()),
+            brightness: Brightness::DEFAULT,
+            calibration: Calibration::paper_defaults(),
+        }
+    }
+}
+
+/// Why bytes are not a valid [`Settings`] record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SettingsError {
+    /// The version byte is not one this firmware reads (offset 0).
+    UnsupportedVersion(u8),
+    /// The buffer is not [`SETTINGS_BYTES`] long (an empty buffer included).
+    Length {
+        /// [`SETTINGS_BYTES`].
+        expected: usize,
+        /// The length received.
+        found: usize,
+    },
+    /// Unknown mode byte (offset 1).
+    Mode(u8),
+    /// Gear byte outside 1–6 (offset 8).
+    Gear(u8),
+    /// A bounded value out of range (spacing, drum speed, coefficient, brightness).
+    Param(ParamError),
+    /// The calibration block failed validation.
+    Calibration(TableError),
+}
+
+impl fmt::Display for SettingsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::UnsupportedVersion(v) => write!(f, "unsupported settings version {v}"),
+            Self::Length { expected, found } => {
+                write!(f, "settings are {found} bytes, expected {expected}")
+            }
+            Self::Mode(m) => write!(f, "invalid mode byte {m}"),
+            Self::Gear(g) => write!(f, "invalid gear index {g}"),
+            Self::Param(e) => write!(f, "{e}"),
+            Self::Calibration(e) => write!(f, "calibration: {e}"),
+        }
+    }
+}
+
+impl From<ParamError> for SettingsError {
+    fn from(e: ParamError) -> Self {
+        Self::Param(e)
+    }
+}
+
+/// The screen's gear (wire index 1–6) as the kinematics gear.
+#[must_use]
+pub const fn gear_from_screen(g: screen::Gear) -> Gear {
+    match g {
+        screen::Gear::Low1 => Gear::Low1,
+        screen::Gear::Low2 => Gear::Low2,
+        screen::Gear::Low3 => Gear::Low3,
+        screen::Gear::High1 => Gear::High1,
+        screen::Gear::High2 => Gear::High2,
+        screen::Gear::High3 => Gear::High3,
+    }
+}
+
+/// The kinematics gear as the screen's gear (wire index 1–6).
+#[must_use]
+pub const fn gear_to_screen(g: Gear) -> screen::Gear {
+    match g {
+        Gear::Low1 => screen::Gear::Low1,
+        Gear::Low2 => screen::Gear::Low2,
+        Gear::Low3 => screen::Gear::Low3,
+        Gear::High1 => screen::Gear::High1,
+        Gear::High2 => screen::Gear::High2,
+        Gear::High3 => screen::Gear::High3,
+    }
+}
+
+const fn mode_byte(m: Mode) -> u8 {
+    match m {
+        Mode::Fixed => 1,
+        Mode::SpeedAdaptive => 2,
+    }
+}
+
+const fn mode_from_byte(b: u8) -> Option<Mode> {
+    match b {
+        1 => Some(Mode::Fixed),
+        2 => Some(Mode::SpeedAdaptive),
+        _ => None,
+    }
+}
+
+impl Settings {
+    /// Serialises in format version 1 (layout in the [module docs](self)).
+    #[must_use]
+    pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
+        let mut out = [0u8; SETTINGS_BYTES];
+        let (head, cal) = out.split_at_mut(HEAD_BYTES);
+        let [s0, s1] = self.spacing.raw().to_le_bytes();
+        let [d0, d1] = self.fixed_drum_speed.raw().to_le_bytes();
+        let [m0, m1] = self.motor_coefficient.raw().to_le_bytes();
+        head.copy_from_slice(&[
+            SETTINGS_FORMAT_VERSION,
+            mode_byte(self.mode),
+            s0,
+            s1,
+            d0,
+            d1,
+            m0,
+            m1,
+            gear_to_screen(self.gear).index(),
+            self.brightness.raw(),
+        ]);
+        cal.copy_from_slice(&self.calibration.to_bytes());
+        out
+    }
+}
+
+/// Parses and validates bytes written by [`Settings::encode`].
+pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
+    let length = SettingsError::Length {
+        expected: SETTINGS_BYTES,
+        found: bytes.len(),
+    };
+    let (&version, _) = bytes.split_first().ok_or(length)?;
+    if version != SETTINGS_FORMAT_VERSION {
+        return Err(SettingsError::UnsupportedVersion(version));
+    }
+    if bytes.len() != SETTINGS_BYTES {
+        return Err(length);
+    }
+    let (head, cal) = bytes.split_at(HEAD_BYTES);
+    let Ok::<[u8; HEAD_BYTES], _>([_, mode, s0, s1, d0, d1, m0, m1, gear, brightness]) =
+        head.try_into()
+    else {
+        return Err(length);
+    };
+    let mode = mode_from_byte(mode).ok_or(SettingsError::Mode(mode))?;
+    let spacing = Spacing::new(i32::from(u16::from_le_bytes([s0, s1])))?;
+    let fixed_drum_speed = DrumSpeed::new(i32::from(u16::from_le_bytes([d0, d1])))?;
+    let motor_coefficient = MotorCoefficient::new(i32::from(u16::from_le_bytes([m0, m1])))?;
+    let gear = screen::Gear::from_index(gear)
+        .map(gear_from_screen)
+        .ok_or(SettingsError::Gear(gear))?;
+    let brightness = Brightness::new(i32::from(brightness))?;
+    let calibration = Calibration::from_bytes(cal).map_err(SettingsError::Calibration)?;
+    Ok(Settings {
+        mode,
+        spacing,
+        fixed_drum_speed,
+        motor_coefficient,
+        gear,
+        brightness,
+        calibration,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hmi_proto::screen::Field;
+    use kinematics::table::{CoeffTable, K_MAX, K_MIN, MAX_POINTS};
+    use proptest::prelude::*;
+    use std::collections::BTreeSet;
+    use std::vec::Vec;
+
+    #[test]
+    fn sizes() {
+        // kinematics::travel: CALIBRATION_BYTES = 1 + 3 × 66 = 199.
+        assert_eq!(CALIBRATION_BYTES, 199);
+        assert_eq!(SETTINGS_BYTES, 209);
+    }
+
+    #[test]
+    fn defaults_are_the_documented_ones() {
+        let s = Settings::default();
+        assert_eq!(s.mode, Mode::SpeedAdaptive);
+        // hmi_proto::screen: Spacing 70 mm, DrumSpeed 2521, MotorCoefficient 100,
+        // Brightness 100; the screen's default gear is Low 1.
+        assert_eq!(s.spacing.raw(), 70);
+        assert_eq!(s.fixed_drum_speed.raw(), 2521);
+        assert_eq!(s.motor_coefficient.raw(), 100);
+        assert_eq!(s.brightness.raw(), 100);
+        assert_eq!(s.gear, Gear::Low1);
+        assert_eq!(s.calibration, Calibration::paper_defaults());
+    }
+
+    #[test]
+    fn encode_layout_byte_by_byte() {
+        let s = Settings {
+            mode: Mode::Fixed,
+            spacing: Spacing::new(500).unwrap(),
+            fixed_drum_speed: DrumSpeed::new(4470).unwrap(),
+            motor_coefficient: MotorCoefficient::new(200).unwrap(),
+            gear: Gear::High3,
+            brightness: Brightness::new(10).unwrap(),
+            calibration: Calibration::identity(),
+        };
+        let b = s.encode();
+        // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
+        assert_eq!(b[..10], [1, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
+        assert_eq!(b[10..], Calibration::identity().to_bytes());
+        assert_eq!(decode(&b).unwrap(), s);
+    }
+
+    #[test]
+    fn rejects_every_bad_field() {
+        let good = Settings::default().encode();
+        let with = |i: usize, v: u8| {
+            let mut b = good;
+            b[i] = v;
+            decode(&b)
+        };
+        assert_eq!(with(0, 2), Err(SettingsError::UnsupportedVersion(2)));
+        assert_eq!(with(0, 0xFF), Err(SettingsError::UnsupportedVersion(0xFF)));
+        assert_eq!(with(1, 0), Err(SettingsError::Mode(0)));
+        assert_eq!(with(1, 3), Err(SettingsError::Mode(3)));
+        // Spacing 29 < 30 mm.
+        assert_eq!(
+            with(2, 29),
+            Err(SettingsError::Param(ParamError {
+                field: Field::Spacing,
+                value: 29
+            }))
+        );
+        // Drum speed 0xFF_D9 = 65497 > 4470.
+        assert!(
+            matches!(with(5, 0xFF), Err(SettingsError::Param(p)) if p.field == Field::FixedDrumSpeed)
+        );
+        // Motor coefficient 49 < 50.
+        assert!(
+            matches!(with(6, 49), Err(SettingsError::Param(p)) if p.field == Field::MotorCoefficient)
+        );
+        assert_eq!(with(8, 0), Err(SettingsError::Gear(0)));
+        assert_eq!(with(8, 7), Err(SettingsError::Gear(7)));
+        // Brightness 9 < 10 %.
+        assert!(matches!(with(9, 9), Err(SettingsError::Param(p)) if p.field == Field::Brightness));
+        // Calibration version byte.
+        assert_eq!(
+            with(10, 9),
+            Err(SettingsError::Calibration(TableError::BadVersion))
+        );
+        // k1 table point count 0.
+        assert_eq!(
+            with(12, 0),
+            Err(SettingsError::Calibration(TableError::Empty))
+        );
+    }
+
+    #[test]
+    fn rejects_lengths_and_blank() {
+        let good = Settings::default().encode();
+        assert_eq!(
+            decode(&[]),
+            Err(SettingsError::Length {
+                expected: 209,
+                found: 0
+            })
+        );
+        assert_eq!(
+            decode(&good[..208]),
+            Err(SettingsError::Length {
+                expected: 209,
+                found: 208
+            })
+        );
+        let mut long = [0u8; 210];
+        long[..209].copy_from_slice(&good);
+        assert!(matches!(decode(&long), Err(SettingsError::Length { .. })));
+        assert_eq!(
+            decode(&[0xFF; SETTINGS_BYTES]),
+            Err(SettingsError::UnsupportedVersion(0xFF))
+        );
+        let mut zero = [0u8; SETTINGS_BYTES];
+        zero[0] = 1;
+        assert_eq!(decode(&zero), Err(SettingsError::Mode(0)));
+    }
+
+    #[test]
+    fn gear_mapping_round_trips_and_keeps_order() {
+        for (i, g) in hmi_proto::screen::Gear::ALL.iter().enumerate() {
+            let k = gear_from_screen(*g);
+            assert_eq!(k, Gear::ALL[i]);
+            assert_eq!(gear_to_screen(k), *g);
+        }
+    }
+
+    #[test]
+    fn errors_display() {
+        let e = SettingsError::UnsupportedVersion(7);
+        assert_eq!(std::format!("{e}"), "unsupported settings version 7");
+        let e = SettingsError::Calibration(TableError::Empty);
+        assert_eq!(std::format!("{e}"), "calibration: table has no points");
+    }
+
+    /// A random valid table, built from its serialised form.
+    fn table() -> impl Strategy<Value = CoeffTable> {
+        (
+            proptest::collection::btree_set(any::<u32>(), 1..=MAX_POINTS),
+            proptest::collection::vec(K_MIN.to_bits()..=K_MAX.to_bits(), MAX_POINTS),
+        )
+            .prop_map(|(xs, ks): (BTreeSet<u32>, Vec<u32>)| {
+                let mut b = std::vec![1u8, xs.len() as u8];
+                for (x, k) in xs.iter().zip(ks.iter()) {
+                    b.extend_from_slice(&x.to_le_bytes());
+                    b.extend_from_slice(&k.to_le_bytes());
+                }
+                CoeffTable::from_bytes(&b).unwrap().0
+            })
+    }
+
+    /// A random valid [`Settings`].
+    fn settings() -> impl Strategy<Value = Settings> {
+        (
+            any::<bool>(),
+            Spacing::MIN..=Spacing::MAX,
+            DrumSpeed::MIN..=DrumSpeed::MAX,
+            MotorCoefficient::MIN..=MotorCoefficient::MAX,
+            0usize..6,
+            Brightness::MIN..=Brightness::MAX,
+            (table(), table(), table()),
+        )
+            .prop_map(|(fixed, sp, ds, mc, g, br, (k1, k2, k3))| Settings {
+                mode: if fixed {
+                    Mode::Fixed
+                } else {
+                    Mode::SpeedAdaptive
+                },
+                spacing: Spacing::new(i32::from(sp)).unwrap(),
+                fixed_drum_speed: DrumSpeed::new(i32::from(ds)).unwrap(),
+                motor_coefficient: MotorCoefficient::new(i32::from(mc)).unwrap(),
+                gear: Gear::ALL[g],
+                brightness: Brightness::new(i32::from(br)).unwrap(),
+                calibration: Calibration { k1, k2, k3 },
+            })
+    }
+
+    proptest! {
+        #[test]
+        fn encode_decode_round_trip(s in settings()) {
+            let b = s.encode();
+            prop_assert_eq!(b[0], SETTINGS_FORMAT_VERSION);
+            prop_assert_eq!(decode(&b), Ok(s));
+        }
+
+        #[test]
+        fn decode_arbitrary_bytes_never_panics(b in proptest::collection::vec(any::<u8>(), 0..260)) {
+            let _ = decode(&b);
+        }
+
+        #[test]
+        fn decode_mutated_record_never_panics_and_revalidates(
+            s in settings(),
+            at in 0usize..SETTINGS_BYTES,
+            v in any::<u8>(),
+        ) {
+            let mut b = s.encode();
+            b[at] = v;
+            // Whatever decodes must re-encode to a record that decodes to itself.
+            if let Ok(d) = decode(&b) {
+                prop_assert_eq!(decode(&d.encode()), Ok(d));
+            }
+        }
+    }
+}

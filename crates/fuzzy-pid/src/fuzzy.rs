@@ -86,12 +86,12 @@ impl FuzzyConfig {
         Self {
             rules: RuleBase::paper(size),
             and: AndOperator::Product,
-            e_domain: Fix::lit("25"),
-            ec_domain: Fix::lit("10"),
+            e_domain: const { Fix::lit("25") },
+            ec_domain: const { Fix::lit("10") },
             range: Gains {
-                kp: Fix::lit("5"),
-                ki: Fix::lit("1.25"),
-                kd: Fix::lit("2.5"),
+                kp: const { Fix::lit("5") },
+                ki: const { Fix::lit("1.25") },
+                kd: const { Fix::lit("2.5") },
             },
         }
     }

@@ -61,7 +61,7 @@ impl Default for AntiWindup {
     fn default() -> Self {
         Self {
             clamping: true,
-            back_calculation: Fix::lit("0.25"),
+            back_calculation: const { Fix::lit("0.25") },
         }
     }
 }
@@ -96,15 +96,15 @@ pub const N_MAX: Fix = Fix::lit("44.7");
 
 /// Paper A eq. 19–21: `Kp0 = 2`, `Ki0 = 0.1`, `Kd0 = 0.05`.
 pub const PAPER_BASE: Gains = Gains {
-    kp: Fix::lit("2"),
-    ki: Fix::lit("0.1"),
-    kd: Fix::lit("0.05"),
+    kp: const { Fix::lit("2") },
+    ki: const { Fix::lit("0.1") },
+    kd: const { Fix::lit("0.05") },
 };
 
 /// Default gain floors: `Kp ≥ 0`, `Ki ≥ 0.05` (half of `Ki0`), `Kd ≥ 0`.
 pub const DEFAULT_MIN_GAINS: Gains = Gains {
     kp: Fix::ZERO,
-    ki: Fix::lit("0.05"),
+    ki: const { Fix::lit("0.05") },
     kd: Fix::ZERO,
 };
 
@@ -125,7 +125,7 @@ impl Config {
             min_gains: DEFAULT_MIN_GAINS,
             output_min: Fix::ZERO,
             output_max: N_MAX,
-            derivative_filter: Fix::lit("0.5"),
+            derivative_filter: const { Fix::lit("0.5") },
             anti_windup: AntiWindup::default(),
         }
     }

@@ -62,13 +62,13 @@ impl defmt::Format for ProfileBSettings {
 impl Default for ProfileBSettings {
     fn default() -> Self {
         Self {
-            plant_spacing: Metres::lit("0.25"),
-            belt_pitch: Metres::lit("0.10"),
-            clamping_angle_deg: U16F16::lit("120"),
+            plant_spacing: const { Metres::lit("0.25") },
+            belt_pitch: const { Metres::lit("0.10") },
+            clamping_angle_deg: const { U16F16::lit("120") },
             seedlings_clamped: 2,
-            roller_radius: Metres::lit("0.025"),
-            belt_thickness: Metres::lit("0.001"),
-            threshold: MetresPerSecond::lit("0.02"),
+            roller_radius: const { Metres::lit("0.025") },
+            belt_thickness: const { Metres::lit("0.001") },
+            threshold: const { MetresPerSecond::lit("0.02") },
             planting_steps_per_rev: 1600,
             feeding_steps_per_rev: 1600,
         }
@@ -111,7 +111,9 @@ impl ProfileBSettings {
         if self.plant_spacing == Metres::ZERO || self.belt_pitch == Metres::ZERO {
             return Err(ProfileBConfigError::ZeroLength);
         }
-        if self.clamping_angle_deg == U16F16::ZERO || self.clamping_angle_deg > U16F16::lit("360") {
+        if self.clamping_angle_deg == U16F16::ZERO
+            || self.clamping_angle_deg > const { U16F16::lit("360") }
+        {
             return Err(ProfileBConfigError::ClampingAngle);
         }
         if self.seedlings_clamped == 0 {

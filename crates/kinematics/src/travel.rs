@@ -7,7 +7,7 @@
 //! 3. wheel speed `v_wheel = π·(D1+2H1)·n_teeth/60`;
 //! 4. `k2 = K2(v_wheel)` (table over wheel km/h), `V1 = k2·v_wheel` (eq. 3).
 
-use fixed::types::{U16F16, U2F30};
+use fixed::types::U16F16;
 
 use crate::consts::{self, Gear};
 use crate::fx;
@@ -64,19 +64,26 @@ pub const PAPER_K3: [(&str, &str); 5] = [
     ("25", "0.980"),
 ];
 
-fn table_from_lits(lits: &[(&str, &str)]) -> CoeffTable {
-    let mut pts = [TablePoint::new(U16F16::ZERO, Coefficient::ONE); crate::table::MAX_POINTS];
-    let mut n = 0usize;
-    for ((x, k), slot) in lits.iter().zip(pts.iter_mut()) {
-        let (Ok(x), Ok(k)) = (x.parse::<U16F16>(), k.parse::<U2F30>()) else {
-            return CoeffTable::one();
-        };
-        *slot = TablePoint::new(x, Coefficient::from_fixed(k));
-        n = n.saturating_add(1);
+/// Builds table points from decimal literals at compile time (used only to
+/// define the `const` point arrays below, so no string is parsed at run time:
+/// the parser alone would cost the firmware ~10 KB of flash).
+#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+const fn points_from_lits<const N: usize>(lits: [(&str, &str); N]) -> [TablePoint; N] {
+    let mut out = [TablePoint::new(U16F16::ZERO, Coefficient::ONE); N];
+    let mut i = 0;
+    while i < N {
+        out[i] = TablePoint::new(U16F16::lit(lits[i].0), Coefficient::lit(lits[i].1));
+        i += 1;
     }
-    pts.get(..n)
-        .and_then(|p| CoeffTable::new(p).ok())
-        .unwrap_or_default()
+    out
+}
+
+const PAPER_K1_POINTS: [TablePoint; 6] = points_from_lits(PAPER_K1);
+const PAPER_K2_POINTS: [TablePoint; 6] = points_from_lits(PAPER_K2);
+const PAPER_K3_POINTS: [TablePoint; 5] = points_from_lits(PAPER_K3);
+
+fn table_from_points(points: &[TablePoint]) -> CoeffTable {
+    CoeffTable::new(points).unwrap_or_default()
 }
 
 impl Calibration {
@@ -84,9 +91,9 @@ impl Calibration {
     #[must_use]
     pub fn paper_defaults() -> Self {
         Self {
-            k1: table_from_lits(&PAPER_K1),
-            k2: table_from_lits(&PAPER_K2),
-            k3: table_from_lits(&PAPER_K3),
+            k1: table_from_points(&PAPER_K1_POINTS),
+            k2: table_from_points(&PAPER_K2_POINTS),
+            k3: table_from_points(&PAPER_K3_POINTS),
         }
     }
 
@@ -97,7 +104,7 @@ impl Calibration {
         Self {
             k1: CoeffTable::constant(p.k1).unwrap_or_default(),
             k2: CoeffTable::constant(p.k2).unwrap_or_default(),
-            k3: table_from_lits(&PAPER_K3),
+            k3: table_from_points(&PAPER_K3_POINTS),
         }
     }
 

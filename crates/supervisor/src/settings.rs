@@ -244,6 +244,7 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
 }
 
 #[cfg(test)]
+#[allow(clippy::arithmetic_side_effects, clippy::cast_possible_truncation)]
 mod tests {
     use super::*;
     use hmi_proto::screen::Field;

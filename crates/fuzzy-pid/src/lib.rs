@@ -56,7 +56,10 @@ mod tests;
 
 pub use fixed::types::I16F16;
 pub use fuzzy::{AndOperator, FuzzyConfig, FuzzyTuner, LutTuner};
-pub use pid::{AntiWindup, Config, Controller, Mode, Saturation, Schedule, Status};
+pub use pid::{
+    AntiWindup, AnyController, AnySchedule, Config, Controller, DirectSchedule, GainSchedule,
+    LutController, Mode, Saturation, Schedule, Status,
+};
 pub use rules::{GainOutput, RuleBase, RuleBaseSize};
 
 /// Configuration errors reported by the `new`/`build` constructors.
@@ -88,6 +91,11 @@ pub enum Error {
     DerivativeFilter,
     /// Back-calculation gain outside `[0, 1]`.
     BackCalculation,
+    /// The schedule does not fit the controller type: [`Config::build`] holds
+    /// a conventional or direct fuzzy tuner only (use
+    /// [`Config::build_lut`] or [`Config::build_any`] for
+    /// [`Schedule::Lookup`]), [`Config::build_lut`] a lookup table only.
+    LookupSchedule,
 }
 
 impl core::fmt::Display for Error {
@@ -109,6 +117,9 @@ impl core::fmt::Display for Error {
             Self::NegativeGain => f.write_str("base gains must not be negative"),
             Self::DerivativeFilter => f.write_str("derivative filter must lie in (0, 1]"),
             Self::BackCalculation => f.write_str("back-calculation gain must lie in [0, 1]"),
+            Self::LookupSchedule => {
+                f.write_str("schedule needs another controller type (build, build_lut, build_any)")
+            }
         }
     }
 }
@@ -158,3 +169,8 @@ impl defmt::Format for Gains {
         );
     }
 }
+
+// RAM budget of the firmware (docs/fuzzy-pid.md): the default controller
+// stays within 450 bytes on the 32-bit MCU (392 today).
+#[cfg(target_pointer_width = "32")]
+const _: () = assert!(core::mem::size_of::<Controller>() <= 450);

@@ -141,8 +141,35 @@ impl Config {
         }
     }
 
-    /// Validates the configuration and precomputes the tuner.
+    /// Validates the configuration and precomputes the tuner: a conventional
+    /// or direct fuzzy [`Controller`] (≈ 400 bytes on thumbv7m).
+    ///
+    /// A [`Schedule::Lookup`] configuration is refused with
+    /// [`Error::LookupSchedule`]: its 1 KB table would sit in every
+    /// `Controller`. Build it with [`build_lut`](Self::build_lut) (or
+    /// [`build_any`](Self::build_any) to pick the schedule at run time).
     pub fn build(&self) -> Result<Controller, Error> {
+        self.build_with()
+    }
+
+    /// Like [`build`](Self::build), for any schedule: a controller that holds
+    /// whichever tuner the configuration names (≈ 1.2 KB, the lookup table
+    /// included). For hosts and tests that switch schedules at run time.
+    pub fn build_any(&self) -> Result<AnyController, Error> {
+        self.build_with()
+    }
+
+    /// Like [`build`](Self::build), for a [`Schedule::Lookup`] configuration
+    /// only (a conventional or direct fuzzy one is refused with
+    /// [`Error::LookupSchedule`]).
+    pub fn build_lut(&self) -> Result<LutController, Error> {
+        self.build_with()
+    }
+
+    /// Validates the configuration and builds a controller around the gain
+    /// schedule type `S` ([`DirectSchedule`], [`LutTuner`] or
+    /// [`AnySchedule`]).
+    pub fn build_with<S: GainSchedule>(&self) -> Result<Controller<S>, Error> {
         if self.output_min >= self.output_max {
             return Err(Error::OutputLimits);
         }
@@ -161,11 +188,7 @@ impl Config {
         if kb < Fix::ZERO || kb > Fix::ONE {
             return Err(Error::BackCalculation);
         }
-        let tuner = match &self.schedule {
-            Schedule::Conventional => Tuner::Conventional,
-            Schedule::Fuzzy(f) => Tuner::Fuzzy(FuzzyTuner::new(f)?),
-            Schedule::Lookup(f) => Tuner::Lookup(LutTuner::new(f)?),
-        };
+        let tuner = S::from_schedule(&self.schedule)?;
         let integral_limit = self.output_max.saturating_sub(self.output_min);
         let mut c = Controller {
             tuner,
@@ -191,14 +214,101 @@ impl Config {
     }
 }
 
-// No heap: the variants are stored inline (≤ 1.1 KB), by design.
+/// A source of gain corrections ΔK for a [`Controller`]: built from a
+/// [`Schedule`] and asked once per step.
+pub trait GainSchedule: Sized {
+    /// Builds the tuner for `schedule`, or refuses a schedule this type cannot
+    /// hold ([`Error::LookupSchedule`]) or an invalid fuzzy configuration.
+    fn from_schedule(schedule: &Schedule) -> Result<Self, Error>;
+
+    /// ΔKp, ΔKi, ΔKd for error `e` and error change `ec` (zero for a
+    /// conventional PID).
+    fn delta(&self, e: Fix, ec: Fix) -> Gains;
+}
+
+/// The default gain schedule of a [`Controller`]: fixed gains or direct fuzzy
+/// inference ([`Schedule::Conventional`] or [`Schedule::Fuzzy`]).
+// No heap: the tuner is stored inline (280 bytes), by design.
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Tuner {
+pub enum DirectSchedule {
+    /// Conventional PID: fixed gains `K0`.
     Conventional,
+    /// Fuzzy self-tuning, direct inference over the active rules.
     Fuzzy(FuzzyTuner),
+}
+
+impl GainSchedule for DirectSchedule {
+    fn from_schedule(schedule: &Schedule) -> Result<Self, Error> {
+        match schedule {
+            Schedule::Conventional => Ok(Self::Conventional),
+            Schedule::Fuzzy(f) => FuzzyTuner::new(f).map(Self::Fuzzy),
+            Schedule::Lookup(_) => Err(Error::LookupSchedule),
+        }
+    }
+
+    #[inline]
+    fn delta(&self, e: Fix, ec: Fix) -> Gains {
+        match self {
+            Self::Conventional => Gains::ZERO,
+            Self::Fuzzy(t) => t.infer(e, ec),
+        }
+    }
+}
+
+impl GainSchedule for LutTuner {
+    /// Only [`Schedule::Lookup`].
+    fn from_schedule(schedule: &Schedule) -> Result<Self, Error> {
+        match schedule {
+            Schedule::Lookup(f) => Self::new(f),
+            Schedule::Conventional | Schedule::Fuzzy(_) => Err(Error::LookupSchedule),
+        }
+    }
+
+    #[inline]
+    fn delta(&self, e: Fix, ec: Fix) -> Gains {
+        self.infer(e, ec)
+    }
+}
+
+/// Any of the three schedules, chosen at run time (holds the lookup table
+/// inline, ≈ 1.1 KB).
+// No heap: the variants are stored inline, by design.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AnySchedule {
+    /// Conventional PID: fixed gains `K0`.
+    Conventional,
+    /// Fuzzy self-tuning, direct inference over the active rules.
+    Fuzzy(FuzzyTuner),
+    /// Fuzzy self-tuning, surface precomputed into a 13×13 lookup table.
     Lookup(LutTuner),
 }
+
+impl GainSchedule for AnySchedule {
+    fn from_schedule(schedule: &Schedule) -> Result<Self, Error> {
+        Ok(match schedule {
+            Schedule::Conventional => Self::Conventional,
+            Schedule::Fuzzy(f) => Self::Fuzzy(FuzzyTuner::new(f)?),
+            Schedule::Lookup(f) => Self::Lookup(LutTuner::new(f)?),
+        })
+    }
+
+    #[inline]
+    fn delta(&self, e: Fix, ec: Fix) -> Gains {
+        match self {
+            Self::Conventional => Gains::ZERO,
+            Self::Fuzzy(t) => t.infer(e, ec),
+            Self::Lookup(t) => t.infer(e, ec),
+        }
+    }
+}
+
+/// A controller with any schedule ([`Config::build_any`]).
+pub type AnyController = Controller<AnySchedule>;
+
+/// A lookup-table controller ([`Config::build_lut`]).
+pub type LutController = Controller<LutTuner>;
 
 /// Operating mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -272,11 +382,13 @@ impl defmt::Format for Status {
 
 /// The drum-speed controller: fuzzy (direct or lookup table) or conventional.
 ///
-/// Built by [`Config::build`]; starts in [`Mode::Off`]. Call
-/// [`step`](Self::step) once per control period (10 ms).
+/// Built by [`Config::build`] (the default schedule type [`DirectSchedule`]:
+/// conventional or direct fuzzy), [`Config::build_lut`] or
+/// [`Config::build_any`]; starts in [`Mode::Off`]. Call [`step`](Self::step)
+/// once per control period (10 ms).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Controller {
-    tuner: Tuner,
+pub struct Controller<S = DirectSchedule> {
+    tuner: S,
     base: Gains,
     min_gains: Gains,
     output_min: Fix,
@@ -296,7 +408,7 @@ pub struct Controller {
     status: Status,
 }
 
-impl Controller {
+impl<S: GainSchedule> Controller<S> {
     /// One control period. `target`, `measured` and `feedforward` in r/min;
     /// returns the output in r/min within the limits. In [`Mode::Off`] the
     /// output is 0 (clamped into the limits); in [`Mode::Manual`] it is the
@@ -314,11 +426,7 @@ impl Controller {
             self.primed = true;
         }
         let ec = e.saturating_sub(self.prev_error);
-        let delta = match &self.tuner {
-            Tuner::Conventional => Gains::ZERO,
-            Tuner::Fuzzy(t) => t.infer(e, ec),
-            Tuner::Lookup(t) => t.infer(e, ec),
-        };
+        let delta = self.tuner.delta(e, ec);
         let gains = Gains {
             kp: self.base.kp.saturating_add(delta.kp).max(self.min_gains.kp),
             ki: self.base.ki.saturating_add(delta.ki).max(self.min_gains.ki),
@@ -444,11 +552,7 @@ impl Controller {
     /// conventional controller. Same computation as inside [`step`](Self::step).
     #[must_use]
     pub fn gain_delta(&self, e: Fix, ec: Fix) -> Gains {
-        match &self.tuner {
-            Tuner::Conventional => Gains::ZERO,
-            Tuner::Fuzzy(t) => t.infer(e, ec),
-            Tuner::Lookup(t) => t.infer(e, ec),
-        }
+        self.tuner.delta(e, ec)
     }
 
     fn clear(&mut self) {

@@ -6,15 +6,15 @@ use std::vec::Vec;
 use super::plant::{Plant, TS};
 use crate::reference::RefPid;
 use crate::{
-    AndOperator, AntiWindup, Config, Controller, FuzzyConfig, Gains, Mode, RuleBaseSize,
-    Saturation, Schedule, I16F16,
+    AndOperator, AntiWindup, Config, Controller, FuzzyConfig, GainSchedule, Gains, Mode,
+    RuleBaseSize, Saturation, Schedule, I16F16,
 };
 
 fn fx(x: f64) -> I16F16 {
     I16F16::from_num(x)
 }
 
-fn fixed_step(c: &mut Controller) -> impl FnMut(f64, f64, f64) -> f64 + '_ {
+fn fixed_step<S: GainSchedule>(c: &mut Controller<S>) -> impl FnMut(f64, f64, f64) -> f64 + '_ {
     move |sp, y, ff| c.step(fx(sp), fx(y), fx(ff)).to_num()
 }
 
@@ -105,7 +105,7 @@ fn feedforward_alone_reaches_target_on_exact_plant() {
 
     // With the fuzzy PID on top, the trim vanishes once the speed is reached.
     for (name, cfg) in schedules() {
-        let mut c = cfg.build().unwrap();
+        let mut c = cfg.build_any().unwrap();
         c.start();
         let mut p = Plant::new(1.0);
         let (ys, us) = run(fixed_step(&mut c), &mut p, 200, |_| 20.0);
@@ -131,7 +131,7 @@ fn fixed_point_tracks_f64_reference_in_closed_loop() {
                 },
                 _ => cfg,
             };
-            let mut c = cfg.build().unwrap();
+            let mut c = cfg.build_any().unwrap();
             c.start();
             let mut r = RefPid::new(&cfg);
             let target = |k: usize| if k < 150 { 20.0 } else { 12.0 };
@@ -164,7 +164,7 @@ fn step_responses_with_sign_convention() {
     println!("controller     | overshoot r/min | settling s | ss error r/min | load: settling s, ss error");
     let mut rows = Vec::new();
     for (name, cfg) in schedules() {
-        let mut c = cfg.build().unwrap();
+        let mut c = cfg.build_any().unwrap();
         c.start();
         let mut p = Plant::new(0.85);
         let mut ctrl = fixed_step(&mut c);

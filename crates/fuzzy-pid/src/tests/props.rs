@@ -54,7 +54,7 @@ proptest! {
             _ => Schedule::Fuzzy(FuzzyConfig { and: AndOperator::Min, ..f }),
         };
         let cfg = Config::with_schedule(schedule);
-        let mut c = cfg.build().unwrap();
+        let mut c = cfg.build_any().unwrap();
         c.start();
         for (sp, y, ff, action) in steps {
             match action {

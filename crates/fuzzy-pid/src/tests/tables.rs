@@ -96,7 +96,21 @@ fn custom_rule_base_is_validated() {
         ..FuzzyConfig::default()
     };
     assert!(Config::with_schedule(Schedule::Fuzzy(f)).build().is_ok());
-    assert!(Config::with_schedule(Schedule::Lookup(f)).build().is_ok());
+    assert!(Config::with_schedule(Schedule::Lookup(f))
+        .build_lut()
+        .is_ok());
+    assert!(Config::with_schedule(Schedule::Lookup(f))
+        .build_any()
+        .is_ok());
+    // `build` holds a direct tuner only: a lookup table needs its own type.
+    assert_eq!(
+        Config::with_schedule(Schedule::Lookup(f)).build().err(),
+        Some(Error::LookupSchedule)
+    );
+    assert_eq!(
+        Config::with_schedule(Schedule::Fuzzy(f)).build_lut().err(),
+        Some(Error::LookupSchedule)
+    );
     let msg = std::format!(
         "{}",
         Error::RuleLabel {
@@ -175,6 +189,6 @@ fn config_errors() {
         ),
     ];
     for (cfg, err) in cases {
-        assert_eq!(cfg.build().err(), Some(err));
+        assert_eq!(cfg.build_any().err(), Some(err));
     }
 }

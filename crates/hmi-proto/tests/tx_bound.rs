@@ -1,0 +1,56 @@
+//! The transmit queue bound ([`TX_CAPACITY`]): the longest burst the firmware
+//! queues before it drains (a page shown, its live status written and a
+//! 40-character message, nothing sent in between) must fit without a drop.
+//! Measured: 207 bytes on the Adaptive page (docs/hmi.md), so the queue
+//! cannot shrink to 160 bytes.
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
+
+use hmi_proto::hmi::{Hmi, TX_CAPACITY};
+use hmi_proto::screen::{Page, Settings, Status};
+
+/// A 40-character (the screen's limit) plain ASCII text.
+const LONG: &str = "0123456789012345678901234567890123456789";
+
+/// Bytes queued by `show_page` + `write_status` (every value at its widest) +
+/// `show_message` (40 characters) on a connected link with a 40-character
+/// version text.
+fn burst(page: Page) -> (usize, u32) {
+    let mut hmi = Hmi::new(Settings::default(), LONG);
+    for b in [0x66, 0x00, 0xFF, 0xFF, 0xFF] {
+        hmi.push(b);
+    }
+    assert!(hmi.is_connected());
+    let mut sink = [0u8; 512];
+    let _ = hmi.poll_transmit(&mut sink);
+    let status = Status {
+        travel_speed_kmh_x100: u16::MAX,
+        target_drum_rpm_x100: u16::MAX,
+        actual_drum_rpm_x100: u16::MAX,
+        plants: u32::MAX,
+        distance_dm: u32::MAX,
+        measured_distance_cm: u32::MAX,
+        calibration_result_x1000: u16::MAX,
+    };
+    let _ = hmi.show_page(page);
+    let _ = hmi.write_status(&status);
+    let _ = hmi.show_message(LONG);
+    (hmi.tx_pending(), hmi.stats().tx_dropped)
+}
+
+#[test]
+fn longest_burst_fits_the_transmit_queue() {
+    let mut longest = 0;
+    for page in Page::ALL {
+        let (n, dropped) = burst(page);
+        println!("{page:?}: {n} bytes");
+        assert_eq!(dropped, 0, "{page:?}: {n} bytes > {TX_CAPACITY}");
+        longest = longest.max(n);
+    }
+    // The figure documented in docs/hmi.md; update both if the pages change.
+    assert_eq!(longest, 207);
+    assert!(longest <= TX_CAPACITY);
+}

@@ -232,7 +232,7 @@ impl EstimatorSettings {
             ref_valid: false,
             learned_upto: 0,
             learned_mask: 0,
-            weights: [ONE_Q16; MAX_TEETH],
+            weights: [0; MAX_TEETH],
             weight_sum: u32::from(self.teeth).saturating_mul(ONE_Q16),
             held: 0,
             history: [0; 3],
@@ -327,8 +327,10 @@ pub struct MtEstimator {
     ref_valid: bool,
     learned_upto: u32,
     learned_mask: u32,
-    /// Learned share of each gap, Q16 (1.0 = 1/z of a revolution).
-    weights: [u32; MAX_TEETH],
+    /// Learned share of each gap, Q16 (1.0 = 1/z of a revolution), stored as
+    /// its offset from 1.0: a learned share lies within ±4 % (±2621) of it,
+    /// so `i16` holds it exactly (64 bytes instead of 128).
+    weights: [i16; MAX_TEETH],
     weight_sum: u32,
     /// Last measurement, U12F20 bits.
     held: u32,
@@ -360,6 +362,20 @@ fn ring_prev(i: usize, back: usize) -> usize {
     }
 }
 
+/// Q16 share from its stored offset to 1.0.
+fn weight_from_offset(d: i16) -> u32 {
+    ONE_Q16.saturating_add_signed(i32::from(d))
+}
+
+/// Offset to 1.0 of a Q16 share within ±4 % (always representable; a value
+/// outside `i16` cannot occur and would read as nominal).
+fn weight_to_offset(w: u32) -> i16 {
+    i64::from(w)
+        .checked_sub(i64::from(ONE_Q16))
+        .and_then(|d| i16::try_from(d).ok())
+        .unwrap_or(0)
+}
+
 fn median3(a: u32, b: u32, c: u32) -> u32 {
     a.max(b).min(a.min(b).max(c))
 }
@@ -371,10 +387,21 @@ impl MtEstimator {
         &self.cfg
     }
 
-    /// Learned share of each gap relative to 1/Z (Q16 bits: 65536 = nominal).
-    #[must_use]
-    pub fn tooth_weights(&self) -> &[u32] {
-        self.weights.get(..self.z).unwrap_or(&[])
+    /// Learned share of each gap relative to 1/Z (Q16 bits: 65536 = nominal),
+    /// one per tooth.
+    pub fn tooth_weights(&self) -> impl ExactSizeIterator<Item = u32> + '_ {
+        self.weights
+            .get(..self.z)
+            .unwrap_or(&[])
+            .iter()
+            .map(|&d| weight_from_offset(d))
+    }
+
+    /// Learned share of gap `idx`, Q16 (nominal outside the table).
+    fn weight(&self, idx: usize) -> u32 {
+        self.weights
+            .get(idx)
+            .map_or(ONE_Q16, |&d| weight_from_offset(d))
     }
 
     /// Records one Hall edge (call from the capture interrupt). O(1), no division.
@@ -439,7 +466,7 @@ impl MtEstimator {
         let mut sum = full.saturating_mul(u64::from(self.weight_sum));
         let mut idx = self.tooth;
         for _ in 0..rem {
-            sum = sum.saturating_add(u64::from(self.weights.get(idx).copied().unwrap_or(ONE_Q16)));
+            sum = sum.saturating_add(u64::from(self.weight(idx)));
             idx = if idx == 0 {
                 self.z.saturating_sub(1)
             } else {
@@ -501,14 +528,17 @@ impl MtEstimator {
                 let bit = 1u32
                     .checked_shl(u32::try_from(tooth).unwrap_or(0))
                     .unwrap_or(0);
-                if let Some(w) = self.weights.get_mut(tooth) {
-                    if self.learned_mask & bit == 0 {
-                        *w = w_new;
-                    } else if w_new >= *w {
-                        *w = w.saturating_add((w_new.saturating_sub(*w)) >> 2);
-                    } else {
-                        *w = w.saturating_sub((w.saturating_sub(w_new)) >> 2);
-                    }
+                let w = self.weight(tooth);
+                let w = if self.learned_mask & bit == 0 {
+                    w_new
+                } else if w_new >= w {
+                    w.saturating_add((w_new.saturating_sub(w)) >> 2)
+                } else {
+                    w.saturating_sub((w.saturating_sub(w_new)) >> 2)
+                };
+                if let Some(slot) = self.weights.get_mut(tooth) {
+                    // Between the old share and `w_new`, both within ±4 %.
+                    *slot = weight_to_offset(w);
                 }
                 self.learned_mask |= bit;
             }
@@ -525,7 +555,7 @@ impl MtEstimator {
             .get(..z)
             .unwrap_or(&[])
             .iter()
-            .fold(0u32, |a, &w| a.saturating_add(w));
+            .fold(0u32, |a, &d| a.saturating_add(weight_from_offset(d)));
     }
 
     /// Computes the speed at `now` (call periodically from the control task).
@@ -608,7 +638,7 @@ impl MtEstimator {
             .checked_add(1)
             .filter(|&t| t < self.z)
             .unwrap_or(0);
-        let w_next = u64::from(self.weights.get(next).copied().unwrap_or(ONE_Q16));
+        let w_next = u64::from(self.weight(next));
         let cap = self.rpm_bits(w_next, since_edge_ticks);
         if cap < self.held {
             out.state = MotionState::Decaying;

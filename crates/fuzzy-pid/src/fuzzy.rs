@@ -241,7 +241,8 @@ fn clamp_sym(x: Fix, r: Fix) -> Fix {
 /// output, the seven singleton values `label/3 · range` for `label ∈ −3..=3`
 /// (computed once in [`new`](Self::new), truncated exactly as before), so a
 /// firing rule costs one table read and no multiply beyond the weighting:
-/// 280 bytes on thumbv7m instead of 664 for an `I16F16` singleton per cell.
+/// 280 bytes on thumbv7m instead of about 650 for an `I16F16` singleton per
+/// cell.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FuzzyTuner {
     e: Axis,

@@ -507,13 +507,45 @@ impl MtEstimator {
         if t_rev == 0 {
             return;
         }
+        // Learn only from a steady revolution: while the machine speeds up
+        // or slows down, later gaps are shorter (or longer) than earlier
+        // ones for reasons that have nothing to do with the teeth, and a
+        // share learnt then would bias every later estimate. Steady means
+        // both halves of the revolution ran at the same mean speed within
+        // 0.5 % (tooth position errors of ±2 % of a pitch move a
+        // half-revolution of 12 gaps by at most 0.33 %).
+        let half = z / 2;
+        let mid = self
+            .stamps
+            .get(ring_prev(self.head, half))
+            .copied()
+            .unwrap_or(newest);
+        let first =
+            u64::from(mid.wrapping_sub(rev_start)).saturating_mul(u64::try_from(half).unwrap_or(0));
+        let second = u64::from(newest.wrapping_sub(mid))
+            .saturating_mul(u64::try_from(z.saturating_sub(half)).unwrap_or(0));
+        if first.abs_diff(second).saturating_mul(200) > first.max(second) {
+            self.learned_upto = self.edges_total;
+            return;
+        }
         let recip = (u64::from(z32) << 48)
             .checked_div(u64::from(t_rev))
             .unwrap_or(0);
         let fresh = self.edges_total.wrapping_sub(self.learned_upto).min(z32);
         let tol = ONE_Q16 / 25; // ±4 %
-        let mut pos = self.head;
-        let mut tooth = self.tooth;
+                                // Learn the gaps in the middle of the revolution, not the newest
+                                // ones: the revolution is then centred on each gap learnt, so a
+                                // steady acceleration lengthens the gaps before it as much as it
+                                // shortens those after, and the share comes out unbiased.
+        let mut pos = ring_prev(self.head, half);
+        let mut tooth = self
+            .tooth
+            .wrapping_add(z)
+            .wrapping_sub(half)
+            .checked_rem(z)
+            .unwrap_or(0);
+        // Only gaps that have a whole revolution around them in the ring.
+        let fresh = fresh.min(z32.saturating_sub(u32::try_from(half).unwrap_or(0)));
         for _ in 0..fresh {
             let prev = ring_prev(pos, 1);
             let gap = self
@@ -528,6 +560,8 @@ impl MtEstimator {
                 let bit = 1u32
                     .checked_shl(u32::try_from(tooth).unwrap_or(0))
                     .unwrap_or(0);
+                // The first steady, centred observation is taken as it is;
+                // later ones move the share a quarter of the way.
                 let w = self.weight(tooth);
                 let w = if self.learned_mask & bit == 0 {
                     w_new

@@ -336,3 +336,46 @@ proptest! {
         }
     }
 }
+
+/// Tooth learning must not mistake a change of speed for tooth-pitch error:
+/// a perfect gear (no pitch error) at 0.5 km/h, then a 0.5 s-time-constant
+/// rise of 10 % (a chassis answering more throttle). Once the speed is
+/// steady again every gap is truly equal, so any estimate away from the
+/// truth is a share learnt wrongly during the rise. Expected values: the
+/// exact speed of the edge stream, computed here in f64.
+#[test]
+fn a_speed_change_is_not_learnt_as_tooth_error() {
+    let mut est = EstimatorSettings::default().build().unwrap();
+    let pitch = std::f64::consts::PI * 0.2 / 25.0; // m of track per edge
+    let v0 = 0.5 / 3.6;
+    let speed = |t: f64| {
+        if t < 20.0 {
+            v0
+        } else {
+            v0 * (1.0 + 0.1 * (1.0 - (-(t - 20.0) / 0.5).exp()))
+        }
+    };
+    let (mut t, mut s, mut next_edge) = (0.0f64, 0.0f64, pitch);
+    let dt = 1e-5;
+    let mut worst_after: f64 = 0.0;
+    let mut last_update = 0.0;
+    while t < 40.0 {
+        t += dt;
+        s += speed(t) * dt;
+        if s >= next_edge {
+            next_edge += pitch;
+            est.push_edge(Ticks((t * 1e6) as u32));
+        }
+        if t - last_update >= 0.1 {
+            last_update = t;
+            let m = est.update(Ticks((t * 1e6) as u32));
+            // Speed of the gear, r/min, from the true track speed.
+            let truth = speed(t) / (std::f64::consts::PI * 0.2) * 60.0;
+            if t > 28.0 {
+                let e = (m.gear_speed.to_f64() - truth).abs() / truth;
+                worst_after = worst_after.max(e);
+            }
+        }
+    }
+    assert!(worst_after <= 0.001, "after the rise: {:.3} %", worst_after * 100.0);
+}

@@ -232,6 +232,10 @@ impl EstimatorSettings {
             ref_valid: false,
             learned_upto: 0,
             learned_mask: 0,
+            rev_min: u32::MAX,
+            rev_max: 0,
+            rev_count: 0,
+            rev_steady: false,
             weights: [0; MAX_TEETH],
             weight_sum: u32::from(self.teeth).saturating_mul(ONE_Q16),
             held: 0,
@@ -327,6 +331,14 @@ pub struct MtEstimator {
     ref_valid: bool,
     learned_upto: u32,
     learned_mask: u32,
+    /// Shortest and longest rolling revolution time (newest edge minus the
+    /// edge z before it: immune to tooth errors) seen in the current group of
+    /// z edges, how many edges the group has, and whether the previous
+    /// complete group was steady.
+    rev_min: u32,
+    rev_max: u32,
+    rev_count: u8,
+    rev_steady: bool,
     /// Learned share of each gap, Q16 (1.0 = 1/z of a revolution), stored as
     /// its offset from 1.0: a learned share lies within ±4 % (±2621) of it,
     /// so `i16` holds it exactly (64 bytes instead of 128).
@@ -443,10 +455,46 @@ impl MtEstimator {
         self.has_last = true;
         self.edges_total = self.edges_total.wrapping_add(1);
         self.valid_run = self.valid_run.saturating_add(1);
+        self.track_steadiness(t);
         verdict
     }
 
+    /// Keeps the spread of the rolling revolution time over groups of z
+    /// edges (a subtraction and two compares per edge, no division).
+    fn track_steadiness(&mut self, newest: u32) {
+        let z32 = u32::try_from(self.z).unwrap_or(u32::MAX);
+        if self.valid_run <= z32 {
+            return;
+        }
+        let rev = newest.wrapping_sub(
+            self.stamps
+                .get(ring_prev(self.head, self.z))
+                .copied()
+                .unwrap_or(newest),
+        );
+        self.rev_min = self.rev_min.min(rev);
+        self.rev_max = self.rev_max.max(rev);
+        self.rev_count = self.rev_count.saturating_add(1);
+        if u32::from(self.rev_count) >= z32 {
+            self.rev_steady = self.spread_is_steady();
+            self.rev_min = u32::MAX;
+            self.rev_max = 0;
+            self.rev_count = 0;
+        }
+    }
+
+    /// The rolling revolution time varied by at most 0.2 % in the group so far.
+    fn spread_is_steady(&self) -> bool {
+        self.rev_count == 0
+            || u64::from(self.rev_max.saturating_sub(self.rev_min)).saturating_mul(500)
+                <= u64::from(self.rev_max)
+    }
+
     fn restart(&mut self) {
+        self.rev_min = u32::MAX;
+        self.rev_max = 0;
+        self.rev_count = 0;
+        self.rev_steady = false;
         self.valid_run = 0;
         self.last_gap = 0;
         self.ref_valid = false;
@@ -507,45 +555,47 @@ impl MtEstimator {
         if t_rev == 0 {
             return;
         }
-        // Learn only from a steady revolution: while the machine speeds up
+        // Learn only while the speed is steady: while the machine speeds up
         // or slows down, later gaps are shorter (or longer) than earlier
         // ones for reasons that have nothing to do with the teeth, and a
         // share learnt then would bias every later estimate. Steady means
-        // both halves of the revolution ran at the same mean speed within
-        // 0.5 % (tooth position errors of ±2 % of a pitch move a
-        // half-revolution of 12 gaps by at most 0.33 %).
-        let half = z / 2;
-        let mid = self
-            .stamps
-            .get(ring_prev(self.head, half))
-            .copied()
-            .unwrap_or(newest);
-        let first =
-            u64::from(mid.wrapping_sub(rev_start)).saturating_mul(u64::try_from(half).unwrap_or(0));
-        let second = u64::from(newest.wrapping_sub(mid))
-            .saturating_mul(u64::try_from(z.saturating_sub(half)).unwrap_or(0));
-        if first.abs_diff(second).saturating_mul(200) > first.max(second) {
+        // the rolling revolution time (which tooth errors cannot move) stayed
+        // within 0.2 % over the last complete group of z edges and over the
+        // edges since.
+        if !(self.rev_steady && self.spread_is_steady()) {
             self.learned_upto = self.edges_total;
             return;
         }
+        let half = z / 2;
+        let all = 1u32
+            .checked_shl(z32)
+            .map_or(u32::MAX, |b| b.wrapping_sub(1));
+        let first_pass = self.learned_mask & all != all;
         let recip = (u64::from(z32) << 48)
             .checked_div(u64::from(t_rev))
             .unwrap_or(0);
         let fresh = self.edges_total.wrapping_sub(self.learned_upto).min(z32);
         let tol = ONE_Q16 / 25; // ±4 %
-                                // Learn the gaps in the middle of the revolution, not the newest
-                                // ones: the revolution is then centred on each gap learnt, so a
-                                // steady acceleration lengthens the gaps before it as much as it
-                                // shortens those after, and the share comes out unbiased.
-        let mut pos = ring_prev(self.head, half);
-        let mut tooth = self
-            .tooth
-            .wrapping_add(z)
-            .wrapping_sub(half)
-            .checked_rem(z)
-            .unwrap_or(0);
-        // Only gaps that have a whole revolution around them in the ring.
-        let fresh = fresh.min(z32.saturating_sub(u32::try_from(half).unwrap_or(0)));
+                                // The first shares come from one whole steady revolution, all at
+                                // once, so that no tooth gets its first share from a revolution that
+                                // only just passed the steadiness check. Afterwards each gap is
+                                // refined when it sits in the middle of the revolution measured: the
+                                // revolution is then centred on it, so a steady acceleration
+                                // lengthens the gaps before it as much as it shortens those after.
+        let (mut pos, mut tooth, fresh) = if first_pass {
+            (self.head, self.tooth, z32)
+        } else {
+            (
+                ring_prev(self.head, half),
+                self.tooth
+                    .wrapping_add(z)
+                    .wrapping_sub(half)
+                    .checked_rem(z)
+                    .unwrap_or(0),
+                // Only gaps with a whole revolution around them in the ring.
+                fresh.min(z32.saturating_sub(u32::try_from(half).unwrap_or(0))),
+            )
+        };
         for _ in 0..fresh {
             let prev = ring_prev(pos, 1);
             let gap = self
@@ -560,15 +610,16 @@ impl MtEstimator {
                 let bit = 1u32
                     .checked_shl(u32::try_from(tooth).unwrap_or(0))
                     .unwrap_or(0);
-                // The first steady, centred observation is taken as it is;
-                // later ones move the share a quarter of the way.
+                // Refinements move the share a sixteenth of the way, so that
+                // a revolution spoilt by a change of speed the steadiness
+                // check let through can bias a share by 1/16 of its error.
                 let w = self.weight(tooth);
-                let w = if self.learned_mask & bit == 0 {
+                let w = if first_pass {
                     w_new
                 } else if w_new >= w {
-                    w.saturating_add((w_new.saturating_sub(w)) >> 2)
+                    w.saturating_add((w_new.saturating_sub(w)) >> 4)
                 } else {
-                    w.saturating_sub((w.saturating_sub(w_new)) >> 2)
+                    w.saturating_sub((w.saturating_sub(w_new)) >> 4)
                 };
                 if let Some(slot) = self.weights.get_mut(tooth) {
                     // Between the old share and `w_new`, both within ±4 %.

@@ -377,5 +377,9 @@ fn a_speed_change_is_not_learnt_as_tooth_error() {
             }
         }
     }
-    assert!(worst_after <= 0.001, "after the rise: {:.3} %", worst_after * 100.0);
+    assert!(
+        worst_after <= 0.001,
+        "after the rise: {:.3} %",
+        worst_after * 100.0
+    );
 }

@@ -1,0 +1,389 @@
+//! The supervisor against the machine simulator on the host: the same loop
+//! the firmware runs every 10 ms, without the RTOS. Expected values come from
+//! an independent f64 form of eq. 7 on the simulator's *true* ground speed
+//! and the belt slip of Table 13, never from the code under test.
+#![allow(
+    clippy::unwrap_used,
+    clippy::arithmetic_side_effects,
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_precision_loss,
+    clippy::indexing_slicing
+)]
+
+use hmi_proto::screen::{Command, DrumSpeed, Mode, Spacing};
+use kinematics::consts::Gear;
+use kinematics::units::Ticks;
+use machine_sim::{Config, Fault, Inputs, Machine};
+use supervisor::control::{Actuation, Alarm, Hardware, RunState, Supervisor};
+use supervisor::settings::Settings;
+
+const HW: Hardware = Hardware::BOARD;
+
+struct Rig {
+    sup: Supervisor,
+    m: Machine,
+    act: Actuation,
+    t_ms: u32,
+}
+
+impl Rig {
+    fn new(config: Config, settings: Settings) -> Self {
+        Self {
+            sup: Supervisor::new(HW, settings).unwrap(),
+            m: config.build().unwrap(),
+            act: Actuation::OFF,
+            t_ms: 0,
+        }
+    }
+
+    /// One control period: the machine runs 10 ms under the last output,
+    /// then the supervisor reads it, exactly as the firmware's control task.
+    fn period(&mut self) {
+        let inputs = Inputs {
+            drum_duty: f32::from(self.act.ccr) / f32::from(HW.pwm_arr + 1),
+            driver_enabled: self.act.driver_enabled,
+            ..Inputs::default()
+        };
+        let sup = &mut self.sup;
+        self.m
+            .step(10_000, &inputs, &mut |t| sup.hall_edge(Ticks(t)));
+        self.act = self
+            .sup
+            .control_step(Ticks(self.m.capture_ticks()), self.m.drum_encoder_count());
+        self.t_ms += 10;
+    }
+
+    fn run_ms(&mut self, ms: u32) {
+        for _ in 0..ms / 10 {
+            self.period();
+        }
+    }
+}
+
+/// Eq. 7 from the truth: the drum speed (r/min) at which the belt drops one
+/// partition per `spacing` of ground: V2 = v·Lclap/Lplant and
+/// V2 = k3·π·0.070·n/60, with k3 from Table 13 (interpolated here in f64).
+fn eq7_target(ground_m_s: f64, spacing_m: f64) -> f64 {
+    let k3_table = [
+        (5.0, 0.993),
+        (10.0, 0.982),
+        (15.0, 0.986),
+        (20.0, 0.994),
+        (25.0, 0.980),
+    ];
+    let k3 = |n: f64| -> f64 {
+        if n <= 5.0 {
+            return 0.993;
+        }
+        for w in k3_table.windows(2) {
+            let ((x0, y0), (x1, y1)) = (w[0], w[1]);
+            if n <= x1 {
+                return y0 + (y1 - y0) * (n - x0) / (x1 - x0);
+            }
+        }
+        0.980
+    };
+    // n depends on k3(n): two fixed-point iterations converge (k3 is flat).
+    let mut n = ground_m_s * 0.05 / spacing_m * 60.0 / (std::f64::consts::PI * 0.070);
+    for _ in 0..3 {
+        n = ground_m_s * 0.05 / spacing_m * 60.0 / (k3(n) * std::f64::consts::PI * 0.070);
+    }
+    n
+}
+
+fn adaptive(spacing_mm: u16) -> Settings {
+    Settings {
+        mode: Mode::SpeedAdaptive,
+        spacing: Spacing::new(i32::from(spacing_mm)).unwrap(),
+        gear: Gear::Low2,
+        ..Settings::default()
+    }
+}
+
+fn low2(config: Config) -> Config {
+    Config {
+        initial_gear: Some(Gear::Low2),
+        ..config
+    }
+}
+
+/// A tracked chassis: its speed answers a change of load or throttle with a
+/// time constant of `tau` seconds rather than jumping.
+fn chassis(config: Config, tau: f32) -> Config {
+    Config {
+        track_tau_s: tau,
+        ..config
+    }
+}
+
+#[test]
+fn speed_adaptive_7cm_low2_settles_within_half_a_second_and_follows_a_10_percent_disturbance() {
+    // Noiseless machine (no pitch error, jitter or terrain), so that the
+    // errors are the controller's and the estimator's; a ±10 % change of
+    // travel speed through the chassis's 2.5 s time constant (a load or
+    // throttle change: at most 4.4 %/s). The Hall gear sees one edge every
+    // 177 ms at Low 2, so the drum learns of a change up to 177 ms late; a
+    // change faster than ≈ 5 %/s cannot be followed within 1 % by any
+    // controller on this sensor (docs/firmware.md; the benchmark reports the
+    // faster case).
+    let mut rig = Rig::new(chassis(low2(Config::noiseless()), 2.5), adaptive(70));
+    // Let the tractor reach speed and the estimator learn the gear's teeth.
+    rig.run_ms(10_000);
+    assert_eq!(
+        rig.sup.command(Command::Start),
+        supervisor::control::Effect::None
+    );
+    let start = rig.t_ms;
+    let mut worst_after_settle: f64 = 0.0;
+    let mut worst_disturbed: f64 = 0.0;
+    while rig.t_ms - start < 34_000 {
+        rig.period();
+        let t = rig.t_ms - start;
+        match t {
+            2_000 => rig.m.inject_speed_step(0.10),
+            10_000 | 26_000 => rig.m.clear_speed_step(),
+            18_000 => rig.m.inject_speed_step(-0.10),
+            _ => {}
+        }
+        let target = eq7_target(f64::from(rig.m.travel_speed_m_s()), 0.07);
+        let err = (f64::from(rig.m.drum_speed_rpm()) - target).abs() / target;
+        if (500..2_000).contains(&t) {
+            worst_after_settle = worst_after_settle.max(err);
+        }
+        if t >= 2_000 {
+            worst_disturbed = worst_disturbed.max(err);
+        }
+    }
+    assert!(
+        worst_after_settle <= 0.01,
+        "after 0.5 s: {:.3} %",
+        worst_after_settle * 100.0
+    );
+    assert!(
+        worst_disturbed <= 0.01,
+        "through ±10 %: {:.3} %",
+        worst_disturbed * 100.0
+    );
+}
+
+#[test]
+fn fixed_mode_holds_20_rpm_within_half_a_percent() {
+    let settings = Settings {
+        mode: Mode::Fixed,
+        fixed_drum_speed: DrumSpeed::new(2000).unwrap(),
+        ..Settings::default()
+    };
+    // The full noise model: seedling load ±5 % per partition, speed ripple.
+    let mut rig = Rig::new(Config::default(), settings);
+    rig.sup.command(Command::Start);
+    rig.run_ms(3_000);
+    let (mut sum, mut n) = (0.0, 0.0);
+    for _ in 0..500 {
+        rig.period();
+        // The reported speed (smoothed over ≈ 0.5 s), as the screen shows it.
+        let reported = f64::from(rig.sup.snapshot().actual_drum_rpm_x1000) / 1000.0;
+        assert!((reported - 20.0).abs() <= 0.1, "reported {reported}");
+        sum += f64::from(rig.m.drum_speed_rpm());
+        n += 1.0;
+    }
+    // And the drum itself, on average over those 5 s.
+    let mean = sum / n;
+    assert!((mean - 20.0).abs() <= 0.1, "true mean {mean}");
+}
+
+#[test]
+fn a_row_of_70_m_gets_its_plant_count_within_half_a_percent() {
+    // Theoretical count: 70 m / 0.07 m = 1000 plants in one row. The belt runs
+    // from standstill with the tractor (start before moving).
+    let mut rig = Rig::new(low2(Config::default()), adaptive(70));
+    rig.m.stop_travel();
+    rig.run_ms(200);
+    rig.sup.command(Command::Start);
+    rig.m.resume_travel();
+    rig.m.reset_metrics();
+    let g0 = rig.m.ground_position_m();
+    let p0 = rig.m.plants_dropped();
+    while rig.m.ground_position_m() - g0 < 70.0 {
+        rig.period();
+    }
+    let plants = rig.m.plants_dropped() - p0;
+    let error = (f64::from(plants) - 1000.0) / 1000.0;
+    assert!(
+        error.abs() <= 0.005,
+        "{plants} plants, {:.2} %",
+        error * 100.0
+    );
+}
+
+#[test]
+fn a_stalled_drum_stops_the_pwm_and_latches_an_alarm() {
+    let mut rig = Rig::new(low2(Config::noiseless()), adaptive(70));
+    rig.run_ms(3_000);
+    rig.sup.command(Command::Start);
+    rig.run_ms(1_000);
+    assert!(rig.act.ccr > 0);
+    rig.m.inject_fault(Fault::DrumStall);
+    let injected = rig.t_ms;
+    while rig.act.ccr != 0 {
+        rig.period();
+        assert!(rig.t_ms - injected <= 300, "no reaction");
+    }
+    // Detection needs > 200 ms without counts (the definition); the
+    // PWM drops in the period that detects it.
+    let reaction = rig.t_ms - injected;
+    assert!((200..=220).contains(&reaction), "{reaction} ms");
+    assert_eq!(rig.sup.alarm(), Some(Alarm::DrumStall));
+    assert!(!rig.act.driver_enabled);
+    // Latched: clearing the jam does not restart the drum, Start is refused.
+    rig.m.clear_fault(Fault::DrumStall);
+    rig.run_ms(500);
+    assert_eq!(rig.act, Actuation::OFF);
+    rig.sup.command(Command::Start);
+    assert_eq!(rig.sup.run_state(), RunState::Stopped);
+    rig.sup.command(Command::AcknowledgeAlarm);
+    assert_eq!(rig.sup.alarm(), None);
+    rig.sup.command(Command::Start);
+    rig.run_ms(500);
+    assert!(rig.act.ccr > 0);
+}
+
+#[test]
+fn a_lost_hall_signal_at_working_speed_stops_the_drum_with_an_alarm() {
+    let mut rig = Rig::new(low2(Config::noiseless()), adaptive(70));
+    rig.run_ms(8_000);
+    rig.sup.command(Command::Start);
+    rig.run_ms(1_000);
+    rig.m.inject_fault(Fault::HallLoss);
+    let injected = rig.t_ms;
+    while rig.sup.alarm() != Some(Alarm::HallLost) {
+        rig.period();
+        assert!(rig.t_ms - injected <= 600, "no alarm");
+    }
+    assert_eq!(rig.act, Actuation::OFF);
+    // Low 2: one Hall period is 25.13 mm / (0.52 km/h / 1.020) = 177 ms; the
+    // loss is declared after two periods without an edge, counted from the
+    // last edge (at most one period before the injection).
+    let reaction = rig.t_ms - injected;
+    assert!(reaction <= 2 * 178 + 10, "{reaction} ms");
+}
+
+#[test]
+fn a_normal_stop_of_the_tractor_stops_the_drum_without_an_alarm() {
+    // The chassis coasts to a stop with a 0.5 s time constant: 72 mm from
+    // Low 2, so its last tooth passes at ≈ 0.18 km/h, below the 0.25 km/h
+    // from which a silent sensor counts as lost.
+    let mut rig = Rig::new(chassis(low2(Config::noiseless()), 0.5), adaptive(70));
+    rig.run_ms(8_000);
+    rig.sup.command(Command::Start);
+    rig.run_ms(1_000);
+    rig.m.stop_travel();
+    rig.run_ms(3_000);
+    assert_eq!(rig.sup.alarm(), None, "a stop is not a fault");
+    assert!(
+        rig.m.drum_speed_rpm() < 0.5,
+        "drum {}",
+        rig.m.drum_speed_rpm()
+    );
+}
+
+#[test]
+fn too_fast_for_the_spacing_shows_the_allowed_maximum_and_holds_n_max() {
+    // 7 cm allows ≈ 0.81 km/h (kinematics docs); High 1 runs at 1.40 km/h.
+    let mut rig = Rig::new(
+        Config {
+            initial_gear: Some(Gear::High1),
+            ..Config::noiseless()
+        },
+        adaptive(70),
+    );
+    rig.run_ms(8_000);
+    rig.sup.command(Command::Start);
+    rig.run_ms(2_000);
+    match rig.sup.alarm() {
+        Some(Alarm::TooFast { max_kmh_x100 }) => assert!((78..=84).contains(&max_kmh_x100)),
+        other => panic!("{other:?}"),
+    }
+    let n = f64::from(rig.m.drum_speed_rpm());
+    assert!((n - 44.7).abs() < 0.5, "drum {n}");
+}
+
+#[test]
+fn the_k2_calibration_on_the_screen_measures_the_track_slip() {
+    // Low 1, with the simulator's Table 12 slip (2.82 % at Low 1) and its
+    // k1 under-reading. The operator starts the count, drives, stops it, and
+    // enters the taped ground distance; k2 = taped / wheel-turn distance.
+    let mut rig = Rig::new(
+        Config {
+            initial_gear: Some(Gear::Low1),
+            ..Config::noiseless()
+        },
+        adaptive(70),
+    );
+    rig.run_ms(3_000);
+    rig.sup.command(Command::CalibrationStart);
+    let g0 = rig.m.ground_position_m();
+    let w0 = rig.m.wheel_turns();
+    rig.run_ms(120_000);
+    rig.sup.command(Command::CalibrationStop);
+    let ground_cm = ((rig.m.ground_position_m() - g0) * 100.0).round() as i32;
+    // Expected from the simulator's truth: ground / (wheel turns · π·0.20 m).
+    let expected_k2 = (rig.m.ground_position_m() - g0)
+        / ((rig.m.wheel_turns() - w0) * std::f64::consts::PI * 0.20);
+    let d = hmi_proto::screen::CalibrationDistance::new(ground_cm).unwrap();
+    assert_eq!(
+        rig.sup.command(Command::CalibrationActualDistance(d)),
+        supervisor::control::Effect::None
+    );
+    let status = rig.sup.screen_status();
+    let k2 = f64::from(status.calibration_result_x1000) / 1000.0;
+    // The firmware counts wheel turns as Hall edges / 25, and the simulated
+    // Hall gear reads low by k1 (Table 11: 1.031 at Low 1), so the measured
+    // k2 carries k1 too, as the paper's procedure on the same sensor does.
+    // Tolerance: one Hall edge in the ≈ 425 of this 10.7 m run (0.24 %).
+    let k1 = 1.031;
+    assert!(
+        (k2 - expected_k2 * k1).abs() <= 0.003,
+        "k2 {k2} vs {:.4}",
+        expected_k2 * k1
+    );
+    assert_eq!(
+        rig.sup.command(Command::CalibrationAccept),
+        supervisor::control::Effect::SettingsChanged
+    );
+}
+
+#[test]
+fn saving_is_refused_while_the_drum_runs() {
+    let mut rig = Rig::new(low2(Config::noiseless()), adaptive(70));
+    rig.run_ms(1_000);
+    rig.sup.command(Command::Start);
+    assert!(matches!(
+        rig.sup.command(Command::SaveSettings),
+        supervisor::control::Effect::Message(_)
+    ));
+    rig.sup.command(Command::Stop);
+    assert_eq!(
+        rig.sup.command(Command::SaveSettings),
+        supervisor::control::Effect::Save
+    );
+}
+
+#[test]
+fn the_too_fast_alarm_text_shows_the_allowed_maximum() {
+    let mut text = heapless::String::<40>::new();
+    Alarm::TooFast { max_kmh_x100: 81 }
+        .write_text(&mut text)
+        .unwrap();
+    assert_eq!(text.as_str(), "Too fast: max 0.81 km/h");
+    text.clear();
+    Alarm::TooFast { max_kmh_x100: 208 }
+        .write_text(&mut text)
+        .unwrap();
+    assert_eq!(text.as_str(), "Too fast: max 2.08 km/h");
+    text.clear();
+    Alarm::TooFast { max_kmh_x100: 5 }
+        .write_text(&mut text)
+        .unwrap();
+    assert_eq!(text.as_str(), "Too fast: max 0.05 km/h");
+}

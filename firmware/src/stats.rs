@@ -41,11 +41,13 @@ pub static CONTROL_LOOPS: Counter = Counter::new();
 pub static CONTROL_OVERRUNS: Counter = Counter::new();
 /// Bytes received from the touchscreen (USART1).
 pub static HMI_RX_BYTES: Counter = Counter::new();
-/// Complete frames received from the touchscreen.
-pub static HMI_RX_FRAMES: Counter = Counter::new();
-/// Frames dropped because the HMI task had not taken the previous ones.
-pub static HMI_RX_FRAMES_DROPPED: Counter = Counter::new();
+/// Received bytes dropped because the HMI task had not taken the earlier ones.
+pub static HMI_RX_DROPPED: Counter = Counter::new();
 /// Receive errors (overrun, framing, noise, parity) reported by USART1.
 pub static HMI_RX_ERRORS: Counter = Counter::new();
+/// Instructions to the screen dropped because its transmit queue was full.
+pub static HMI_TX_DROPPED: Counter = Counter::new();
 /// Hall edges captured (TIM2 CH1, or the simulated machine on the QEMU board).
 pub static HALL_EDGES: Counter = Counter::new();
+/// Hall edges dropped because the control task had not taken the earlier ones.
+pub static HALL_EDGES_DROPPED: Counter = Counter::new();

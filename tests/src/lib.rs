@@ -99,6 +99,16 @@ pub struct BootOptions {
     pub run_ms: Option<u32>,
     /// Print each decoded log line to stderr as it arrives.
     pub echo_logs: bool,
+    /// The host file behind the board's settings flash (`flash=`); it
+    /// survives a reboot of the emulated board.
+    pub flash: Option<PathBuf>,
+    /// Scenario words for the simulated machine (`gear=2`, `stall=3000`, …;
+    /// see `firmware/src/board/qemu.rs`).
+    pub scenario: Vec<String>,
+    /// Run in QEMU's instruction-counting mode with idle time skipped
+    /// (`-icount shift=0,sleep=off`): deterministic and faster than real
+    /// time, for long runs that need no touchscreen replies.
+    pub accelerated: bool,
 }
 
 impl Default for BootOptions {
@@ -106,6 +116,9 @@ impl Default for BootOptions {
         Self {
             run_ms: Some(10_000),
             echo_logs: false,
+            flash: None,
+            scenario: Vec::new(),
+            accelerated: false,
         }
     }
 }
@@ -116,6 +129,7 @@ pub struct Firmware {
     printer: Child,
     serial: TcpStream,
     serial_in: Vec<u8>,
+    serial_taken: usize,
     logs_rx: Receiver<String>,
     logs: Mutex<Vec<String>>,
 }
@@ -137,7 +151,17 @@ impl Firmware {
         if let Some(ms) = options.run_ms {
             semihosting.push_str(&format!(",arg=run_ms={ms}"));
         }
-        let mut qemu = Command::new("qemu-system-arm")
+        if let Some(flash) = &options.flash {
+            semihosting.push_str(&format!(",arg=flash={}", flash.display()));
+        }
+        for word in &options.scenario {
+            semihosting.push_str(&format!(",arg={word}"));
+        }
+        let mut qemu = Command::new("qemu-system-arm");
+        if options.accelerated {
+            qemu.args(["-icount", "shift=0,sleep=off"]);
+        }
+        let mut qemu = qemu
             .args(["-machine", "stm32vldiscovery", "-cpu", "cortex-m3"])
             .args(["-display", "none", "-monitor", "none"])
             .args(["-semihosting-config", &semihosting])
@@ -229,6 +253,7 @@ impl Firmware {
             printer,
             serial,
             serial_in: Vec::new(),
+            serial_taken: 0,
             logs_rx,
             logs: Mutex::new(Vec::new()),
         })
@@ -279,6 +304,37 @@ impl Firmware {
             }
         }
         Ok(self.serial_in.clone())
+    }
+
+    /// Reads what the firmware sent on USART1 for up to `wait`, and returns
+    /// the bytes not returned by an earlier call.
+    pub fn read_serial_new(&mut self, wait: Duration) -> io::Result<Vec<u8>> {
+        let mut chunk = [0u8; 512];
+        self.serial
+            .set_read_timeout(Some(wait.max(Duration::from_millis(1))))?;
+        match self.serial.read(&mut chunk) {
+            Ok(0) => {}
+            Ok(n) => self
+                .serial_in
+                .extend_from_slice(chunk.get(..n).unwrap_or(&[])),
+            Err(e)
+                if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {
+            }
+            Err(e) => return Err(e),
+        }
+        let new = self
+            .serial_in
+            .get(self.serial_taken..)
+            .unwrap_or(&[])
+            .to_vec();
+        self.serial_taken = self.serial_in.len();
+        Ok(new)
+    }
+
+    /// Every decoded log line received so far.
+    pub fn logs(&self) -> Vec<String> {
+        while self.drain_logs(Duration::from_millis(0)).is_some() {}
+        self.logs.lock().map(|l| l.clone()).unwrap_or_default()
     }
 
     /// Every byte the firmware has sent on USART1 so far (as read by
@@ -353,4 +409,136 @@ impl Drop for Firmware {
         let _ = self.printer.kill();
         let _ = self.printer.wait();
     }
+}
+
+/// The firmware in QEMU with a virtual touchscreen on its USART1.
+pub struct Bench {
+    /// The emulation.
+    pub fw: Firmware,
+    /// The touchscreen, following the machine's screen contract.
+    pub screen: hmi_proto::virtual_screen::VirtualScreen,
+}
+
+impl Bench {
+    /// Boots the firmware and powers up the screen (it sends its start-up
+    /// and ready frames, as a real Nextion does).
+    pub fn boot(options: &BootOptions) -> io::Result<Self> {
+        let elf = qemu_firmware_elf()?;
+        let fw = Firmware::boot(&elf, options)?;
+        let mut screen = hmi_proto::virtual_screen::VirtualScreen::with_contract();
+        screen.boot();
+        let mut bench = Self { fw, screen };
+        bench.pump(Duration::from_millis(50))?;
+        Ok(bench)
+    }
+
+    /// Moves bytes both ways for `dur`.
+    pub fn pump(&mut self, dur: Duration) -> io::Result<()> {
+        let deadline = Instant::now() + dur;
+        loop {
+            let out = self.screen.take_output();
+            if !out.is_empty() {
+                self.fw.send(&out)?;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            let got = self
+                .fw
+                .read_serial_new(left.min(Duration::from_millis(5)))?;
+            if !got.is_empty() {
+                self.screen.feed(&got);
+            }
+            if left.is_zero() {
+                return Ok(());
+            }
+        }
+    }
+
+    /// Pumps until `pred` holds for the screen, or `timeout`.
+    pub fn pump_until(
+        &mut self,
+        timeout: Duration,
+        mut pred: impl FnMut(&hmi_proto::virtual_screen::VirtualScreen) -> bool,
+    ) -> io::Result<bool> {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline {
+            if pred(&self.screen) {
+                return Ok(true);
+            }
+            self.pump(Duration::from_millis(10))?;
+        }
+        Ok(pred(&self.screen))
+    }
+
+    /// The operator taps a button.
+    pub fn tap(&mut self, name: &str) -> io::Result<()> {
+        self.screen
+            .tap(name)
+            .map_err(|e| io::Error::other(format!("tap {name}: {e:?}")))?;
+        self.pump(Duration::from_millis(60))
+    }
+
+    /// The operator types `value` into the number field `field` and taps
+    /// `apply`.
+    pub fn enter(&mut self, field: &str, value: i32, apply: &str) -> io::Result<()> {
+        self.screen
+            .set_value(field, value)
+            .map_err(|e| io::Error::other(format!("set {field}: {e:?}")))?;
+        self.tap(apply)?;
+        self.pump(Duration::from_millis(150))
+    }
+}
+
+/// One `sim:` line of the QEMU board's log (ten a second): the simulated
+/// machine's truth next to the firmware's outputs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SimSample {
+    /// Firmware time, ms.
+    pub t_ms: u32,
+    /// True ground speed, m/s.
+    pub ground_m_s: f64,
+    /// True drum speed, r/min.
+    pub drum_rpm: f64,
+    /// The firmware's target drum speed, r/min.
+    pub target_rpm: f64,
+    /// The PWM compare value the firmware applied.
+    pub ccr: u32,
+    /// Plants the belt dropped since boot.
+    pub plants: u32,
+    /// Ground position, m.
+    pub ground_m: f64,
+}
+
+/// The firmware time (ms) at the start of a decoded defmt line
+/// (`"12.340 INFO  …"`).
+pub fn log_time_ms(line: &str) -> Option<u32> {
+    let t: f64 = line.split_whitespace().next()?.parse().ok()?;
+    Some((t * 1000.0).round() as u32)
+}
+
+fn number_after(line: &str, key: &str) -> Option<f64> {
+    line.split(key)
+        .nth(1)?
+        .split_whitespace()
+        .next()?
+        .trim_end_matches(',')
+        .parse()
+        .ok()
+}
+
+/// Parses the `sim:` lines of a log.
+pub fn sim_samples(logs: &[String]) -> Vec<SimSample> {
+    logs.iter()
+        .filter(|l| l.contains(" sim: ground "))
+        .filter_map(|l| {
+            Some(SimSample {
+                t_ms: log_time_ms(l)?,
+                ground_m_s: number_after(l, "sim: ground ")? / 1000.0,
+                drum_rpm: number_after(l, "drum ")? / 1000.0,
+                target_rpm: number_after(l, "target ")? / 1000.0,
+                ccr: number_after(l, "ccr ")? as u32,
+                plants: number_after(l, "plants ")? as u32,
+                ground_m: number_after(l, "ground position ")? / 1000.0,
+            })
+        })
+        .collect()
 }

@@ -277,8 +277,8 @@ pub struct Supervisor {
     reported: I16F16,
     /// Hall edges since boot.
     edges: u32,
-    /// Edges at Start (distance since Start).
-    edges_at_start: u32,
+    /// Ground distance since Start (∫ V1 dt), µm.
+    distance_um: u64,
     /// Drum encoder counts since Start.
     drum_counts_since_start: u64,
     /// Last measured travel speed, km/h × 1000, and the period behind it, µs.
@@ -352,10 +352,15 @@ impl Predictor {
         let age =
             i64::from(now.0.wrapping_sub(center)).min(i64::from(self.period).saturating_mul(2));
         let (dv, dt) = self.slope;
-        let step = dv.saturating_mul(age).checked_div(dt).unwrap_or(0).clamp(
-            v.checked_div(-10).unwrap_or(0),
-            v.checked_div(10).unwrap_or(0),
-        );
+        // `max`/`min` rather than `clamp`: the bounds are not constant, and
+        // `clamp` would carry a (never taken) panic with formatted values.
+        let bound = v.checked_div(10).unwrap_or(0).max(0);
+        let step = dv
+            .saturating_mul(age)
+            .checked_div(dt)
+            .unwrap_or(0)
+            .max(bound.saturating_neg())
+            .min(bound);
         let bits = v.saturating_add(step).clamp(0, i64::from(u32::MAX));
         RevPerMin::from_bits(u32::try_from(bits).unwrap_or(0))
     }
@@ -428,7 +433,7 @@ impl Supervisor {
             stall_us: 0,
             reported: I16F16::ZERO,
             edges: 0,
-            edges_at_start: 0,
+            distance_um: 0,
             drum_counts_since_start: 0,
             last_travel_kmh_x1000: 0,
             last_period_us: 0,
@@ -437,6 +442,12 @@ impl Supervisor {
             predictor: Predictor::default(),
             snapshot: Snapshot::default(),
         })
+    }
+
+    /// Whether [`Supervisor::new`] accepts these settings (the drum plan is
+    /// the only part that depends on them), without building anything.
+    pub fn check(hw: Hardware, settings: &Settings) -> Result<(), Error> {
+        Self::plan_for(settings, hw).map(|_| ())
     }
 
     fn plan_for(settings: &Settings, hw: Hardware) -> Result<DrumPlan, Error> {
@@ -512,7 +523,7 @@ impl Supervisor {
             self.run = RunState::Running;
             self.controller.start();
             self.stall_us = 0;
-            self.edges_at_start = self.edges;
+            self.distance_um = 0;
             self.drum_counts_since_start = 0;
         }
         Effect::None
@@ -525,6 +536,7 @@ impl Supervisor {
 
     /// Applies one operator command from the screen (already range-checked
     /// by the screen contract).
+    #[inline(never)]
     pub fn command(&mut self, cmd: Command) -> Effect {
         match cmd {
             Command::Start => self.start(),
@@ -718,6 +730,7 @@ impl Supervisor {
     ///
     /// `now` is the Hall timer's time (1 MHz, extended); `drum_encoder` the
     /// free-running encoder counter.
+    #[inline(never)]
     pub fn control_step(&mut self, now: Ticks, drum_encoder: u16) -> Actuation {
         self.snapshot.steps = self.snapshot.steps.wrapping_add(1);
         let delta = match self.last_encoder {
@@ -845,7 +858,14 @@ impl Supervisor {
         self.snapshot.ccr = actuation.ccr;
         self.snapshot.hall_edges = self.edges;
         self.snapshot.plants = self.plants_since_start();
-        self.snapshot.distance_mm = self.distance_since_start_mm();
+        if self.run == RunState::Running {
+            // ∫ V1 dt: (m/h)·µs / 3600 = µm.
+            self.distance_um = self.distance_um.saturating_add(
+                u64::from(travel_kmh_x1000).saturating_mul(u64::from(self.hw.control_period_us))
+                    / 3600,
+            );
+        }
+        self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
         actuation
     }
 
@@ -853,48 +873,25 @@ impl Supervisor {
     fn plants_since_start(&self) -> u32 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
-        let k3_x1e6 = u64::from(
+        let k3_x1000 = u64::from(
             self.settings
                 .calibration
                 .k3_at(
                     RevPerMin::from_ratio(self.snapshot.target_drum_rpm_x1000, 1000)
                         .unwrap_or(RevPerMin::ZERO),
                 )
-                .to_fixed()
-                .saturating_mul_int(1_000_000)
-                .saturating_to_num::<u32>(),
+                .to_milli(),
         );
         self.drum_counts_since_start
             .saturating_mul(PARTITIONS_PER_TURN_X1E6)
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .map(|v| v.saturating_mul(k3_x1e6) / 1_000_000_000_000)
+            .map(|v| v.saturating_mul(k3_x1000) / 1_000_000_000)
             .and_then(|v| u32::try_from(v).ok())
             .unwrap_or(u32::MAX)
     }
 
-    /// Ground distance since Start: edges · pitch · k2 (at the last speed).
-    fn distance_since_start_mm(&self) -> u32 {
-        // One Hall edge is π·0.20 m / 25 = 25.1327 mm of track (µm here).
-        const EDGE_UM: u64 = 25_133;
-        let edges = u64::from(self.edges.wrapping_sub(self.edges_at_start));
-        let k2_x1000 = u64::from(
-            self.settings
-                .calibration
-                .k2
-                .eval(
-                    U16F16::saturating_from_num(self.last_travel_kmh_x1000)
-                        .checked_div_int(1000)
-                        .unwrap_or(U16F16::ZERO),
-                )
-                .to_fixed()
-                .saturating_mul_int(1000)
-                .saturating_to_num::<u32>(),
-        );
-        u32::try_from(edges.saturating_mul(EDGE_UM).saturating_mul(k2_x1000) / 1_000_000)
-            .unwrap_or(u32::MAX)
-    }
-
     /// The status as the screen shows it.
+    #[inline(never)]
     pub fn screen_status(&self) -> screen::Status {
         let s = self.snapshot;
         let x100 = |v: u32| u16::try_from(v / 10).unwrap_or(u16::MAX);

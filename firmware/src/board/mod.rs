@@ -25,9 +25,6 @@ mod stm32f103;
 #[cfg(not(feature = "board-qemu"))]
 pub use stm32f103::*;
 
-/// Frequency of the Hall capture timer: one tick is 1 µs.
-pub const HALL_TIMER_HZ: u32 = 1_000_000;
-
 /// Drum PWM carrier frequency (TIM1). 20 kHz is above hearing and well within
 /// what a BLDC driver's PWM speed input accepts.
 pub const DRUM_PWM_HZ: u32 = 20_000;
@@ -36,6 +33,13 @@ pub const DRUM_PWM_HZ: u32 = 20_000;
 /// shaft read in ×4 quadrature (400 counts per motor turn) behind the 118:1
 /// gearbox.
 pub const DRUM_ENCODER_COUNTS_PER_REV: u32 = 400 * 118;
+
+/// The board facts the supervisor needs.
+pub const HARDWARE: supervisor::control::Hardware = supervisor::control::Hardware {
+    encoder_counts_per_drum_rev: DRUM_ENCODER_COUNTS_PER_REV,
+    control_period_us: 10_000,
+    pwm_arr: (72_000_000 / DRUM_PWM_HZ - 1) as u16,
+};
 
 /// Most Hall edges one [`Sensors::sample`] can return (the Hall sensor is
 /// rated 1 kHz, so at most 10 in a 10 ms control period).

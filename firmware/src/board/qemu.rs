@@ -7,18 +7,28 @@
 //! - runs from the HSI (the HAL believes 8 MHz; QEMU's SysTick counts at a
 //!   fixed 24 MHz, which is what the monotonic is started with);
 //! - talks to the touchscreen over the real emulated USART1;
-//! - replaces the TIM1 compare register, the TIM3 encoder counter and the
-//!   TIM2 Hall captures by a simulated machine that the control task steps
-//!   every period, so the same control code runs against it;
+//! - replaces the registers the real board reads and writes — TIM1's compare
+//!   value, the driver enable pin, TIM3's encoder counter, TIM2's Hall
+//!   captures and counter — by atomics and a simulated machine
+//!   ([`machine_sim`]) that the control task steps every period, so the same
+//!   control code runs against it;
+//! - keeps the settings in a host file through semihosting (`flash=PATH` on
+//!   the semihosting command line), a stand-in for the NOR flash that behaves
+//!   like the F103's (erase to 0xFF, half-word programming only onto erased
+//!   half-words) and survives a reboot of the emulated board;
+//! - takes a test scenario from the semihosting command line (gear, travel
+//!   disturbances, injected faults at given firmware times);
 //! - writes defmt frames to the host over semihosting and ends a run through
-//!   semihosting `exit`, with a time limit read from the semihosting command
-//!   line (`run_ms=N`).
+//!   semihosting `exit` at `run_ms=N`.
 //!
-//! What only the real board can show: clocks, pin levels, timer capture
-//! latency, PWM on the pin, encoder noise, the flash controller, the watchdog.
+//! What only the real board can show: see `docs/firmware.md`.
 
-use core::sync::atomic::{AtomicU16, Ordering::Relaxed};
+use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering::Relaxed};
 
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+use machine_sim::{Fault, Inputs, Machine};
 use stm32f1xx_hal::{
     pac::{self, USART1},
     prelude::*,
@@ -28,7 +38,7 @@ use stm32f1xx_hal::{
 
 use defmt_semihosting as _;
 
-use super::{SensorSample, DRUM_ENCODER_COUNTS_PER_REV, DRUM_PWM_HZ, HALL_TIMER_HZ};
+use super::{SensorSample, DRUM_PWM_HZ};
 
 /// Transmit half of the touchscreen UART.
 pub type HmiTx = Tx<USART1>;
@@ -38,9 +48,12 @@ pub type HmiRx = Rx<USART1>;
 /// QEMU's `stm32vldiscovery` clocks SysTick at a fixed 24 MHz.
 pub const SYSCLK_HZ: u32 = 24_000_000;
 
-/// The stand-in for TIM1's CCR1 register: written by [`DrumDrive`], read by
-/// the machine model, zeroed by [`safe_state`].
+/// Stand-in for TIM1's CCR1 register.
 static DRUM_CCR: AtomicU16 = AtomicU16::new(0);
+/// Stand-in for the driver enable pin.
+static DRIVER_ENABLE: AtomicBool = AtomicBool::new(false);
+/// Stand-in for TIM2's counter, extended to 32 bits (1 MHz).
+static HALL_TIMER_NOW: AtomicU32 = AtomicU32::new(0);
 
 /// Everything the application owns after [`init`].
 pub struct Board {
@@ -56,11 +69,44 @@ pub struct Board {
     pub hall: HallCapture,
     /// Status LED stand-in.
     pub led: StatusLed,
+    /// The watchdog stand-in.
+    pub watchdog: Watchdog,
+    /// The settings flash stand-in, if the command line named a file.
+    pub settings_flash: Option<SettingsFlash>,
+    /// Run limit from the command line.
+    pub run_limit_ms: Option<u32>,
     /// SysTick input frequency for the monotonic.
     pub sysclk_hz: u32,
 }
 
+/// Words of the semihosting command line this board understands.
+#[derive(Default)]
+struct CmdLine {
+    run_ms: Option<u32>,
+    scenario: Scenario,
+}
+
+/// Scheduled changes to the simulated machine, in firmware milliseconds.
+///
+/// `gear=N` (1–6, Low 1 … High 3) sets the travel gear at boot;
+/// `step=T:+P` / `step=T:-P` changes travel speed by P % at T ms;
+/// `stop=T` stops the tractor at T ms; `stall=T`, `hall_loss=T`,
+/// `enc_loss=T` inject faults at T ms; `noise=0` makes the model noiseless;
+/// `seed=N` seeds it.
+#[derive(Default, Clone, Copy)]
+struct Scenario {
+    gear: Option<u8>,
+    step: [Option<(u32, i32)>; 2],
+    stop: Option<u32>,
+    stall: Option<u32>,
+    hall_loss: Option<u32>,
+    enc_loss: Option<u32>,
+    noiseless: bool,
+    seed: Option<u32>,
+}
+
 /// Brings up the emulated peripherals. Called once from `init`.
+#[inline(never)]
 pub fn init(dp: pac::Peripherals) -> Board {
     let mut flash = dp.FLASH.constrain();
     let mut rcc = dp.RCC.freeze(rcc::Config::hsi(), &mut flash.acr);
@@ -77,15 +123,54 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let (hmi_tx, mut hmi_rx) = hmi.split();
     hmi_rx.listen();
     DRUM_CCR.store(0, Relaxed);
+    DRIVER_ENABLE.store(false, Relaxed);
+
+    let mut path = [0u8; 96];
+    let mut cmd = CmdLine::default();
+    let path_len = read_cmdline(&mut cmd, &mut path);
+    let settings_flash = path
+        .get(..path_len)
+        .filter(|p| !p.is_empty())
+        .and_then(SettingsFlash::open);
+
+    let scenario = cmd.scenario;
+    let mut config = if scenario.noiseless {
+        machine_sim::Config::noiseless()
+    } else {
+        machine_sim::Config::default()
+    };
+    if let Some(seed) = scenario.seed {
+        config.seed = u64::from(seed);
+    }
+    config.initial_gear = scenario
+        .gear
+        .and_then(|g| kinematics::consts::Gear::ALL.get(usize::from(g).wrapping_sub(1)))
+        .copied();
+    // The model lives in a static (528 B): moving it through `init`'s
+    // return value would need its size again on the stack.
+    let machine = match config.build() {
+        Ok(m) => cortex_m::singleton!(: Machine = m),
+        Err(_) => None,
+    };
+    let Some(machine) = machine else {
+        // The configurations above are valid: a build-time mistake.
+        defmt::error!("machine model configuration rejected");
+        fatal()
+    };
     Board {
         hmi_tx,
         hmi_rx,
         drum: DrumDrive { enabled: false },
         sensors: Sensors {
-            machine: Machine::new(),
+            machine,
+            scenario,
+            now_ms: 0,
         },
         hall: HallCapture,
         led: StatusLed,
+        watchdog: Watchdog,
+        settings_flash,
+        run_limit_ms: cmd.run_ms,
         sysclk_hz: SYSCLK_HZ,
     }
 }
@@ -107,39 +192,91 @@ impl DrumDrive {
 
     /// Sets the compare value (duty = `ccr / period()`), clamped to the period.
     pub fn set_compare(&mut self, ccr: u16) {
-        let ccr = if self.enabled {
-            ccr.min(DRUM_PERIOD)
-        } else {
-            0
-        };
-        DRUM_CCR.store(ccr, Relaxed);
+        DRUM_CCR.store(ccr.min(DRUM_PERIOD), Relaxed);
     }
 
     /// Switches the motor driver on or off; off also zeroes the duty.
     pub fn set_enabled(&mut self, on: bool) {
         self.enabled = on;
+        DRIVER_ENABLE.store(on, Relaxed);
         if !on {
             DRUM_CCR.store(0, Relaxed);
         }
+    }
+
+    /// The compare value and enable as the drive sees them (what a scope on
+    /// PA8 and PB12 would show).
+    pub fn output(&self) -> (u16, bool) {
+        (DRUM_CCR.load(Relaxed), DRIVER_ENABLE.load(Relaxed))
     }
 }
 
 /// The simulated machine, read like the real board's sensors.
 pub struct Sensors {
-    machine: Machine,
+    machine: &'static mut Machine,
+    scenario: Scenario,
+    now_ms: u32,
+}
+
+fn due(at: Option<u32>, from: u32, to: u32) -> bool {
+    at.is_some_and(|t| t > from && t <= to)
 }
 
 impl Sensors {
-    /// Advances the machine to `now_ms` under the current PWM compare value and
+    /// Advances the machine to `now_ms` under the current PWM output and
     /// reads the encoder and the Hall edges that happened meanwhile.
     pub fn sample(&mut self, now_ms: u32) -> SensorSample {
         let mut edges = heapless::Vec::new();
-        let duty = f32::from(DRUM_CCR.load(Relaxed)) / f32::from(DRUM_PERIOD);
-        self.machine.advance_to(now_ms, duty, &mut edges);
+        let (from, to) = (self.now_ms, now_ms);
+        let s = self.scenario;
+        for (at, pct) in s.step.iter().flatten() {
+            if due(Some(*at), from, to) {
+                self.machine.inject_speed_step(*pct as f32 / 100.0);
+                defmt::info!("sim: travel speed step {=i32} %", pct);
+            }
+        }
+        if due(s.stop, from, to) {
+            self.machine.stop_travel();
+            defmt::info!("sim: tractor stops");
+        }
+        if due(s.stall, from, to) {
+            self.machine.inject_fault(Fault::DrumStall);
+            defmt::warn!("sim: drum stall injected");
+        }
+        if due(s.hall_loss, from, to) {
+            self.machine.inject_fault(Fault::HallLoss);
+            defmt::warn!("sim: Hall signal loss injected");
+        }
+        if due(s.enc_loss, from, to) {
+            self.machine.inject_fault(Fault::EncoderLoss);
+            defmt::warn!("sim: encoder loss injected");
+        }
+        let inputs = Inputs {
+            drum_duty: f32::from(DRUM_CCR.load(Relaxed)) / f32::from(DRUM_PERIOD),
+            driver_enabled: DRIVER_ENABLE.load(Relaxed),
+            ..Inputs::default()
+        };
+        let dt_us = to.saturating_sub(from).saturating_mul(1000);
+        self.machine.step(dt_us, &inputs, &mut |t| {
+            let _ = edges.push(t);
+        });
+        self.now_ms = to;
+        HALL_TIMER_NOW.store(self.machine.capture_ticks(), Relaxed);
         SensorSample {
-            drum_encoder: self.machine.encoder_count(),
+            drum_encoder: self.machine.drum_encoder_count(),
             hall_edges: edges,
         }
+    }
+
+    /// The model's own view, for the log: ground travel speed (mm/s), drum
+    /// speed (r/min × 1000), plants dropped, ground position (mm).
+    pub fn truth(&self) -> (u32, u32, u32, u32) {
+        (
+            (self.machine.travel_speed_m_s() * 1000.0) as u32,
+            (self.machine.drum_speed_rpm() * 1000.0) as u32,
+            self.machine.plants_dropped(),
+            (self.machine.ground_position_m() * 1000.0) as u32,
+        )
     }
 }
 
@@ -151,6 +288,11 @@ impl HallCapture {
     pub fn on_interrupt(&mut self) -> Option<u32> {
         None
     }
+
+    /// The capture timer's time, 1 MHz, extended to 32 bits.
+    pub fn now(&self) -> u32 {
+        HALL_TIMER_NOW.load(Relaxed)
+    }
 }
 
 /// Status LED stand-in (GPIO is not emulated).
@@ -161,9 +303,18 @@ impl StatusLed {
     pub fn set(&mut self, _on: bool) {}
 }
 
-/// Zeroes the PWM stand-in (the model then coasts the drum to a stop).
+/// Watchdog stand-in: QEMU 7.2 does not emulate the IWDG.
+pub struct Watchdog;
+
+impl Watchdog {
+    /// Nothing to feed under QEMU.
+    pub fn feed(&mut self) {}
+}
+
+/// Zeroes the PWM stand-in and the enable (the model coasts the drum down).
 pub fn safe_state() {
     DRUM_CCR.store(0, Relaxed);
+    DRIVER_ENABLE.store(false, Relaxed);
 }
 
 /// Ends the emulation with a failure exit code after a fatal error.
@@ -184,11 +335,10 @@ pub fn exit_success() -> ! {
     }
 }
 
-/// The run's time limit, from a `run_ms=N` word on the semihosting command
-/// line (`-semihosting-config enable=on,target=native,arg=firmware,arg=run_ms=N`);
-/// `None` runs until QEMU is killed.
-pub fn run_limit_ms() -> Option<u32> {
-    let mut buf = [0u8; 64];
+/// Reads the semihosting command line into `cmd`; copies a `flash=PATH`
+/// value into `path` and returns its length.
+fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
+    let mut buf = [0u8; 192];
     // SYS_GET_CMDLINE takes a two-word block {buffer, length} and writes the
     // used length back into it.
     let block = [buf.as_mut_ptr() as usize, buf.len()];
@@ -197,14 +347,50 @@ pub fn run_limit_ms() -> Option<u32> {
     let rc =
         unsafe { cortex_m_semihosting::syscall(cortex_m_semihosting::nr::GET_CMDLINE, &block) };
     if rc != 0 {
-        return None;
+        return 0;
     }
     // SAFETY: the host updated the length word behind a shared reference.
     let len = unsafe { core::ptr::read_volatile(&block[1]) }.min(buf.len());
-    let line = buf.get(..len)?;
-    line.split(|&b| b == b' ')
-        .find_map(|word| word.strip_prefix(b"run_ms="))
-        .and_then(parse_u32)
+    let mut path_len = 0;
+    let line = buf.get(..len).unwrap_or(&[]);
+    for word in line.split(|&b| b == b' ') {
+        let Some(eq) = word.iter().position(|&b| b == b'=') else {
+            continue;
+        };
+        let (key, value) = (
+            word.get(..eq).unwrap_or(&[]),
+            word.get(eq + 1..).unwrap_or(&[]),
+        );
+        let s = &mut cmd.scenario;
+        match key {
+            b"run_ms" => cmd.run_ms = parse_u32(value),
+            b"flash" => {
+                if let Some(dst) = path.get_mut(..value.len()) {
+                    dst.copy_from_slice(value);
+                    path_len = value.len();
+                }
+            }
+            b"gear" => s.gear = parse_u32(value).and_then(|g| u8::try_from(g).ok()),
+            b"step" => {
+                let slot = s.step.iter_mut().find(|x| x.is_none());
+                if let (Some(slot), Some(colon)) = (slot, value.iter().position(|&b| b == b':')) {
+                    let at = parse_u32(value.get(..colon).unwrap_or(&[]));
+                    let pct = value.get(colon + 1..).and_then(parse_i32);
+                    if let (Some(at), Some(pct)) = (at, pct) {
+                        *slot = Some((at, pct));
+                    }
+                }
+            }
+            b"stop" => s.stop = parse_u32(value),
+            b"stall" => s.stall = parse_u32(value),
+            b"hall_loss" => s.hall_loss = parse_u32(value),
+            b"enc_loss" => s.enc_loss = parse_u32(value),
+            b"noise" => s.noiseless = value == b"0",
+            b"seed" => s.seed = parse_u32(value),
+            _ => {}
+        }
+    }
+    path_len
 }
 
 fn parse_u32(digits: &[u8]) -> Option<u32> {
@@ -220,69 +406,178 @@ fn parse_u32(digits: &[u8]) -> Option<u32> {
     })
 }
 
-/// Placeholder machine: constant travel at 0.52 km/h (paper A's Low 2) and a
-/// drum motor that follows its duty through a 25 ms first-order lag. The full
-/// machine simulator replaces it.
-struct Machine {
-    now_ms: u32,
-    /// Travel speed, m/s.
-    travel_speed: f32,
-    /// Track travelled since the last Hall edge, m.
-    since_edge_m: f32,
-    /// Microseconds since start, in Hall timer ticks.
-    ticks: u32,
-    /// Drum speed, r/min.
-    drum_speed: f32,
-    /// Encoder position, counts (fractional).
-    encoder: f32,
+fn parse_i32(text: &[u8]) -> Option<i32> {
+    match text.split_first() {
+        Some((b'-', rest)) => parse_u32(rest)
+            .and_then(|v| i32::try_from(v).ok())
+            .map(|v| -v),
+        Some((b'+', rest)) => parse_u32(rest).and_then(|v| i32::try_from(v).ok()),
+        _ => parse_u32(text).and_then(|v| i32::try_from(v).ok()),
+    }
 }
 
-/// Track per Hall edge: π·(0.16 + 2·0.02) m / 25 teeth.
-const TOOTH_PITCH_M: f32 = core::f32::consts::PI * 0.20 / 25.0;
-/// Drum speed at 100 % duty, r/min (SPEC §3).
-const DRUM_MAX_RPM: f32 = 44.7;
-/// Motor time constant, s.
-const DRUM_TAU_S: f32 = 0.025;
+/// Size of the settings flash stand-in: the two 1 KB pages the store uses.
+pub const SETTINGS_FLASH_BYTES: u32 = 2 * 1024;
 
-impl Machine {
-    fn new() -> Self {
-        Self {
-            now_ms: 0,
-            travel_speed: 0.52 / 3.6,
-            since_edge_m: 0.0,
-            ticks: 0,
-            drum_speed: 0.0,
-            encoder: 0.0,
+/// The settings flash stand-in: a host file through semihosting, with the
+/// F103's NOR rules enforced (erase to 0xFF in 1 KB pages, programming in
+/// half-words onto erased half-words only).
+pub struct SettingsFlash {
+    handle: usize,
+}
+
+/// Errors of the flash stand-in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub enum FlashError {
+    /// Outside the stand-in, or misaligned.
+    OutOfBounds,
+    /// Programming a half-word that is not erased (the F103's PGERR).
+    NotErased,
+    /// The host file could not be read or written.
+    Io,
+}
+
+impl NorFlashError for FlashError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            Self::OutOfBounds => NorFlashErrorKind::OutOfBounds,
+            Self::NotErased | Self::Io => NorFlashErrorKind::Other,
+        }
+    }
+}
+
+mod sh {
+    //! Semihosting file calls (ARM semihosting specification 2.0).
+    use cortex_m_semihosting::{nr, syscall};
+
+    pub fn open(path: &[u8], mode: usize) -> Option<usize> {
+        // SYS_OPEN wants a NUL-terminated name.
+        let mut name = [0u8; 97];
+        let dst = name.get_mut(..path.len())?;
+        dst.copy_from_slice(path);
+        let block = [name.as_ptr() as usize, mode, path.len()];
+        // SAFETY: the block describes a live NUL-terminated buffer.
+        let h = unsafe { syscall(nr::OPEN, &block) };
+        (h != usize::MAX).then_some(h)
+    }
+
+    pub fn seek(h: usize, pos: u32) -> bool {
+        let block = [h, pos as usize];
+        // SAFETY: plain values.
+        unsafe { syscall(nr::SEEK, &block) == 0 }
+    }
+
+    pub fn read(h: usize, buf: &mut [u8]) -> bool {
+        let block = [h, buf.as_mut_ptr() as usize, buf.len()];
+        // SAFETY: the block describes a live, writable buffer.
+        unsafe { syscall(nr::READ, &block) == 0 }
+    }
+
+    pub fn write(h: usize, buf: &[u8]) -> bool {
+        let block = [h, buf.as_ptr() as usize, buf.len()];
+        // SAFETY: the block describes a live buffer.
+        unsafe { syscall(nr::WRITE, &block) == 0 }
+    }
+
+    pub fn flen(h: usize) -> usize {
+        let block = [h];
+        // SAFETY: plain value.
+        unsafe { syscall(nr::FLEN, &block) }
+    }
+}
+
+impl SettingsFlash {
+    /// Opens (or creates, erased) the host file that backs the stand-in.
+    fn open(path: &[u8]) -> Option<Self> {
+        // Mode 3 = "r+b"; mode 7 = "w+b" (create).
+        if let Some(handle) = sh::open(path, 3) {
+            if sh::flen(handle) == SETTINGS_FLASH_BYTES as usize {
+                return Some(Self { handle });
+            }
+        }
+        let handle = sh::open(path, 7)?;
+        let erased = [0xFFu8; 256];
+        for _ in 0..(SETTINGS_FLASH_BYTES / 256) {
+            if !sh::write(handle, &erased) {
+                return None;
+            }
+        }
+        defmt::info!("settings flash stand-in created (erased)");
+        Some(Self { handle })
+    }
+}
+
+impl ErrorType for SettingsFlash {
+    type Error = FlashError;
+}
+
+impl ReadNorFlash for SettingsFlash {
+    const READ_SIZE: usize = 1;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+        let end = offset
+            .checked_add(bytes.len() as u32)
+            .ok_or(FlashError::OutOfBounds)?;
+        if end > SETTINGS_FLASH_BYTES {
+            return Err(FlashError::OutOfBounds);
+        }
+        if sh::seek(self.handle, offset) && sh::read(self.handle, bytes) {
+            Ok(())
+        } else {
+            Err(FlashError::Io)
         }
     }
 
-    fn advance_to(
-        &mut self,
-        now_ms: u32,
-        duty: f32,
-        edges: &mut heapless::Vec<u32, { super::MAX_EDGES_PER_SAMPLE }>,
-    ) {
-        const DT: f32 = 0.001;
-        const TICKS_PER_MS: u32 = HALL_TIMER_HZ / 1_000;
-        while self.now_ms < now_ms {
-            self.now_ms += 1;
-            self.ticks = self.ticks.wrapping_add(TICKS_PER_MS);
-            self.since_edge_m += self.travel_speed * DT;
-            if self.since_edge_m >= TOOTH_PITCH_M {
-                self.since_edge_m -= TOOTH_PITCH_M;
-                let late_us = (self.since_edge_m / self.travel_speed * 1e6) as u32;
-                let _ = edges.push(self.ticks.wrapping_sub(late_us));
-            }
-            let target = duty.clamp(0.0, 1.0) * DRUM_MAX_RPM;
-            self.drum_speed += (target - self.drum_speed) * (DT / DRUM_TAU_S);
-            self.encoder += self.drum_speed / 60.0 * DRUM_ENCODER_COUNTS_PER_REV as f32 * DT;
-            if self.encoder >= 65_536.0 {
-                self.encoder -= 65_536.0;
-            }
+    fn capacity(&self) -> usize {
+        SETTINGS_FLASH_BYTES as usize
+    }
+}
+
+impl NorFlash for SettingsFlash {
+    const WRITE_SIZE: usize = 2;
+    const ERASE_SIZE: usize = 1024;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+        if !from.is_multiple_of(1024)
+            || !to.is_multiple_of(1024)
+            || to > SETTINGS_FLASH_BYTES
+            || from > to
+        {
+            return Err(FlashError::OutOfBounds);
         }
+        let erased = [0xFFu8; 256];
+        let mut at = from;
+        while at < to {
+            if !(sh::seek(self.handle, at) && sh::write(self.handle, &erased)) {
+                return Err(FlashError::Io);
+            }
+            at += 256;
+        }
+        Ok(())
     }
 
-    fn encoder_count(&self) -> u16 {
-        self.encoder as u16
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+        let end = offset
+            .checked_add(bytes.len() as u32)
+            .ok_or(FlashError::OutOfBounds)?;
+        if !offset.is_multiple_of(2) || !bytes.len().is_multiple_of(2) || end > SETTINGS_FLASH_BYTES
+        {
+            return Err(FlashError::OutOfBounds);
+        }
+        // Check erased first, like the F103 refuses to program over data.
+        let mut at = offset;
+        for chunk in bytes.chunks(64) {
+            let mut old = [0u8; 64];
+            let old = old.get_mut(..chunk.len()).ok_or(FlashError::OutOfBounds)?;
+            self.read(at, old)?;
+            if old.iter().any(|&b| b != 0xFF) {
+                return Err(FlashError::NotErased);
+            }
+            if !(sh::seek(self.handle, at) && sh::write(self.handle, chunk)) {
+                return Err(FlashError::Io);
+            }
+            at += chunk.len() as u32;
+        }
+        Ok(())
     }
 }

@@ -13,9 +13,14 @@
 //! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable, RS-485 to the motor driver, 9600 8N1 |
 //! | PC13 | status LED (low = on) |
 
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+use kinematics::speed::CaptureExtender;
 use stm32f1xx_hal::{
+    flash::{self, FlashSize, SectorSize},
     gpio::{Output, PushPull, PA1, PB12, PB13, PC13},
-    pac::{self, TIM1, TIM2, TIM3, USART1, USART2},
+    pac::{self, IWDG, TIM1, TIM2, TIM3, USART1, USART2},
     prelude::*,
     rcc,
     serial::{self, Rx, Tx},
@@ -24,7 +29,10 @@ use stm32f1xx_hal::{
 
 use defmt_rtt as _;
 
-use super::{SensorSample, DRUM_PWM_HZ, HALL_TIMER_HZ};
+use super::{SensorSample, DRUM_PWM_HZ};
+
+/// Frequency of the Hall capture timer: one tick is 1 µs.
+const HALL_TIMER_HZ: u32 = 1_000_000;
 
 /// Transmit half of the touchscreen UART.
 pub type HmiTx = Tx<USART1>;
@@ -54,6 +62,12 @@ pub struct Board {
     pub rs485: Rs485,
     /// Status LED.
     pub led: StatusLed,
+    /// The independent watchdog (running).
+    pub watchdog: Watchdog,
+    /// The settings pages of the MCU's flash.
+    pub settings_flash: Option<SettingsFlash>,
+    /// The real board runs until it is switched off.
+    pub run_limit_ms: Option<u32>,
     /// SysTick input frequency for the monotonic.
     pub sysclk_hz: u32,
 }
@@ -70,6 +84,7 @@ pub struct Rs485 {
 }
 
 /// Brings up clocks and peripherals. Called once from `init`, interrupts off.
+#[inline(never)]
 pub fn init(dp: pac::Peripherals) -> Board {
     let mut flash = dp.FLASH.constrain();
     let mut rcc = dp.RCC.freeze(
@@ -131,6 +146,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let sensors = Sensors::new(tim3);
 
     let led = StatusLed(gpioc.pc13.into_push_pull_output(&mut gpioc.crh));
+    let watchdog = Watchdog::start(dp.IWDG);
 
     Board {
         hmi_tx,
@@ -140,6 +156,9 @@ pub fn init(dp: pac::Peripherals) -> Board {
         hall,
         rs485: Rs485 { tx, rx, de },
         led,
+        watchdog,
+        settings_flash: Some(SettingsFlash { flash }),
+        run_limit_ms: None,
         sysclk_hz: SYSCLK_HZ,
     }
 }
@@ -237,7 +256,7 @@ impl Sensors {
 /// the timer's update (overflow) events.
 pub struct HallCapture {
     tim2: TIM2,
-    overflows: u16,
+    extender: CaptureExtender,
 }
 
 impl HallCapture {
@@ -255,38 +274,151 @@ impl HallCapture {
         tim2.sr().write(|w| unsafe { w.bits(0) });
         tim2.dier().write(|w| unsafe { w.bits(0b11) });
         tim2.cr1().write(|w| unsafe { w.bits(1) });
-        Self { tim2, overflows: 0 }
+        Self {
+            tim2,
+            extender: CaptureExtender::new(),
+        }
     }
 
     /// Handles the TIM2 interrupt: returns the edge captured, if any, as a
-    /// 32-bit timestamp in 1 µs ticks.
+    /// 32-bit timestamp in 1 µs ticks. The capture is extended *before* the
+    /// pending overflow is accounted (see `kinematics::speed::CaptureExtender`).
     pub fn on_interrupt(&mut self) -> Option<u32> {
         let sr = self.tim2.sr().read().bits();
         let overflowed = sr & 1 != 0;
-        let captured = sr & 0b10 != 0;
+        let edge = (sr & 0b10 != 0).then(|| {
+            let ccr = self.tim2.ccr1().read().bits() as u16;
+            self.extender.extend(ccr, overflowed).0
+        });
         // Clear what we saw (rc_w0 bits: write 0 to clear, 1 to keep).
+        // SAFETY: only the flags read above are cleared.
         self.tim2
             .sr()
             .write(|w| unsafe { w.bits(!(sr & 0b11) & 0xFFFF) });
-        let mut edge = None;
-        if captured {
-            let ccr = self.tim2.ccr1().read().bits() as u16;
-            // An overflow pending together with a capture in the upper half
-            // happened after the capture: the capture still belongs to the
-            // old epoch.
-            let epoch = if overflowed && ccr >= 0x8000 {
-                self.overflows
-            } else if overflowed {
-                self.overflows.wrapping_add(1)
-            } else {
-                self.overflows
-            };
-            edge = Some((u32::from(epoch) << 16) | u32::from(ccr));
-        }
         if overflowed {
-            self.overflows = self.overflows.wrapping_add(1);
+            self.extender.on_overflow();
         }
         edge
+    }
+
+    /// The capture timer's time, 1 MHz, extended to 32 bits.
+    pub fn now(&self) -> u32 {
+        let counter = self.tim2.cnt().read().bits() as u16;
+        let pending = self.tim2.sr().read().bits() & 1 != 0;
+        self.extender.now(counter, pending).0
+    }
+}
+
+/// The independent watchdog: 250 ms from the 40 kHz LSI (prescaler /32,
+/// reload 312). Fed only by the control task when it ran on time; a flash
+/// page erase (≤ 40 ms) fits well inside.
+pub struct Watchdog {
+    iwdg: IWDG,
+}
+
+impl Watchdog {
+    fn start(iwdg: IWDG) -> Self {
+        // SAFETY: the IWDG key sequence of RM0008 §19.3: 0x5555 unlocks PR
+        // and RLR, 0xCCCC starts the watchdog (it cannot be stopped again).
+        iwdg.kr().write(|w| unsafe { w.bits(0x5555) });
+        iwdg.pr().write(|w| unsafe { w.bits(0b011) });
+        iwdg.rlr().write(|w| unsafe { w.bits(312) });
+        iwdg.kr().write(|w| unsafe { w.bits(0xCCCC) });
+        Self { iwdg }
+    }
+
+    /// Reloads the watchdog counter.
+    pub fn feed(&mut self) {
+        // SAFETY: 0xAAAA is the reload key.
+        self.iwdg.kr().write(|w| unsafe { w.bits(0xAAAA) });
+    }
+}
+
+/// Offset of the settings pages from the start of flash (0x0801E000, see
+/// memory-stm32f103.x).
+const SETTINGS_OFFSET: u32 = 0x1E000;
+/// The two 1 KB pages the settings store uses.
+pub const SETTINGS_FLASH_BYTES: u32 = 2 * 1024;
+
+/// The settings pages of the MCU's own flash as a NOR flash.
+pub struct SettingsFlash {
+    flash: flash::Parts,
+}
+
+/// Errors of the flash controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub enum FlashError {
+    /// Outside the settings pages, or misaligned.
+    OutOfBounds,
+    /// The controller reported an error (programming, protection, verify).
+    Controller,
+}
+
+impl NorFlashError for FlashError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            Self::OutOfBounds => NorFlashErrorKind::OutOfBounds,
+            Self::Controller => NorFlashErrorKind::Other,
+        }
+    }
+}
+
+impl SettingsFlash {
+    fn check(offset: u32, len: usize) -> Result<u32, FlashError> {
+        let end = offset
+            .checked_add(u32::try_from(len).map_err(|_| FlashError::OutOfBounds)?)
+            .ok_or(FlashError::OutOfBounds)?;
+        if end > SETTINGS_FLASH_BYTES {
+            return Err(FlashError::OutOfBounds);
+        }
+        Ok(SETTINGS_OFFSET + offset)
+    }
+}
+
+impl ErrorType for SettingsFlash {
+    type Error = FlashError;
+}
+
+impl ReadNorFlash for SettingsFlash {
+    const READ_SIZE: usize = 1;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+        let at = Self::check(offset, bytes.len())?;
+        let writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
+        let data = writer
+            .read(at, bytes.len())
+            .map_err(|_| FlashError::Controller)?;
+        bytes.copy_from_slice(data);
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        SETTINGS_FLASH_BYTES as usize
+    }
+}
+
+impl NorFlash for SettingsFlash {
+    const WRITE_SIZE: usize = 2;
+    const ERASE_SIZE: usize = 1024;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+        if !from.is_multiple_of(1024) || !to.is_multiple_of(1024) || from > to {
+            return Err(FlashError::OutOfBounds);
+        }
+        let at = Self::check(from, (to - from) as usize)?;
+        let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
+        writer
+            .erase(at, (to - from) as usize)
+            .map_err(|_| FlashError::Controller)
+    }
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+        if !offset.is_multiple_of(2) || !bytes.len().is_multiple_of(2) {
+            return Err(FlashError::OutOfBounds);
+        }
+        let at = Self::check(offset, bytes.len())?;
+        let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
+        writer.write(at, bytes).map_err(|_| FlashError::Controller)
     }
 }
 
@@ -330,11 +462,6 @@ pub fn fatal() -> ! {
     loop {
         cortex_m::asm::nop();
     }
-}
-
-/// The real board runs until it is switched off.
-pub fn run_limit_ms() -> Option<u32> {
-    None
 }
 
 /// Ends a run that reached its limit (never on the real board).

@@ -941,7 +941,8 @@ pub fn screen_settings(settings: &Settings) -> screen::Settings {
 /// rules, `Kp0` = 2, `Ki0` = 0.1, `Kd0` = 0.05, ΔK ranges of SPEC §5).
 ///
 /// The paper's gains work on this drum as they stand because the PID sees
-/// only the error the feed-forward cannot explain ([`REFERENCE_ALPHA`]).
+/// only the error the feed-forward cannot explain (the drum model of
+/// `Supervisor::control_step`).
 /// Compared against its measurement-vs-target form, with which the same gains
 /// swung the drum between 0 and 100 % duty, and against ¼ and ½ of the gains,
 /// which could not hold the seedlings' per-partition load (±5 % at 1.5 Hz)

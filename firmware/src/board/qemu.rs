@@ -89,14 +89,17 @@ struct CmdLine {
 /// Scheduled changes to the simulated machine, in firmware milliseconds.
 ///
 /// `gear=N` (1–6, Low 1 … High 3) sets the travel gear at boot;
-/// `step=T:+P` / `step=T:-P` changes travel speed by P % at T ms;
+/// `step=T:+P` / `step=T:-P` sets the travel speed P % off its gear speed at
+/// T ms (`step=T:0` returns to it; up to four); `tau=MS` gives the chassis a
+/// speed time constant;
 /// `stop=T` stops the tractor at T ms; `stall=T`, `hall_loss=T`,
 /// `enc_loss=T` inject faults at T ms; `noise=0` makes the model noiseless;
 /// `seed=N` seeds it.
 #[derive(Default, Clone, Copy)]
 struct Scenario {
     gear: Option<u8>,
-    step: [Option<(u32, i32)>; 2],
+    step: [Option<(u32, i32)>; 4],
+    tau_ms: Option<u32>,
     stop: Option<u32>,
     stall: Option<u32>,
     hall_loss: Option<u32>,
@@ -141,6 +144,9 @@ pub fn init(dp: pac::Peripherals) -> Board {
     };
     if let Some(seed) = scenario.seed {
         config.seed = u64::from(seed);
+    }
+    if let Some(tau) = scenario.tau_ms {
+        config.track_tau_s = tau as f32 / 1000.0;
     }
     config.initial_gear = scenario
         .gear
@@ -382,6 +388,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
                 }
             }
             b"stop" => s.stop = parse_u32(value),
+            b"tau" => s.tau_ms = parse_u32(value),
             b"stall" => s.stall = parse_u32(value),
             b"hall_loss" => s.hall_loss = parse_u32(value),
             b"enc_loss" => s.enc_loss = parse_u32(value),

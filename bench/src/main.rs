@@ -99,6 +99,56 @@ fn lut_cost(name: &str, inputs: &[(I16F16, I16F16); INPUTS], baseline: u32) {
     report(name, t, baseline);
 }
 
+/// The whole control step of the product (`Supervisor::control_step`):
+/// Hall estimator update, travel speed, eq. 7 target, the feed-forward and
+/// fuzzy PID on the drum model, fault checks, plants and distance. Speed-
+/// Adaptive, running, 7 cm, at Low 2: a Hall edge every 177 ms and 160
+/// encoder counts per period (about 20 r/min), as on the machine.
+#[inline(never)]
+fn control_step_cost(baseline_per_call_x10: u64) {
+    use hmi_proto::screen::Command;
+    use kinematics::units::Ticks;
+    use supervisor::{
+        control::{Hardware, Supervisor},
+        settings::Settings,
+    };
+    // Note(unwrap): the default settings are valid; the slot is taken once.
+    let sup: &'static mut Supervisor = cortex_m::singleton!(
+        : Supervisor = Supervisor::new(Hardware::BOARD, Settings::default()).unwrap()
+    )
+    .unwrap();
+    let mut now: u32 = 0;
+    let mut next_edge: u32 = 0;
+    let mut encoder: u16 = 0;
+    // Warm up: the estimator needs edges and a learnt revolution.
+    for _ in 0..3_000 {
+        now = now.wrapping_add(10_000);
+        while next_edge.wrapping_sub(now) > u32::MAX / 2 {
+            sup.hall_edge(Ticks(next_edge));
+            next_edge = next_edge.wrapping_add(177_000);
+        }
+        encoder = encoder.wrapping_add(160);
+        black_box(sup.control_step(Ticks(now), encoder));
+        if now == 1_000_000 {
+            sup.command(Command::Start);
+        }
+    }
+    let start = SYST::get_current();
+    for _ in 0..N {
+        now = now.wrapping_add(10_000);
+        while next_edge.wrapping_sub(now) > u32::MAX / 2 {
+            sup.hall_edge(Ticks(next_edge));
+            next_edge = next_edge.wrapping_add(177_000);
+        }
+        encoder = encoder.wrapping_add(160);
+        black_box(sup.control_step(Ticks(black_box(now)), black_box(encoder)));
+    }
+    let end = SYST::get_current();
+    let ticks = u64::from(start.wrapping_sub(end) & 0x00FF_FFFF);
+    let per_call_x10 = (ticks * 10_000 / 24 / u64::from(N)).saturating_sub(baseline_per_call_x10);
+    hprintln!("cost control_step {}", per_call_x10);
+}
+
 #[entry]
 fn main() -> ! {
     // Note(unwrap): taken once at the top of the program.
@@ -134,6 +184,10 @@ fn main() -> ! {
     // `Controller` needs more stack than the QEMU board's 8 KB of RAM
     // (docs/PERFORMANCE.md); its step is the conventional step plus
     // `lut_infer_7x7`.
+
+    // The loop overhead of `ticks` (per call ×10) stands in for the control
+    // loop's own bookkeeping.
+    control_step_cost(u64::from(baseline) * 10_000 / 24 / u64::from(N));
 
     debug::exit(debug::EXIT_SUCCESS);
     loop {

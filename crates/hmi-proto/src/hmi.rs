@@ -482,6 +482,12 @@ impl Hmi {
                 let _ = self.set_settings(s);
                 Some(Command::SelectGear(g))
             }
+            Action::NextCalibration => {
+                let mut s = self.settings;
+                s.calibration_kind = s.calibration_kind.next();
+                let _ = self.set_settings(s);
+                Some(Command::SelectCalibration(s.calibration_kind))
+            }
             Action::CalibrationStart => Some(Command::CalibrationStart),
             Action::CalibrationStop => Some(Command::CalibrationStop),
             Action::CalibrationAccept => Some(Command::CalibrationAccept),

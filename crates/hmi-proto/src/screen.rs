@@ -99,6 +99,42 @@ impl Mode {
     }
 }
 
+/// Which coefficient the calibration page measures (paper A §3: k1 the speed
+/// sensor, k2 the track slip, k3 the belt slip).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalibrationKind {
+    /// k1: a timed run over a taped course; the travel speed the firmware
+    /// shows is corrected to the speed measured.
+    SpeedK1,
+    /// k2: wheel turns counted over a taped course (the default).
+    #[default]
+    SlipK2,
+    /// k3: the drum turns counted while the belt runs; the belt length that
+    /// passed is taped.
+    BeltK3,
+}
+
+impl CalibrationKind {
+    /// The label shown in `tkind`.
+    pub const fn label(self) -> &'static str {
+        match self {
+            Self::SpeedK1 => "k1 speed sensor",
+            Self::SlipK2 => "k2 track slip",
+            Self::BeltK3 => "k3 belt slip",
+        }
+    }
+
+    /// The next kind (k1 → k2 → k3 → k1), for the selector button.
+    pub const fn next(self) -> Self {
+        match self {
+            Self::SpeedK1 => Self::SlipK2,
+            Self::SlipK2 => Self::BeltK3,
+            Self::BeltK3 => Self::SpeedK1,
+        }
+    }
+}
+
 /// Tractor gear presets (spec §4: Low 1–3, High 1–3); the wire index is 1–6.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -337,6 +373,8 @@ pub enum Command {
     SetMotorCoefficient(MotorCoefficient),
     /// New gear preset.
     SelectGear(Gear),
+    /// Calibration: measure this coefficient next.
+    SelectCalibration(CalibrationKind),
     /// Calibration: start counting a run at the current gear.
     CalibrationStart,
     /// Calibration: end the run; the firmware shows the measured distance.
@@ -371,6 +409,8 @@ pub struct Settings {
     pub calibration_coefficient: CalibrationCoefficient,
     /// Last calibration distance entered.
     pub calibration_distance: CalibrationDistance,
+    /// The coefficient the calibration page measures.
+    pub calibration_kind: CalibrationKind,
     /// Screen brightness.
     pub brightness: Brightness,
 }
@@ -450,6 +490,8 @@ pub enum Action {
     GearDown,
     /// [`Command::SelectGear`] with the next faster gear.
     GearUp,
+    /// [`Command::SelectCalibration`] with the next kind.
+    NextCalibration,
     /// [`Command::CalibrationStart`].
     CalibrationStart,
     /// [`Command::CalibrationStop`].
@@ -474,6 +516,8 @@ pub enum Role {
     Status(StatusField),
     /// The gear label, written with `tgear.txt=`.
     GearLabel,
+    /// The calibration kind's label, written with `tkind.txt=`.
+    CalibrationLabel,
     /// The firmware version, written with `tver.txt=`.
     Version,
     /// The alarm text, written with `talarm.txt=`.
@@ -796,6 +840,14 @@ pub const COMPONENTS: &[Component] = &[
     ),
     c(P::Calibration, 11, "tgear", K::Text, R::GearLabel),
     c(P::Calibration, 12, "tmsg", K::Text, R::Message),
+    c(
+        P::Calibration,
+        13,
+        "bkind",
+        K::Button,
+        R::Action(A::NextCalibration),
+    ),
+    c(P::Calibration, 14, "tkind", K::Text, R::CalibrationLabel),
     // 5 alarm
     c(P::Alarm, 1, "talarm", K::Text, R::AlarmText),
     c(
@@ -856,6 +908,10 @@ pub fn page_instructions(
                 comp.obj(),
                 ScreenText::new(settings.gear.label()).unwrap_or(version),
             ),
+            Role::CalibrationLabel => Instruction::SetText(
+                comp.obj(),
+                ScreenText::new(settings.calibration_kind.label()).unwrap_or(version),
+            ),
             Role::Version => Instruction::SetText(comp.obj(), version),
             _ => continue,
         };
@@ -906,7 +962,15 @@ mod tests {
             assert!(Component::on_page(p).count() <= 16);
             assert!(
                 Component::on_page(p)
-                    .filter(|c| matches!(c.role, Role::Input(_) | Role::GearLabel | Role::Version))
+                    .filter(|c| {
+                        matches!(
+                            c.role,
+                            Role::Input(_)
+                                | Role::GearLabel
+                                | Role::CalibrationLabel
+                                | Role::Version
+                        )
+                    })
                     .count()
                     <= MAX_PAGE_INSTRUCTIONS
             );

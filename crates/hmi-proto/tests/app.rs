@@ -303,6 +303,31 @@ fn alarm_and_acknowledge_return_to_the_page() {
 }
 
 #[test]
+fn the_coefficient_button_cycles_k1_k2_k3_and_labels_it() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("bcalib").unwrap();
+    pump(&mut hmi, &mut screen);
+    // The page opens on the default, k2 (docs/hmi.md page 4).
+    assert_eq!(screen.text("tkind"), Some("k2 track slip"));
+    screen.release("bkind").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SelectCalibration(CalibrationKind::BeltK3))]
+    );
+    assert_eq!(screen.text("tkind"), Some("k3 belt slip"));
+    screen.release("bkind").unwrap();
+    screen.release("bkind").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![
+            cmd(Command::SelectCalibration(CalibrationKind::SpeedK1)),
+            cmd(Command::SelectCalibration(CalibrationKind::SlipK2)),
+        ]
+    );
+    assert_eq!(screen.text("tkind"), Some("k2 track slip"));
+}
+
+#[test]
 fn calibration_and_settings_pages() {
     let (mut hmi, mut screen) = connected();
     screen.release("bcalib").unwrap();

@@ -109,15 +109,20 @@ pub struct Config {
     pub ground_wheel_diameter_m: f32,
     /// Ground-wheel encoder counts per turn (600 ppr × 4 in quadrature). Default 2400.
     pub ground_encoder_counts_per_turn: u32,
-    /// Steps per revolution of both steppers. Default 1600.
+    /// Steps per revolution of both steppers. Default 1600
+    /// (`ProfileBSettings::default().feeding_steps_per_rev`).
     pub stepper_steps_per_rev: u32,
     /// Highest step rate the steppers follow, Hz (faster commands are clamped). Default 40 000.
     pub stepper_max_rate_hz: f32,
-    /// Empty feed-roller radius `r`, m (unpublished). Default 0.035.
+    /// Empty feed-roller radius `r`, m (unpublished). Default 0.025
+    /// (`ProfileBSettings::default().roller_radius`).
     pub feed_roller_radius_m: f32,
-    /// Seedling-belt thickness `h`, m (unpublished). Default 0.002.
+    /// Seedling-belt thickness `h`, m (unpublished). Default 0.001 as the
+    /// firmware stores it (`ProfileBSettings::default().belt_thickness`,
+    /// U12F20: 0.000 999 45 m).
     pub feed_belt_thickness_m: f32,
-    /// Seedling pitch on the belt `B`, m. Default 0.10 (paper B).
+    /// Seedling pitch on the belt `B`, m. Default 0.10 (paper B;
+    /// `ProfileBSettings::default().belt_pitch`, U12F20: 0.099 999 6 m).
     pub seedling_pitch_m: f32,
 
     // ----- field metrics -----
@@ -130,6 +135,7 @@ pub struct Config {
 
 impl Default for Config {
     fn default() -> Self {
+        let pb = kinematics::profile_b::ProfileBSettings::default();
         Self {
             seed: 1,
             profile: Profile::A,
@@ -163,11 +169,12 @@ impl Default for Config {
             timer_start_ticks: 0,
             ground_wheel_diameter_m: 0.25,
             ground_encoder_counts_per_turn: 2400,
-            stepper_steps_per_rev: 1600,
+            // Profile B: the machine the firmware's defaults describe.
+            stepper_steps_per_rev: pb.feeding_steps_per_rev,
             stepper_max_rate_hz: 40_000.0,
-            feed_roller_radius_m: 0.035,
-            feed_belt_thickness_m: 0.002,
-            seedling_pitch_m: 0.10,
+            feed_roller_radius_m: pb.roller_radius.to_f64() as f32,
+            feed_belt_thickness_m: pb.belt_thickness.to_f64() as f32,
+            seedling_pitch_m: pb.belt_pitch.to_f64() as f32,
             target_spacing_m: 0.07,
             qualified_tolerance: 0.2,
         }

@@ -484,19 +484,30 @@ fn config_errors_name_the_field() {
 
 #[test]
 fn profile_b_ground_encoder_and_eq9_feeding_give_the_target_spacing() {
-    // Vm = 0.3 m/s (no slip), X = 0.25 m, B = 0.10 m, r = 0.035 m, h = 0.002 m,
-    // 1600 steps/rev. Eq. 9: n2 = 60·Vm·B / (2π·X·(r + h·j)) r/min, recomputed
+    // Vm = 0.3 m/s (no slip), X = 0.25 m, and the default machine: B = 0.10 m,
+    // r = 0.025 m, h = 0.001 m (the firmware's `ProfileBSettings::default()`,
+    // as stored in U12F20: B = 0.099 999 6 m, h = 0.000 999 45 m), 1600
+    // steps/rev. Eq. 9: n2 = 60·Vm·B / (2π·X·(r + h·j)) r/min, recomputed
     // whenever j increments; step rate = n2/60 · 1600.
-    let mut m = Config {
+    let c = Config {
         profile: Profile::B,
         track_slip_scale: 0.0,
         target_spacing_m: 0.25,
         ..Config::noiseless()
-    }
-    .build()
-    .unwrap();
+    };
+    assert!((c.feed_roller_radius_m - 0.025).abs() < 1e-6);
+    assert!((c.feed_belt_thickness_m - 0.001).abs() < 1e-6);
+    assert!((c.seedling_pitch_m - 0.10).abs() < 1e-6);
+    assert_eq!(c.stepper_steps_per_rev, 1600);
+    let mut m = c.build().unwrap();
     m.set_travel_speed_m_s(0.3);
-    let (vm, b, x, r, h) = (0.3_f64, 0.10, 0.25, 0.035, 0.002);
+    let (vm, b, x, r, h) = (
+        0.3_f64,
+        f64::from(c.seedling_pitch_m),
+        0.25,
+        f64::from(c.feed_roller_radius_m),
+        f64::from(c.feed_belt_thickness_m),
+    );
     let mut plants = Vec::new();
     let mut g_counts = 0u64;
     let mut last = 0u16;
@@ -522,12 +533,18 @@ fn profile_b_ground_encoder_and_eq9_feeding_give_the_target_spacing() {
         (g_counts as f64 - expect).abs() <= 1.0,
         "{g_counts} vs {expect}"
     );
-    // 18 m / 0.25 m = 72 plants (the roller grew by several turns meanwhile).
-    assert!(m.feed_roller_turns() > 10);
+    // 18 m / 0.25 m = 72 plants (the roller grew by several turns meanwhile:
+    // 7.2 m of belt = Σ 2π(r + h·j) over j turns ⇒ 2π(0.025·j + 0.0005·j²) =
+    // 7.2 ⇒ j ≈ 29).
+    assert!(
+        (28..=30).contains(&m.feed_roller_turns()),
+        "{}",
+        m.feed_roller_turns()
+    );
     assert!((71..=73).contains(&plants.len()), "{}", plants.len());
     for w in plants.windows(2) {
         // Within a roller turn the radius is constant, so the spacing is exact;
-        // across a j increment the step mixes two radii (< h/r ≈ 6 %).
+        // across a j increment the step mixes two radii (< h/r = 4 %).
         assert!((w[1] - w[0] - x).abs() < 0.06 * x, "{}", w[1] - w[0]);
     }
     let fm = m.metrics();

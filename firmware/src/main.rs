@@ -213,7 +213,7 @@ mod app {
     #[inline(never)]
     fn build_hmi(slot: &'static mut MaybeUninit<Hmi>, supervisor: &Supervisor) -> &'static mut Hmi {
         slot.write(Hmi::new(
-            supervisor::control::screen_settings(supervisor.settings()),
+            supervisor.screen_settings(),
             env!("CARGO_PKG_VERSION"),
         ))
     }
@@ -407,19 +407,17 @@ mod app {
         match event {
             Event::Command(cmd) => {
                 defmt::info!("screen: {}", cmd);
-                let (effect, settings) = cx.shared.supervisor.lock(|sup| {
-                    let effect = sup.command(cmd);
-                    (effect, sup.settings().clone())
-                });
-                let screen = supervisor::control::screen_settings(&settings);
+                let effect = cx.shared.supervisor.lock(|sup| sup.command(cmd));
                 match effect {
                     Effect::None => {}
                     Effect::SettingsChanged => {
+                        let screen = cx.shared.supervisor.lock(|sup| sup.screen_settings());
                         cx.shared.hmi.lock(|hmi| {
                             let _ = hmi.set_settings(screen);
                         });
                     }
                     Effect::Save => {
+                        let settings = cx.shared.supervisor.lock(|sup| sup.settings().clone());
                         if cx.local.saves_in.try_send(settings).is_err() {
                             cx.shared.hmi.lock(|hmi| {
                                 let _ = hmi.show_message("Save already in progress");
@@ -445,9 +443,9 @@ mod app {
                 );
             }
             Event::Connected => {
-                let settings = cx.shared.supervisor.lock(|sup| sup.settings().clone());
+                let screen = cx.shared.supervisor.lock(|sup| sup.screen_settings());
                 cx.shared.hmi.lock(|hmi| {
-                    let _ = hmi.set_settings(supervisor::control::screen_settings(&settings));
+                    let _ = hmi.set_settings(screen);
                 });
             }
             Event::ScreenError(code) => defmt::warn!("screen error: {}", code),

@@ -28,7 +28,7 @@
 
 use fixed::types::{U12F20, U16F16};
 use fuzzy_pid::{Controller, I16F16};
-use hmi_proto::screen::{self, Command, Mode};
+use hmi_proto::screen::{self, CalibrationKind, Command, Mode};
 use kinematics::{
     consts,
     drum::{DrumPlan, DrumSettings, DrumTarget},
@@ -217,32 +217,38 @@ pub struct Snapshot {
     pub steps: u32,
 }
 
-/// State of the on-screen k2 calibration run.
+/// State of the on-screen calibration run (k1, k2 or k3, docs/hmi.md page 4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum CalibrationRun {
     /// No run.
     Idle,
-    /// Counting wheel turns since this edge count and time.
+    /// Counting since these totals.
     Counting {
         /// Hall edges at the start.
         start_edges: u32,
         /// Control steps at the start.
         start_steps: u32,
+        /// Drum encoder counts at the start.
+        start_drum_counts: u64,
     },
-    /// Run ended: the edges and the time it took.
+    /// Run ended: what it counted and how long it took.
     Measured {
         /// Hall edges in the run.
         edges: u32,
         /// Control steps the run lasted.
         steps: u32,
+        /// Drum encoder counts in the run.
+        drum_counts: u64,
     },
-    /// The operator entered the taped distance; the coefficient is computed.
+    /// The operator entered the taped length; the coefficient is computed.
     Computed {
-        /// The new k2 for the current gear.
-        k2: kinematics::units::Coefficient,
-        /// Wheel speed of the run, km/h (where the k2 table gets its point).
-        wheel_speed: kinematics::units::KilometresPerHour,
+        /// Which coefficient.
+        kind: CalibrationKind,
+        /// Where it goes in its table: monitored km/h (k1), wheel km/h (k2)
+        /// or drum r/min (k3).
+        at: U16F16,
+        /// The coefficient.
+        k: kinematics::units::Coefficient,
     },
 }
 
@@ -271,6 +277,9 @@ pub struct Supervisor {
     run: RunState,
     alarm: Option<Alarm>,
     calibration_run: CalibrationRun,
+    calibration_kind: CalibrationKind,
+    /// Drum encoder counts since boot.
+    drum_counts_total: u64,
     last_encoder: Option<u16>,
     stall_us: u32,
     /// The reported (smoothed) drum speed, r/min.
@@ -429,6 +438,8 @@ impl Supervisor {
             run: RunState::Stopped,
             alarm: None,
             calibration_run: CalibrationRun::Idle,
+            calibration_kind: CalibrationKind::SlipK2,
+            drum_counts_total: 0,
             last_encoder: None,
             stall_us: 0,
             reported: I16F16::ZERO,
@@ -578,10 +589,16 @@ impl Supervisor {
                 self.settings.gear = settings::gear_from_screen(gear);
                 Effect::SettingsChanged
             }
+            Command::SelectCalibration(kind) => {
+                self.calibration_kind = kind;
+                self.calibration_run = CalibrationRun::Idle;
+                Effect::SettingsChanged
+            }
             Command::CalibrationStart => {
                 self.calibration_run = CalibrationRun::Counting {
                     start_edges: self.edges,
                     start_steps: self.snapshot.steps,
+                    start_drum_counts: self.drum_counts_total,
                 };
                 Effect::None
             }
@@ -589,21 +606,25 @@ impl Supervisor {
                 if let CalibrationRun::Counting {
                     start_edges,
                     start_steps,
+                    start_drum_counts,
                 } = self.calibration_run
                 {
                     self.calibration_run = CalibrationRun::Measured {
                         edges: self.edges.wrapping_sub(start_edges),
                         steps: self.snapshot.steps.wrapping_sub(start_steps),
+                        drum_counts: self.drum_counts_total.saturating_sub(start_drum_counts),
                     };
                 }
                 Effect::None
             }
-            Command::CalibrationActualDistance(distance) => self.compute_k2(distance.raw()),
-            Command::CalibrationAccept => self.accept_k2(),
+            Command::CalibrationActualDistance(distance) => {
+                self.compute_coefficient(distance.raw())
+            }
+            Command::CalibrationAccept => self.accept_coefficient(),
             Command::SetCalibrationCoefficient(k) => {
                 let k = kinematics::units::Coefficient::from_ratio(u32::from(k.raw()), 1000);
-                let preset = self.settings.gear.preset();
-                match k.map(|k| self.set_k2_point(preset.actual, k)) {
+                let at = self.hand_set_abscissa();
+                match k.map(|k| self.set_table_point(self.calibration_kind, at, k)) {
                     Some(Ok(())) => Effect::SettingsChanged,
                     _ => Effect::Message("Coefficient rejected"),
                 }
@@ -640,61 +661,140 @@ impl Supervisor {
         Ok(())
     }
 
-    fn compute_k2(&mut self, actual_cm: u32) -> Effect {
-        let CalibrationRun::Measured { edges, steps } = self.calibration_run else {
-            return Effect::Message("Run a calibration first");
-        };
-        // Wheel turns = edges / Z1; time = steps · period.
-        let turns =
-            U16F16::checked_from_num(edges).and_then(|e| e.checked_div_int(u32::from(consts::Z1)));
-        let seconds = u64::from(steps)
-            .checked_mul(u64::from(self.hw.control_period_us))
-            .and_then(|us| u32::try_from(us / 1000).ok())
-            .and_then(|ms| kinematics::units::Seconds::from_ratio(ms, 1000));
-        let distance = Metres::from_mm(actual_cm.saturating_mul(10));
-        match (turns, seconds) {
-            (Some(turns), Some(time)) => {
-                match kinematics::calib::k2_from_wheel_turns(turns, distance, time) {
-                    Ok(r) => {
-                        self.calibration_run = CalibrationRun::Computed {
-                            k2: r.k2,
-                            wheel_speed: r.wheel_speed,
-                        };
-                        Effect::None
-                    }
-                    Err(_) => Effect::Message("Calibration run too short"),
-                }
+    /// Where a coefficient typed by hand goes in its table: at the selected
+    /// gear's monitored (k1) or actual (k2) speed, at the Fixed-mode drum
+    /// speed (k3).
+    fn hand_set_abscissa(&self) -> U16F16 {
+        let preset = self.settings.gear.preset();
+        match self.calibration_kind {
+            CalibrationKind::SpeedK1 => U16F16::saturating_from_num(preset.monitored.to_fixed()),
+            CalibrationKind::SlipK2 => U16F16::saturating_from_num(preset.actual.to_fixed()),
+            CalibrationKind::BeltK3 => {
+                U16F16::saturating_from_num(self.settings.fixed_drum_speed.raw())
+                    .checked_div_int(100)
+                    .unwrap_or(U16F16::ZERO)
             }
-            _ => Effect::Message("Calibration run too short"),
         }
     }
 
-    fn accept_k2(&mut self) -> Effect {
-        let CalibrationRun::Computed { k2, wheel_speed } = self.calibration_run else {
+    /// Duration of `steps` control periods, µs (saturating).
+    fn run_us(&self, steps: u32) -> u32 {
+        u32::try_from(u64::from(steps).saturating_mul(u64::from(self.hw.control_period_us)))
+            .unwrap_or(u32::MAX)
+    }
+
+    /// The coefficient of the selected kind from the last run and the taped
+    /// length (docs/hmi.md page 4).
+    fn compute_coefficient(&mut self, taped_cm: u32) -> Effect {
+        let CalibrationRun::Measured {
+            edges,
+            steps,
+            drum_counts,
+        } = self.calibration_run
+        else {
+            return Effect::Message("Run a calibration first");
+        };
+        let us = self.run_us(steps);
+        let taped_um = taped_cm.saturating_mul(10_000);
+        let kind = self.calibration_kind;
+        let result = match kind {
+            CalibrationKind::SlipK2 => {
+                // k2 = taped / (wheel turns · π·0.20 m), turns = edges / Z1.
+                let turns = U16F16::checked_from_num(edges)
+                    .and_then(|e| e.checked_div_int(u32::from(consts::Z1)));
+                let time = kinematics::units::Seconds::from_ratio(us / 1000, 1000);
+                let distance = Metres::from_mm(taped_cm.saturating_mul(10));
+                turns.zip(time).and_then(|(turns, time)| {
+                    kinematics::calib::k2_from_wheel_turns(turns, distance, time)
+                        .ok()
+                        .map(|r| (U16F16::saturating_from_num(r.wheel_speed.to_fixed()), r.k2))
+                })
+            }
+            CalibrationKind::SpeedK1 => {
+                // Speeds in m/h (km/h × 1000): µm / µs · 3600.
+                let mph = |um: u64| {
+                    u32::try_from(um.saturating_mul(3_600).checked_div(u64::from(us))?).ok()
+                };
+                let monitored = mph(u64::from(edges).saturating_mul(EDGE_UM));
+                let actual = mph(u64::from(taped_um));
+                monitored.zip(actual).and_then(|(monitored, actual)| {
+                    let monitored =
+                        kinematics::units::KilometresPerHour::from_ratio(monitored, 1000)?;
+                    let actual = kinematics::units::KilometresPerHour::from_ratio(actual, 1000)?;
+                    // k1 takes what k2 does not explain, so that the shown
+                    // travel speed (k2·k1·monitored) equals the taped speed.
+                    let k2 = self.settings.calibration.k2_at(monitored).to_fixed();
+                    let corrected = kinematics::units::KilometresPerHour::from_fixed(
+                        monitored
+                            .to_fixed()
+                            .saturating_mul(fixed::types::U10F22::saturating_from_num(k2)),
+                    );
+                    kinematics::calib::k1_from_speeds(actual, corrected)
+                        .ok()
+                        .map(|r| (U16F16::saturating_from_num(monitored.to_fixed()), r.k1))
+                })
+            }
+            CalibrationKind::BeltK3 => {
+                // Mean drum speed: counts · 60 / (counts per turn · s).
+                let rpm_x1000 = drum_counts
+                    .saturating_mul(60_000_000_000)
+                    .checked_div(
+                        u64::from(self.hw.encoder_counts_per_drum_rev)
+                            .saturating_mul(u64::from(us)),
+                    )
+                    .and_then(|v| u32::try_from(v).ok());
+                let belt = kinematics::units::MetresPerSecond::from_ratio(taped_um, us);
+                rpm_x1000
+                    .and_then(|n| RevPerMin::from_ratio(n, 1000))
+                    .zip(belt)
+                    .and_then(|(n, belt)| {
+                        kinematics::calib::k3_from_belt_test(n, belt)
+                            .ok()
+                            .map(|r| (U16F16::saturating_from_num(n.to_fixed()), r.k3))
+                    })
+            }
+        };
+        match result {
+            Some((at, k)) => {
+                self.calibration_run = CalibrationRun::Computed { kind, at, k };
+                Effect::None
+            }
+            None => Effect::Message("Calibration run too short"),
+        }
+    }
+
+    fn accept_coefficient(&mut self) -> Effect {
+        let CalibrationRun::Computed { kind, at, k } = self.calibration_run else {
             return Effect::Message("Nothing to accept");
         };
-        match self.set_k2_point(wheel_speed, k2) {
+        match self.set_table_point(kind, at, k) {
             Ok(()) => {
                 self.calibration_run = CalibrationRun::Idle;
                 Effect::SettingsChanged
             }
-            Err(()) => Effect::Message("k2 out of range 0.8-1.2"),
+            Err(()) => Effect::Message("Coefficient out of range 0.8-1.2"),
         }
     }
 
-    /// Puts `(speed, k)` into the k2 table: replaces the point nearest to
-    /// `speed` when within 0.05 km/h, otherwise inserts it (the table keeps at
-    /// most 8 points; the validated table is built before anything changes).
-    fn set_k2_point(
+    /// Puts `(at, k)` into the table of `kind`: replaces the point nearest to
+    /// `at` when within 0.05 (km/h or r/min), otherwise inserts it (a table
+    /// holds at most 8 points; the validated table is built before anything
+    /// changes, so a rejected point changes nothing).
+    fn set_table_point(
         &mut self,
-        speed: kinematics::units::KilometresPerHour,
+        kind: CalibrationKind,
+        x: U16F16,
         k: kinematics::units::Coefficient,
     ) -> Result<(), ()> {
-        let x = U16F16::saturating_from_num(speed.to_fixed());
+        let table = match kind {
+            CalibrationKind::SpeedK1 => &self.settings.calibration.k1,
+            CalibrationKind::SlipK2 => &self.settings.calibration.k2,
+            CalibrationKind::BeltK3 => &self.settings.calibration.k3,
+        };
         let near = const { U16F16::lit("0.05") };
         let mut points: heapless::Vec<TablePoint, 8> = heapless::Vec::new();
         let mut placed = false;
-        for p in self.settings.calibration.k2.points() {
+        for p in table.points() {
             if !placed && p.x.abs_diff(x) <= near {
                 points.push(TablePoint::new(x, k)).map_err(|_| ())?;
                 placed = true;
@@ -710,7 +810,11 @@ impl Supervisor {
             points.push(TablePoint::new(x, k)).map_err(|_| ())?;
         }
         let table = CoeffTable::new(&points).map_err(|_| ())?;
-        self.settings.calibration.k2 = table;
+        match kind {
+            CalibrationKind::SpeedK1 => self.settings.calibration.k1 = table,
+            CalibrationKind::SlipK2 => self.settings.calibration.k2 = table,
+            CalibrationKind::BeltK3 => self.settings.calibration.k3 = table,
+        }
         Ok(())
     }
 
@@ -848,6 +952,7 @@ impl Supervisor {
         self.drum_counts_since_start = self
             .drum_counts_since_start
             .saturating_add(u64::from(delta));
+        self.drum_counts_total = self.drum_counts_total.saturating_add(u64::from(delta));
         self.snapshot.travel_speed_kmh_x1000 = travel_kmh_x1000;
         self.snapshot.target_drum_rpm_x1000 = if self.run == RunState::Running {
             milli(target)
@@ -896,12 +1001,24 @@ impl Supervisor {
         let s = self.snapshot;
         let x100 = |v: u32| u16::try_from(v / 10).unwrap_or(u16::MAX);
         let (measured_distance_cm, calibration_result_x1000) = match self.calibration_run {
-            CalibrationRun::Measured { edges, .. } => (
-                u32::try_from(u64::from(edges).saturating_mul(25_133) / 10_000).unwrap_or(u32::MAX),
-                0,
-            ),
-            CalibrationRun::Computed { k2, .. } => {
-                (0, u16::try_from(k2.to_milli()).unwrap_or(u16::MAX))
+            CalibrationRun::Measured {
+                edges, drum_counts, ..
+            } => {
+                let um = match self.calibration_kind {
+                    // The Hall teeth counted, as track.
+                    CalibrationKind::SpeedK1 | CalibrationKind::SlipK2 => {
+                        u64::from(edges).saturating_mul(EDGE_UM)
+                    }
+                    // The belt the drum turns imply: π·0.070 m per turn.
+                    CalibrationKind::BeltK3 => drum_counts
+                        .saturating_mul(BELT_PER_DRUM_TURN_UM)
+                        .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
+                        .unwrap_or(0),
+                };
+                (u32::try_from(um / 10_000).unwrap_or(u32::MAX), 0)
+            }
+            CalibrationRun::Computed { k, .. } => {
+                (0, u16::try_from(k.to_milli()).unwrap_or(u16::MAX))
             }
             _ => (0, 0),
         };
@@ -917,23 +1034,35 @@ impl Supervisor {
     }
 }
 
-/// The settings as the screen shows them (its own scaled integers); the
-/// calibration coefficient shown is k2 at the selected gear's speed.
-pub fn screen_settings(settings: &Settings) -> screen::Settings {
-    let preset = settings.gear.preset();
-    let k2 = settings
-        .calibration
-        .k2
-        .eval(U16F16::saturating_from_num(preset.actual.to_fixed()));
-    let k2_x1000 = i32::try_from(k2.to_milli()).unwrap_or(i32::MAX);
-    screen::Settings {
-        spacing: settings.spacing,
-        fixed_drum_speed: settings.fixed_drum_speed,
-        motor_coefficient: settings.motor_coefficient,
-        gear: settings::gear_to_screen(settings.gear),
-        calibration_coefficient: screen::CalibrationCoefficient::new(k2_x1000).unwrap_or_default(),
-        calibration_distance: screen::CalibrationDistance::default(),
-        brightness: settings.brightness,
+/// Track per Hall edge: π·0.20 m / 25 = 25 133 µm.
+const EDGE_UM: u64 = 25_133;
+/// Belt per drum turn: π·(D2 + 2·H2) = π·0.070 m = 219 911 µm.
+const BELT_PER_DRUM_TURN_UM: u64 = 219_911;
+
+impl Supervisor {
+    /// The settings as the screen shows them (its own scaled integers); the
+    /// calibration coefficient shown is the selected one (k1, k2 or k3) at
+    /// the selected gear's speed (k3: at the Fixed-mode drum speed).
+    pub fn screen_settings(&self) -> screen::Settings {
+        let settings = &self.settings;
+        let at = self.hand_set_abscissa();
+        let table = match self.calibration_kind {
+            CalibrationKind::SpeedK1 => &settings.calibration.k1,
+            CalibrationKind::SlipK2 => &settings.calibration.k2,
+            CalibrationKind::BeltK3 => &settings.calibration.k3,
+        };
+        let k_x1000 = i32::try_from(table.eval(at).to_milli()).unwrap_or(i32::MAX);
+        screen::Settings {
+            spacing: settings.spacing,
+            fixed_drum_speed: settings.fixed_drum_speed,
+            motor_coefficient: settings.motor_coefficient,
+            gear: settings::gear_to_screen(settings.gear),
+            calibration_coefficient: screen::CalibrationCoefficient::new(k_x1000)
+                .unwrap_or_default(),
+            calibration_distance: screen::CalibrationDistance::default(),
+            brightness: settings.brightness,
+            calibration_kind: self.calibration_kind,
+        }
     }
 }
 

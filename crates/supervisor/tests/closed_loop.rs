@@ -387,3 +387,97 @@ fn the_too_fast_alarm_text_shows_the_allowed_maximum() {
         .unwrap();
     assert_eq!(text.as_str(), "Too fast: max 0.05 km/h");
 }
+
+#[test]
+fn the_k1_calibration_makes_the_shown_travel_speed_the_taped_one() {
+    // Low 1 in the simulator: the Hall gear reads low by 3.1 % and the track
+    // slips 2.8 %. An uncalibrated machine (all coefficients 1) shows the
+    // monitored speed: 0.33/1.031 = 0.320 km/h against a true 0.33·0.972 =
+    // 0.321 km/h… so take Low 3, where they do not cancel: 0.85/0.966 = 0.880
+    // shown against 0.85·0.963 = 0.819 true (+7.5 %). One k1 run over a taped
+    // course corrects it.
+    use hmi_proto::screen::CalibrationKind;
+    let uncalibrated = Settings {
+        calibration: kinematics::travel::Calibration::identity(),
+        ..adaptive(70)
+    };
+    let mut rig = Rig::new(
+        Config {
+            initial_gear: Some(Gear::Low3),
+            ..Config::noiseless()
+        },
+        uncalibrated,
+    );
+    rig.run_ms(30_000);
+    let truth = f64::from(rig.m.travel_speed_m_s()) * 3600.0;
+    let before = f64::from(rig.sup.snapshot().travel_speed_kmh_x1000);
+    assert!(
+        (before - truth).abs() / truth > 0.05,
+        "before {before} m/h, truth {truth:.1}"
+    );
+    rig.sup
+        .command(Command::SelectCalibration(CalibrationKind::SpeedK1));
+    rig.sup.command(Command::CalibrationStart);
+    let g0 = rig.m.ground_position_m();
+    rig.run_ms(120_000);
+    rig.sup.command(Command::CalibrationStop);
+    let taped_cm = ((rig.m.ground_position_m() - g0) * 100.0).round() as i32;
+    let d = hmi_proto::screen::CalibrationDistance::new(taped_cm).unwrap();
+    assert_eq!(
+        rig.sup.command(Command::CalibrationActualDistance(d)),
+        supervisor::control::Effect::None
+    );
+    let k1 = f64::from(rig.sup.screen_status().calibration_result_x1000) / 1000.0;
+    // k1 = true / monitored = 0.963 · 0.966 = 0.930 (Tables 11, 12 at Low 3).
+    assert!((k1 - 0.930).abs() <= 0.004, "k1 {k1}");
+    assert_eq!(
+        rig.sup.command(Command::CalibrationAccept),
+        supervisor::control::Effect::SettingsChanged
+    );
+    rig.run_ms(5_000);
+    // The truth: the simulator's ground speed, km/h × 1000.
+    let truth = f64::from(rig.m.travel_speed_m_s()) * 3600.0;
+    let shown = f64::from(rig.sup.snapshot().travel_speed_kmh_x1000);
+    assert!(
+        (shown - truth).abs() / truth <= 0.003,
+        "shown {shown} m/h, truth {truth:.1}"
+    );
+}
+
+#[test]
+fn the_k3_calibration_measures_the_belt_slip_of_table_13() {
+    // Fixed mode at 20 r/min: the simulator's belt slips as Table 13 says
+    // (k3 = 0.994 at 20 r/min). The operator marks the belt at Start run and
+    // Stop run and tapes the length between the marks.
+    use hmi_proto::screen::CalibrationKind;
+    let settings = Settings {
+        mode: Mode::Fixed,
+        fixed_drum_speed: DrumSpeed::new(2000).unwrap(),
+        ..Settings::default()
+    };
+    let mut rig = Rig::new(Config::noiseless(), settings);
+    rig.sup.command(Command::Start);
+    rig.run_ms(2_000);
+    rig.sup
+        .command(Command::SelectCalibration(CalibrationKind::BeltK3));
+    rig.sup.command(Command::CalibrationStart);
+    let (b0, n0) = (rig.m.belt_position_m(), rig.m.drum_turns());
+    rig.run_ms(60_000);
+    rig.sup.command(Command::CalibrationStop);
+    let belt_m = rig.m.belt_position_m() - b0;
+    let turns = rig.m.drum_turns() - n0;
+    let d = hmi_proto::screen::CalibrationDistance::new((belt_m * 100.0).round() as i32).unwrap();
+    rig.sup.command(Command::CalibrationActualDistance(d));
+    let k3 = f64::from(rig.sup.screen_status().calibration_result_x1000) / 1000.0;
+    // Expected from the truth: belt length / (drum turns · π·0.070 m).
+    let expected = belt_m / (turns * std::f64::consts::PI * 0.070);
+    assert!((k3 - expected).abs() <= 0.002, "k3 {k3} vs {expected:.4}");
+    assert!(
+        (expected - 0.994).abs() <= 0.003,
+        "the simulator's Table 13 value"
+    );
+    assert_eq!(
+        rig.sup.command(Command::CalibrationAccept),
+        supervisor::control::Effect::SettingsChanged
+    );
+}

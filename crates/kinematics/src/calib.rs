@@ -4,7 +4,7 @@
 use fixed::types::{I16F16, U16F16};
 
 use crate::consts;
-use crate::fx::{self, W};
+use crate::fx;
 use crate::table::TablePoint;
 use crate::units::{Coefficient, KilometresPerHour, Metres, MetresPerSecond, RevPerMin, Seconds};
 use crate::Error;
@@ -25,10 +25,7 @@ impl K1Result {
     /// The table point `(monitored km/h, k1)`.
     #[must_use]
     pub fn point(&self) -> TablePoint {
-        TablePoint::new(
-            U16F16::saturating_from_num(self.monitored.to_fixed()),
-            self.k1,
-        )
+        TablePoint::new(self.monitored.table_x(), self.k1)
     }
 }
 
@@ -96,10 +93,7 @@ impl SlipResult {
     /// The table point `(wheel km/h, k2)`.
     #[must_use]
     pub fn point(&self) -> TablePoint {
-        TablePoint::new(
-            U16F16::saturating_from_num(self.wheel_speed.to_fixed()),
-            self.k2,
-        )
+        TablePoint::new(self.wheel_speed.table_x(), self.k2)
     }
 }
 
@@ -123,20 +117,14 @@ pub fn k2_from_wheel_turns(
     distance: Metres,
     time: Seconds,
 ) -> Result<SlipResult, Error> {
-    let circ = fx::mul(fx::PI, consts::w::WHEEL_D)?;
-    let theo = fx::mul(fx::widen(turns), circ)?;
+    let theo = fx::mul(fx::widen_bits(turns.to_bits(), 16), consts::w::WHEEL_CIRC)?;
     let theoretical_distance = Metres::try_from_w(theo)?;
     let v = MetresPerSecond::try_from_w(fx::div(theo, time.w())?)?;
     let k2w = fx::div(distance.w(), theo)?;
     let k2 = Coefficient::try_from_w(k2w)?;
     // s = 1 − k2, signed.
-    let slip = if k2w <= W::ONE {
-        I16F16::checked_from_num(W::ONE.saturating_sub(k2w)).ok_or(Error::Overflow)?
-    } else {
-        I16F16::checked_from_num(k2w.saturating_sub(W::ONE))
-            .map(|s| s.saturating_neg())
-            .ok_or(Error::Overflow)?
-    };
+    let s = i32::try_from(fx::ONE.abs_diff(k2w) >> 16).map_err(|_| Error::Overflow)?;
+    let slip = I16F16::from_bits(if k2w <= fx::ONE { s } else { s.wrapping_neg() });
     Ok(SlipResult {
         theoretical_distance,
         wheel_speed: v.to_kmh()?,
@@ -163,16 +151,13 @@ impl K3Result {
     /// The table point `(set r/min, k3)`.
     #[must_use]
     pub fn point(&self) -> TablePoint {
-        TablePoint::new(
-            U16F16::saturating_from_num(self.set_drum_speed.to_fixed()),
-            self.k3,
-        )
+        TablePoint::new(self.set_drum_speed.table_x(), self.k3)
     }
 }
 
 /// Theoretical belt speed for a drum speed: `π·(D2+2H2)·n/60` (eq. 6 without k3).
 pub fn belt_speed(drum_speed: RevPerMin) -> Result<MetresPerSecond, Error> {
-    let circ = fx::mul(fx::PI, consts::w::DRUM_D)?;
+    let circ = consts::w::DRUM_CIRC;
     MetresPerSecond::try_from_w(fx::div_int(fx::mul(circ, drum_speed.w())?, 60)?)
 }
 

@@ -190,11 +190,16 @@ impl core::fmt::Display for Gear {
 /// Geometry in the working precision (`U32F32`), so that the calibration
 /// arithmetic reproduces the paper's tables to their printed digits.
 pub(crate) mod w {
-    use crate::fx::W;
+    use crate::fx::{const_mul, PI, W};
+    use fixed::types::U32F32;
     /// D1 + 2·H1.
-    pub(crate) const WHEEL_D: W = W::lit("0.2");
+    pub(crate) const WHEEL_D: W = U32F32::lit("0.2").to_bits();
     /// D2 + 2·H2.
-    pub(crate) const DRUM_D: W = W::lit("0.07");
+    pub(crate) const DRUM_D: W = U32F32::lit("0.07").to_bits();
     /// Lclap.
-    pub(crate) const L_CLAP: W = W::lit("0.05");
+    pub(crate) const L_CLAP: W = U32F32::lit("0.05").to_bits();
+    /// π·(D1 + 2·H1), rounded down as the product of the two above.
+    pub(crate) const WHEEL_CIRC: W = const_mul(PI, WHEEL_D);
+    /// π·(D2 + 2·H2), rounded down as the product of the two above.
+    pub(crate) const DRUM_CIRC: W = const_mul(PI, DRUM_D);
 }

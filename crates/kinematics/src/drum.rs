@@ -82,9 +82,9 @@ impl DrumSettings {
             fx::mul(consts::w::DRUM_D, self.plant_spacing.w()).map_err(ovf)?,
         )
         .map_err(ovf)?;
-        let period = W::from_num(u32::from(self.arr).saturating_add(1));
+        let period = (u64::from(self.arr).saturating_add(1)) << fx::FRAC;
         let ccr_per_rpm = fx::div(period, self.n_max.w()).map_err(ovf)?;
-        let duty_per_rpm = fx::div(W::ONE, self.n_max.w()).map_err(ovf)?;
+        let duty_per_rpm = fx::div(fx::ONE, self.n_max.w()).map_err(ovf)?;
         Ok(DrumPlan {
             settings: self,
             geom,
@@ -196,7 +196,7 @@ impl DrumPlan {
         // Solve n = u / k3(n) by two fixed-point iterations from n = u.
         let mut n = uncorrected;
         for _ in 0..2 {
-            let k3 = cal.k3_at(RevPerMin::from_fixed(fx::narrow(n)));
+            let k3 = cal.k3_at(RevPerMin::saturating_from_w(n));
             n = fx::div(uncorrected, k3.w())?;
         }
         RevPerMin::try_from_w(n)
@@ -212,7 +212,9 @@ impl DrumPlan {
     pub fn ccr(&self, drum_speed: RevPerMin) -> Result<u16, Error> {
         let raw = fx::mul(drum_speed.w(), self.ccr_per_rpm)?;
         let cap = u32::from(self.settings.arr).saturating_add(1);
-        let rounded = raw.round().saturating_to_num::<u32>().min(cap);
+        let rounded = u32::try_from(raw.saturating_add(fx::ONE >> 1) >> fx::FRAC)
+            .unwrap_or(u32::MAX)
+            .min(cap);
         Ok(u16::try_from(rounded).unwrap_or(u16::MAX))
     }
 
@@ -265,7 +267,7 @@ impl DrumPlan {
         let n_max = self.settings.n_max;
         let belt = fx::div_int(
             fx::mul(
-                fx::mul(fx::PI, consts::w::DRUM_D)?,
+                consts::w::DRUM_CIRC,
                 fx::mul(n_max.w(), cal.k3_at(n_max).w())?,
             )?,
             60,

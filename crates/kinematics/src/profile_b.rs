@@ -169,7 +169,7 @@ impl ProfileB {
     /// Eq. 4: planting motor speed `n1 = f·β°/(360·N)`.
     pub fn planting_motor_speed(&self, vm: MetresPerSecond) -> Result<RevPerMin, Error> {
         let f = fx::div(fx::mul_int(vm.w(), 60)?, self.s.plant_spacing.w())?;
-        let num = fx::mul(f, fx::widen(self.s.clamping_angle_deg))?;
+        let num = fx::mul(f, fx::widen_bits(self.s.clamping_angle_deg.to_bits(), 16))?;
         let den = 360u64.saturating_mul(u64::from(self.s.seedlings_clamped));
         RevPerMin::try_from_w(fx::div_int(num, den)?)
     }

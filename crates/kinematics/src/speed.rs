@@ -56,7 +56,10 @@ pub fn m_method_window(psc: u16, arr: u16, hclk_hz: u32) -> Result<Seconds, Erro
     let counts = u64::from(psc)
         .saturating_add(1)
         .saturating_mul(u64::from(arr).saturating_add(1));
-    Seconds::try_from_w(fx::div_int(fx::W::from_num(counts), u64::from(hclk_hz))?)
+    Seconds::try_from_w(fx::div_int(
+        fx::mul_int(counts, fx::ONE)?,
+        u64::from(hclk_hz),
+    )?)
 }
 
 /// Paper A eq. 2 without k1: `n = 60·N/(Z1·t)` r/min for `pulses` counted in `window`.
@@ -73,7 +76,7 @@ pub fn m_method_window(psc: u16, arr: u16, hclk_hz: u32) -> Result<Seconds, Erro
 pub fn m_method_gear_speed(pulses: u32, window: Seconds, teeth: u8) -> Result<RevPerMin, Error> {
     let den = fx::mul_int(window.w(), u64::from(teeth))?;
     RevPerMin::try_from_w(fx::div(
-        fx::W::from_num(u64::from(pulses).saturating_mul(60)),
+        fx::mul_int(u64::from(pulses).saturating_mul(60), fx::ONE)?,
         den,
     )?)
 }
@@ -526,16 +529,17 @@ impl MtEstimator {
 
     /// r/min (U12F20 bits, saturating) for an angle `w` (Q16 shares) over `ticks`.
     fn rpm_bits(&self, w: u64, ticks: u32) -> u32 {
-        let den = u128::from(self.weight_sum).saturating_mul(u128::from(ticks));
+        // S < 2^22 and T < 2^32: the product is exact.
+        let den = u64::from(self.weight_sum).saturating_mul(u64::from(ticks));
         if den == 0 {
             return u32::MAX;
         }
         // n = 60·f·(w/S)/T r/min; ·2^20 for U12F20; the weights carry z·2^16 per rev in S.
-        let num = u128::from(w)
-            .saturating_mul(60)
-            .saturating_mul(u128::from(self.cfg.timer_hz))
-            .saturating_mul(1 << 20);
-        u32::try_from(num.checked_div(den).unwrap_or(0)).unwrap_or(u32::MAX)
+        // 60·f·2^20 < 2^58; w·60·f·2^20 is formed exactly in 128 bits.
+        let scale = (u64::from(self.cfg.timer_hz).wrapping_mul(60)) << 20;
+        fx::mul_div(w, scale, den)
+            .and_then(|q| u32::try_from(q).ok())
+            .unwrap_or(u32::MAX)
     }
 
     fn learn(&mut self) {

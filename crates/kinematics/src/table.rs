@@ -240,8 +240,8 @@ impl CoeffTable {
 }
 
 fn interpolate(a: &TablePoint, b: &TablePoint, x: U16F16) -> Result<Coefficient, crate::Error> {
-    let span = fx::widen(b.x.saturating_sub(a.x));
-    let off = fx::widen(x.saturating_sub(a.x));
+    let span = fx::widen_bits(b.x.saturating_sub(a.x).to_bits(), 16);
+    let off = fx::widen_bits(x.saturating_sub(a.x).to_bits(), 16);
     let frac = fx::div(off, span)?;
     let ka = a.k.w();
     let kb = b.k.w();

@@ -121,20 +121,19 @@ impl Calibration {
     /// k1 at a monitored travel speed.
     #[must_use]
     pub fn k1_at(&self, monitored: KilometresPerHour) -> Coefficient {
-        self.k1
-            .eval(U16F16::saturating_from_num(monitored.to_fixed()))
+        self.k1.eval(monitored.table_x())
     }
 
     /// k2 at a (k1-corrected) wheel speed.
     #[must_use]
     pub fn k2_at(&self, wheel: KilometresPerHour) -> Coefficient {
-        self.k2.eval(U16F16::saturating_from_num(wheel.to_fixed()))
+        self.k2.eval(wheel.table_x())
     }
 
     /// k3 at a set drum speed.
     #[must_use]
     pub fn k3_at(&self, drum: RevPerMin) -> Coefficient {
-        self.k3.eval(U16F16::saturating_from_num(drum.to_fixed()))
+        self.k3.eval(drum.table_x())
     }
 
     /// Serialises: `[version, k1 table, k2 table, k3 table]`, each table
@@ -209,13 +208,13 @@ impl TravelSpeed {
 
 /// Linear speed (m/s) of the track for a gear speed: `π·(D1+2H1)·n/60`.
 pub fn wheel_surface_speed(gear_speed: RevPerMin) -> Result<MetresPerSecond, Error> {
-    let circ = fx::mul(fx::PI, consts::w::WHEEL_D)?;
+    let circ = consts::w::WHEEL_CIRC;
     MetresPerSecond::try_from_w(fx::div_int(fx::mul(circ, gear_speed.w())?, 60)?)
 }
 
 /// Gear speed (r/min) for a track speed: `60·v/(π·(D1+2H1))`.
 pub fn gear_speed_for(speed: MetresPerSecond) -> Result<RevPerMin, Error> {
-    let circ = fx::mul(fx::PI, consts::w::WHEEL_D)?;
+    let circ = consts::w::WHEEL_CIRC;
     RevPerMin::try_from_w(fx::div(fx::mul_int(speed.w(), 60)?, circ)?)
 }
 

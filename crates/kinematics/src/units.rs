@@ -80,16 +80,15 @@ macro_rules! unit {
             /// `num / den` in this unit, rounded down; saturates, `None` if `den == 0`.
             #[must_use]
             pub fn from_ratio(num: u32, den: u32) -> Option<Self> {
-                if den == 0 {
-                    return None;
-                }
-                W::from_num(num).checked_div_int(u64::from(den)).map(|w| Self(fx::narrow(w)))
+                let bits = (u64::from(num) << Self::FRAC).checked_div(u64::from(den))?;
+                Some(Self::from_bits(u32::try_from(bits).unwrap_or(u32::MAX)))
             }
             /// Value in thousandths of the unit, rounded down and saturating (for logs and the HMI).
             #[must_use]
             pub fn to_milli(self) -> u32 {
-                let w = fx::widen(self.0).saturating_mul_int(1000);
-                w.saturating_to_num::<u32>()
+                // Below 2^42: no overflow.
+                let m = u64::from(self.to_bits()).wrapping_mul(1000) >> Self::FRAC;
+                u32::try_from(m).unwrap_or(u32::MAX)
             }
             /// Saturating sum.
             #[must_use]
@@ -110,13 +109,27 @@ macro_rules! unit {
                     rhs.saturating_sub(self)
                 }
             }
+            /// Fractional bits of the storage type.
+            const FRAC: u32 = <$fix>::FRAC_NBITS;
             #[allow(dead_code)]
             pub(crate) fn w(self) -> W {
-                fx::widen(self.0)
+                fx::widen_bits(self.to_bits(), Self::FRAC)
             }
             #[allow(dead_code)]
             pub(crate) fn try_from_w(w: W) -> Result<Self, Error> {
-                fx::try_narrow(w).map(Self)
+                fx::narrow_bits(w, Self::FRAC)
+                    .map(Self::from_bits)
+                    .ok_or(Error::Overflow)
+            }
+            /// As a table abscissa (`U16F16`, rounded down, saturating).
+            #[allow(dead_code)]
+            pub(crate) fn table_x(self) -> U16F16 {
+                U16F16::from_bits(fx::narrow_bits(self.w(), 16).unwrap_or(u32::MAX))
+            }
+            /// Saturating at [`Self::MAX`].
+            #[allow(dead_code)]
+            pub(crate) fn saturating_from_w(w: W) -> Self {
+                Self::from_bits(fx::narrow_bits(w, Self::FRAC).unwrap_or(u32::MAX))
             }
         }
 

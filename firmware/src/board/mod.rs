@@ -55,3 +55,52 @@ pub struct SensorSample {
     /// [`HallCapture::on_interrupt`]).
     pub hall_edges: heapless::Vec<u32, MAX_EDGES_PER_SAMPLE>,
 }
+
+/// The two 1 KB pages of the settings store (both boards).
+pub const SETTINGS_FLASH_BYTES: u32 = 2 * 1024;
+/// Erase unit of the settings flash (the F103's page).
+pub const SETTINGS_PAGE_BYTES: u32 = 1024;
+
+/// Errors of the settings flash, on either board.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub enum FlashError {
+    /// Outside the settings pages, or misaligned.
+    OutOfBounds,
+    /// Programming a half-word that is not erased (the F103's PGERR).
+    NotErased,
+    /// The flash controller (real board) or the host file (QEMU) failed.
+    Device,
+}
+
+impl embedded_storage::nor_flash::NorFlashError for FlashError {
+    fn kind(&self) -> embedded_storage::nor_flash::NorFlashErrorKind {
+        match self {
+            Self::OutOfBounds => embedded_storage::nor_flash::NorFlashErrorKind::OutOfBounds,
+            Self::NotErased | Self::Device => embedded_storage::nor_flash::NorFlashErrorKind::Other,
+        }
+    }
+}
+
+/// Checks an access of `len` bytes at `offset` against the settings pages
+/// and the write unit `align` (1 for reads, 2 for half-word programs);
+/// returns its end.
+pub fn check_flash_access(offset: u32, len: usize, align: u32) -> Result<u32, FlashError> {
+    let len = u32::try_from(len).map_err(|_| FlashError::OutOfBounds)?;
+    let end = offset.checked_add(len).ok_or(FlashError::OutOfBounds)?;
+    if end > SETTINGS_FLASH_BYTES || !offset.is_multiple_of(align) || !len.is_multiple_of(align) {
+        return Err(FlashError::OutOfBounds);
+    }
+    Ok(end)
+}
+
+/// Checks an erase of the pages `[from, to)`.
+pub fn check_flash_erase(from: u32, to: u32) -> Result<(), FlashError> {
+    if !from.is_multiple_of(SETTINGS_PAGE_BYTES)
+        || !to.is_multiple_of(SETTINGS_PAGE_BYTES)
+        || to > SETTINGS_FLASH_BYTES
+        || from > to
+    {
+        return Err(FlashError::OutOfBounds);
+    }
+    Ok(())
+}

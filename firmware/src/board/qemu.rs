@@ -25,9 +25,7 @@
 
 use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering::Relaxed};
 
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use machine_sim::{Fault, Inputs, Machine};
 use stm32f1xx_hal::{
     pac::{self, USART1},
@@ -38,7 +36,10 @@ use stm32f1xx_hal::{
 
 use defmt_semihosting as _;
 
-use super::{SensorSample, DRUM_PWM_HZ};
+use super::{
+    check_flash_access, check_flash_erase, FlashError, SensorSample, DRUM_PWM_HZ,
+    SETTINGS_FLASH_BYTES, SETTINGS_PAGE_BYTES,
+};
 
 /// Transmit half of the touchscreen UART.
 pub type HmiTx = Tx<USART1>;
@@ -423,34 +424,11 @@ fn parse_i32(text: &[u8]) -> Option<i32> {
     }
 }
 
-/// Size of the settings flash stand-in: the two 1 KB pages the store uses.
-pub const SETTINGS_FLASH_BYTES: u32 = 2 * 1024;
-
 /// The settings flash stand-in: a host file through semihosting, with the
 /// F103's NOR rules enforced (erase to 0xFF in 1 KB pages, programming in
 /// half-words onto erased half-words only).
 pub struct SettingsFlash {
     handle: usize,
-}
-
-/// Errors of the flash stand-in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
-pub enum FlashError {
-    /// Outside the stand-in, or misaligned.
-    OutOfBounds,
-    /// Programming a half-word that is not erased (the F103's PGERR).
-    NotErased,
-    /// The host file could not be read or written.
-    Io,
-}
-
-impl NorFlashError for FlashError {
-    fn kind(&self) -> NorFlashErrorKind {
-        match self {
-            Self::OutOfBounds => NorFlashErrorKind::OutOfBounds,
-            Self::NotErased | Self::Io => NorFlashErrorKind::Other,
-        }
-    }
 }
 
 mod sh {
@@ -522,16 +500,11 @@ impl ReadNorFlash for SettingsFlash {
     const READ_SIZE: usize = 1;
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
-        let end = offset
-            .checked_add(bytes.len() as u32)
-            .ok_or(FlashError::OutOfBounds)?;
-        if end > SETTINGS_FLASH_BYTES {
-            return Err(FlashError::OutOfBounds);
-        }
+        check_flash_access(offset, bytes.len(), 1)?;
         if sh::seek(self.handle, offset) && sh::read(self.handle, bytes) {
             Ok(())
         } else {
-            Err(FlashError::Io)
+            Err(FlashError::Device)
         }
     }
 
@@ -542,21 +515,15 @@ impl ReadNorFlash for SettingsFlash {
 
 impl NorFlash for SettingsFlash {
     const WRITE_SIZE: usize = 2;
-    const ERASE_SIZE: usize = 1024;
+    const ERASE_SIZE: usize = SETTINGS_PAGE_BYTES as usize;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
-        if !from.is_multiple_of(1024)
-            || !to.is_multiple_of(1024)
-            || to > SETTINGS_FLASH_BYTES
-            || from > to
-        {
-            return Err(FlashError::OutOfBounds);
-        }
+        check_flash_erase(from, to)?;
         let erased = [0xFFu8; 256];
         let mut at = from;
         while at < to {
             if !(sh::seek(self.handle, at) && sh::write(self.handle, &erased)) {
-                return Err(FlashError::Io);
+                return Err(FlashError::Device);
             }
             at += 256;
         }
@@ -564,13 +531,7 @@ impl NorFlash for SettingsFlash {
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
-        let end = offset
-            .checked_add(bytes.len() as u32)
-            .ok_or(FlashError::OutOfBounds)?;
-        if !offset.is_multiple_of(2) || !bytes.len().is_multiple_of(2) || end > SETTINGS_FLASH_BYTES
-        {
-            return Err(FlashError::OutOfBounds);
-        }
+        check_flash_access(offset, bytes.len(), 2)?;
         // Check erased first, like the F103 refuses to program over data.
         let mut at = offset;
         for chunk in bytes.chunks(64) {
@@ -581,7 +542,7 @@ impl NorFlash for SettingsFlash {
                 return Err(FlashError::NotErased);
             }
             if !(sh::seek(self.handle, at) && sh::write(self.handle, chunk)) {
-                return Err(FlashError::Io);
+                return Err(FlashError::Device);
             }
             at += chunk.len() as u32;
         }

@@ -13,9 +13,7 @@
 //! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable, RS-485 to the motor driver, 9600 8N1 |
 //! | PC13 | status LED (low = on) |
 
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use kinematics::speed::CaptureExtender;
 use stm32f1xx_hal::{
     flash::{self, FlashSize, SectorSize},
@@ -29,7 +27,10 @@ use stm32f1xx_hal::{
 
 use defmt_rtt as _;
 
-use super::{SensorSample, DRUM_PWM_HZ};
+use super::{
+    check_flash_access, check_flash_erase, FlashError, SensorSample, DRUM_PWM_HZ,
+    SETTINGS_FLASH_BYTES, SETTINGS_PAGE_BYTES,
+};
 
 /// Frequency of the Hall capture timer: one tick is 1 µs.
 const HALL_TIMER_HZ: u32 = 1_000_000;
@@ -337,42 +338,9 @@ impl Watchdog {
 /// Offset of the settings pages from the start of flash (0x0801E000, see
 /// memory-stm32f103.x).
 const SETTINGS_OFFSET: u32 = 0x1E000;
-/// The two 1 KB pages the settings store uses.
-pub const SETTINGS_FLASH_BYTES: u32 = 2 * 1024;
-
 /// The settings pages of the MCU's own flash as a NOR flash.
 pub struct SettingsFlash {
     flash: flash::Parts,
-}
-
-/// Errors of the flash controller.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
-pub enum FlashError {
-    /// Outside the settings pages, or misaligned.
-    OutOfBounds,
-    /// The controller reported an error (programming, protection, verify).
-    Controller,
-}
-
-impl NorFlashError for FlashError {
-    fn kind(&self) -> NorFlashErrorKind {
-        match self {
-            Self::OutOfBounds => NorFlashErrorKind::OutOfBounds,
-            Self::Controller => NorFlashErrorKind::Other,
-        }
-    }
-}
-
-impl SettingsFlash {
-    fn check(offset: u32, len: usize) -> Result<u32, FlashError> {
-        let end = offset
-            .checked_add(u32::try_from(len).map_err(|_| FlashError::OutOfBounds)?)
-            .ok_or(FlashError::OutOfBounds)?;
-        if end > SETTINGS_FLASH_BYTES {
-            return Err(FlashError::OutOfBounds);
-        }
-        Ok(SETTINGS_OFFSET + offset)
-    }
 }
 
 impl ErrorType for SettingsFlash {
@@ -383,11 +351,11 @@ impl ReadNorFlash for SettingsFlash {
     const READ_SIZE: usize = 1;
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
-        let at = Self::check(offset, bytes.len())?;
+        check_flash_access(offset, bytes.len(), 1)?;
         let writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
         let data = writer
-            .read(at, bytes.len())
-            .map_err(|_| FlashError::Controller)?;
+            .read(SETTINGS_OFFSET + offset, bytes.len())
+            .map_err(|_| FlashError::Device)?;
         bytes.copy_from_slice(data);
         Ok(())
     }
@@ -399,26 +367,22 @@ impl ReadNorFlash for SettingsFlash {
 
 impl NorFlash for SettingsFlash {
     const WRITE_SIZE: usize = 2;
-    const ERASE_SIZE: usize = 1024;
+    const ERASE_SIZE: usize = SETTINGS_PAGE_BYTES as usize;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
-        if !from.is_multiple_of(1024) || !to.is_multiple_of(1024) || from > to {
-            return Err(FlashError::OutOfBounds);
-        }
-        let at = Self::check(from, (to - from) as usize)?;
+        check_flash_erase(from, to)?;
         let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
         writer
-            .erase(at, (to - from) as usize)
-            .map_err(|_| FlashError::Controller)
+            .erase(SETTINGS_OFFSET + from, (to - from) as usize)
+            .map_err(|_| FlashError::Device)
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
-        if !offset.is_multiple_of(2) || !bytes.len().is_multiple_of(2) {
-            return Err(FlashError::OutOfBounds);
-        }
-        let at = Self::check(offset, bytes.len())?;
+        check_flash_access(offset, bytes.len(), 2)?;
         let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
-        writer.write(at, bytes).map_err(|_| FlashError::Controller)
+        writer
+            .write(SETTINGS_OFFSET + offset, bytes)
+            .map_err(|_| FlashError::Device)
     }
 }
 

@@ -6,37 +6,8 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
+use machine_sim::reference::eq7_drum_speed;
 use qemu_tests::{log_time_ms, sim_samples, Bench, BootOptions, SimSample};
-
-/// Eq. 7 on the truth: the drum speed (r/min) that drops one partition per
-/// `spacing_m` of ground at `ground_m_s`; belt slip k3 from Table 13.
-fn eq7_target(ground_m_s: f64, spacing_m: f64) -> f64 {
-    let table = [
-        (5.0, 0.993),
-        (10.0, 0.982),
-        (15.0, 0.986),
-        (20.0, 0.994),
-        (25.0, 0.980),
-    ];
-    let k3 = |n: f64| -> f64 {
-        if n <= 5.0 {
-            return 0.993;
-        }
-        for w in table.windows(2) {
-            let ((x0, y0), (x1, y1)) = (w[0], w[1]);
-            if n <= x1 {
-                return y0 + (y1 - y0) * (n - x0) / (x1 - x0);
-            }
-        }
-        0.980
-    };
-    let base = ground_m_s * 0.05 / spacing_m * 60.0 / (std::f64::consts::PI * 0.070);
-    let mut n = base;
-    for _ in 0..3 {
-        n = base / k3(n);
-    }
-    n
-}
 
 fn boot(scenario: &[&str], run_ms: u32, flash: Option<PathBuf>) -> Bench {
     let options = BootOptions {
@@ -110,7 +81,7 @@ fn speed_adaptive_7cm_low2_settles_in_half_a_second_and_holds_1_percent_through_
     assert!(samples.len() > 100, "{} samples", samples.len());
     let mut worst: (f64, u32) = (0.0, 0);
     for s in &samples {
-        let target = eq7_target(s.ground_m_s, 0.07);
+        let target = eq7_drum_speed(s.ground_m_s, 0.07);
         let err = (s.drum_rpm - target).abs() / target;
         if err > worst.0 {
             worst = (err, s.t_ms);

@@ -119,10 +119,10 @@ pub struct Config {
     pub feed_roller_radius_m: f32,
     /// Seedling-belt thickness `h`, m (unpublished). Default 0.001 as the
     /// firmware stores it (`ProfileBSettings::default().belt_thickness`,
-    /// U12F20: 0.000 999 45 m).
+    /// U12F20: 0.001 000 4 m).
     pub feed_belt_thickness_m: f32,
     /// Seedling pitch on the belt `B`, m. Default 0.10 (paper B;
-    /// `ProfileBSettings::default().belt_pitch`, U12F20: 0.099 999 6 m).
+    /// `ProfileBSettings::default().belt_pitch`, U12F20: 0.100 000 4 m).
     pub seedling_pitch_m: f32,
 
     // ----- field metrics -----

@@ -65,6 +65,8 @@ mod machine;
 mod metrics;
 #[cfg(feature = "std")]
 mod recorder;
+#[cfg(feature = "std")]
+pub mod reference;
 mod rng;
 pub mod tables;
 

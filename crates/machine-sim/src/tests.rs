@@ -486,7 +486,7 @@ fn config_errors_name_the_field() {
 fn profile_b_ground_encoder_and_eq9_feeding_give_the_target_spacing() {
     // Vm = 0.3 m/s (no slip), X = 0.25 m, and the default machine: B = 0.10 m,
     // r = 0.025 m, h = 0.001 m (the firmware's `ProfileBSettings::default()`,
-    // as stored in U12F20: B = 0.099 999 6 m, h = 0.000 999 45 m), 1600
+    // as stored in U12F20: B = 0.100 000 4 m, h = 0.001 000 4 m), 1600
     // steps/rev. Eq. 9: n2 = 60·Vm·B / (2π·X·(r + h·j)) r/min, recomputed
     // whenever j increments; step rate = n2/60 · 1600.
     let c = Config {

@@ -14,6 +14,7 @@
 use hmi_proto::screen::{Command, DrumSpeed, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
+use machine_sim::reference::eq7_drum_speed;
 use machine_sim::{Config, Fault, Inputs, Machine};
 use supervisor::control::{Actuation, Alarm, Hardware, RunState, Supervisor};
 use supervisor::settings::Settings;
@@ -59,37 +60,6 @@ impl Rig {
             self.period();
         }
     }
-}
-
-/// Eq. 7 from the truth: the drum speed (r/min) at which the belt drops one
-/// partition per `spacing` of ground: V2 = v·Lclap/Lplant and
-/// V2 = k3·π·0.070·n/60, with k3 from Table 13 (interpolated here in f64).
-fn eq7_target(ground_m_s: f64, spacing_m: f64) -> f64 {
-    let k3_table = [
-        (5.0, 0.993),
-        (10.0, 0.982),
-        (15.0, 0.986),
-        (20.0, 0.994),
-        (25.0, 0.980),
-    ];
-    let k3 = |n: f64| -> f64 {
-        if n <= 5.0 {
-            return 0.993;
-        }
-        for w in k3_table.windows(2) {
-            let ((x0, y0), (x1, y1)) = (w[0], w[1]);
-            if n <= x1 {
-                return y0 + (y1 - y0) * (n - x0) / (x1 - x0);
-            }
-        }
-        0.980
-    };
-    // n depends on k3(n): two fixed-point iterations converge (k3 is flat).
-    let mut n = ground_m_s * 0.05 / spacing_m * 60.0 / (std::f64::consts::PI * 0.070);
-    for _ in 0..3 {
-        n = ground_m_s * 0.05 / spacing_m * 60.0 / (k3(n) * std::f64::consts::PI * 0.070);
-    }
-    n
 }
 
 fn adaptive(spacing_mm: u16) -> Settings {
@@ -146,7 +116,7 @@ fn speed_adaptive_7cm_low2_settles_within_half_a_second_and_follows_a_10_percent
             18_000 => rig.m.inject_speed_step(-0.10),
             _ => {}
         }
-        let target = eq7_target(f64::from(rig.m.travel_speed_m_s()), 0.07);
+        let target = eq7_drum_speed(f64::from(rig.m.travel_speed_m_s()), 0.07);
         let err = (f64::from(rig.m.drum_speed_rpm()) - target).abs() / target;
         if (500..2_000).contains(&t) {
             worst_after_settle = worst_after_settle.max(err);

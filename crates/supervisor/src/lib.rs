@@ -9,5 +9,6 @@ extern crate std;
 
 pub mod control;
 pub mod crc;
+pub mod profile_b;
 pub mod settings;
 pub mod store;

@@ -216,7 +216,7 @@ impl From<ProfileBConfigError> for Error {
 /// The defaults are `ProfileBSettings::default()`: X = 25 cm, B = 10 cm
 /// (paper B's bench), β = 120°, N = 2, r = 25 mm, h = 1 mm, Y = 0.02 m/s,
 /// 1600 steps/rev (unpublished, SPEC §8; `machine-sim` models the same
-/// machine by default).
+/// machine by default): `ProfileBConfig::new(ProfileBSettings::default())`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ProfileBConfig {
@@ -328,59 +328,6 @@ impl ProfileBConfig {
     }
 }
 
-impl Default for ProfileBConfig {
-    fn default() -> Self {
-        // The defaults are within every range (tested); the fallback keeps
-        // this free of a panic should a default ever move out of range.
-        Self::new(ProfileBSettings::default()).unwrap_or(Self {
-            plan: ProfileB::fallback(),
-        })
-    }
-}
-
-/// Private helper: a validated plan for the (impossible) case where the
-/// defaults were refused.
-trait Fallback {
-    fn fallback() -> Self;
-}
-
-impl Fallback for ProfileB {
-    fn fallback() -> Self {
-        // `ProfileBSettings::build` only refuses zeros; the defaults are not.
-        match ProfileBSettings::default().build() {
-            Ok(p) => p,
-            Err(_) => match (ProfileBSettings {
-                plant_spacing: Metres::lit("0.25"),
-                belt_pitch: Metres::lit("0.10"),
-                clamping_angle_deg: U16F16::lit("120"),
-                seedlings_clamped: 2,
-                roller_radius: Metres::lit("0.025"),
-                belt_thickness: Metres::ZERO,
-                threshold: MetresPerSecond::lit("0.02"),
-                planting_steps_per_rev: 1600,
-                feeding_steps_per_rev: 1600,
-            })
-            .build()
-            {
-                Ok(p) => p,
-                // Unreachable: every field above is non-zero where it must be.
-                Err(_) => Self::fallback_unreachable(),
-            },
-        }
-    }
-}
-
-trait FallbackUnreachable {
-    fn fallback_unreachable() -> Self;
-}
-
-impl FallbackUnreachable for ProfileB {
-    #[allow(clippy::unconditional_recursion)]
-    fn fallback_unreachable() -> Self {
-        Self::fallback()
-    }
-}
-
 /// What the step-pulse timers must produce after a control step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -433,6 +380,8 @@ pub struct ProfileBSnapshot {
     pub travel_speed: MetresPerSecond,
     /// The linkage's decision this period.
     pub action: LinkageAction,
+    /// The travel speed the motor speeds were computed for (V0).
+    pub computed_for: MetresPerSecond,
     /// Planting motor speed n1 (eq. 4) the linkage holds.
     pub planting_speed: RevPerMin,
     /// Feeding motor speed n2 (eq. 9) the linkage holds.
@@ -504,6 +453,7 @@ impl BeltPlanter {
                 state: PlanterState::Stopped,
                 travel_speed: MetresPerSecond::ZERO,
                 action: LinkageAction::Stop,
+                computed_for: MetresPerSecond::ZERO,
                 planting_speed: RevPerMin::ZERO,
                 feeding_speed: RevPerMin::ZERO,
                 roller_turns: 0,
@@ -695,6 +645,7 @@ impl BeltPlanter {
                     self.feed = self.slew(self.feed, tf);
                     self.plant = self.slew(self.plant, tp);
                     self.snapshot.action = m.action;
+                    self.snapshot.computed_for = m.computed_for;
                     self.snapshot.planting_speed = m.planting_speed;
                     self.snapshot.feeding_speed = m.feeding_speed;
                     self.snapshot.target_feed_step_hz = tf;
@@ -739,6 +690,7 @@ impl BeltPlanter {
         self.feed = Hertz::ZERO;
         self.plant = Hertz::ZERO;
         self.snapshot.action = action;
+        self.snapshot.computed_for = MetresPerSecond::ZERO;
         self.snapshot.planting_speed = RevPerMin::ZERO;
         self.snapshot.feeding_speed = RevPerMin::ZERO;
         self.snapshot.target_feed_step_hz = Hertz::ZERO;
@@ -748,8 +700,8 @@ impl BeltPlanter {
     /// Ground since Start: counts · π·D / counts_per_turn, mm.
     fn distance_mm(&self) -> u32 {
         // D in µm: bits · 10^6 / 2^20.
-        let d_um = u128::from(self.hw.ground_wheel_diameter.to_bits()).saturating_mul(1_000_000)
-            >> 20u32;
+        let d_um =
+            u128::from(self.hw.ground_wheel_diameter.to_bits()).saturating_mul(1_000_000) >> 20u32;
         let um = u128::from(self.counts_since_start)
             .saturating_mul(d_um)
             .saturating_mul(355)

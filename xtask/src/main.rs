@@ -380,6 +380,23 @@ fn test() -> Result<Totals> {
     Ok(totals)
 }
 
+/// The `no_std` library crates (host-tested, built for thumbv7m too).
+const LIBRARIES: &[&str] = &[
+    "kinematics",
+    "fuzzy-pid",
+    "hmi-proto",
+    "machine-sim",
+    "supervisor",
+];
+
+/// `-p NAME` for each package.
+fn packages(names: &[&str]) -> Vec<String> {
+    names
+        .iter()
+        .flat_map(|n| ["-p".to_string(), (*n).to_string()])
+        .collect()
+}
+
 /// `cargo xtask ci`: everything a submission must pass.
 fn ci() -> Result {
     let started = Instant::now();
@@ -401,28 +418,19 @@ fn ci() -> Result {
     )?;
     run(
         "clippy logic crates and the bench program for thumbv7m",
-        cargo().args([
-            "clippy",
-            "-p",
-            "kinematics",
-            "-p",
-            "fuzzy-pid",
-            "-p",
-            "hmi-proto",
-            "-p",
-            "machine-sim",
-            "-p",
-            "supervisor",
-            "-p",
-            "bench",
-            "--features",
-            "kinematics/defmt,fuzzy-pid/defmt,hmi-proto/defmt,supervisor/defmt",
-            "--target",
-            TARGET,
-            "--",
-            "-D",
-            "warnings",
-        ]),
+        cargo()
+            .arg("clippy")
+            .args(packages(LIBRARIES))
+            .args(["-p", "bench"])
+            .args([
+                "--features",
+                "kinematics/defmt,fuzzy-pid/defmt,hmi-proto/defmt,supervisor/defmt",
+                "--target",
+                TARGET,
+                "--",
+                "-D",
+                "warnings",
+            ]),
     )?;
     for board in Board::ALL {
         board.clippy()?;
@@ -430,20 +438,8 @@ fn ci() -> Result {
     run(
         "rustdoc (warnings denied)",
         cargo()
-            .args([
-                "doc",
-                "--no-deps",
-                "-p",
-                "kinematics",
-                "-p",
-                "fuzzy-pid",
-                "-p",
-                "hmi-proto",
-                "-p",
-                "machine-sim",
-                "-p",
-                "supervisor",
-            ])
+            .args(["doc", "--no-deps"])
+            .args(packages(LIBRARIES))
             .env("RUSTDOCFLAGS", "-D warnings"),
     )?;
     let totals = test()?;
@@ -570,4 +566,3 @@ fn flash() -> Result {
             .arg(elf),
     )
 }
-

@@ -411,6 +411,11 @@ pub struct ProfileBSnapshot {
 #[derive(Clone, Debug)]
 pub struct BeltPlanter {
     hw: ProfileBHardware,
+    /// Travel speed of one ground count per period, `MetresPerSecond` bits
+    /// (U8F24) × 2^16: `π·D/(counts_per_turn·T)`.
+    vm_per_count_q16: u64,
+    /// Ground per count, nm: `π·D/counts_per_turn`.
+    nm_per_count: u64,
     config: ProfileBConfig,
     linkage: Linkage,
     compensation: bool,
@@ -435,8 +440,25 @@ impl BeltPlanter {
     pub fn new(config: ProfileBConfig, hw: ProfileBHardware) -> Result<Self, Error> {
         hw.validate()?;
         let s = config.settings();
+        // π as 355/113 (relative error 8.5e-8). D ≤ 2 m, so D_bits ≤ 2^21 and
+        // every product below fits u64 (no u128 arithmetic on the MCU).
+        let d = u64::from(hw.ground_wheel_diameter.to_bits());
+        let cpr = u64::from(hw.ground_counts_per_turn);
+        // U8F24 bits = D_bits(U12F20)·2^4 · 10^6/T_us · π / cpr, then × 2^16.
+        let num = d.saturating_mul(355 * 16 * 1_000_000);
+        let den = cpr
+            .saturating_mul(u64::from(hw.control_period_us))
+            .saturating_mul(113);
+        let vm_per_count_q16 = mul_div_q16(num, den).ok_or(Error::Hardware)?;
+        // nm = D_bits · 10^9 / 2^20 · π / cpr.
+        let nm_per_count = d
+            .saturating_mul(355 * 1_000_000_000)
+            .checked_div(cpr.saturating_mul(113 << 20))
+            .ok_or(Error::Hardware)?;
         Ok(Self {
             hw,
+            vm_per_count_q16,
+            nm_per_count,
             config,
             linkage: Linkage::new(*config.plan()),
             compensation: true,
@@ -540,22 +562,17 @@ impl BeltPlanter {
     /// `Vm = π·D·counts / (counts_per_turn · periods · T)`.
     fn travel_speed(&self) -> MetresPerSecond {
         let n = usize::from(self.filled);
-        let counts: u128 = self
+        // ≤ 32 × 65 535 counts.
+        let counts: u64 = self
             .window
             .iter()
             .take(n)
-            .map(|&c| u128::from(c))
-            .fold(0, u128::saturating_add);
-        // U8F24 bits = π·counts·D_bits(U12F20)·2^4·10^6 / (cpr·n·T_us),
-        // π as 355/113 (relative error 8.5e-8).
-        let num = counts
-            .saturating_mul(u128::from(self.hw.ground_wheel_diameter.to_bits()))
-            .saturating_mul(16 * 1_000_000 * 355);
-        let den = u128::from(self.hw.ground_counts_per_turn)
-            .saturating_mul(u128::from(self.filled))
-            .saturating_mul(u128::from(self.hw.control_period_us))
-            .saturating_mul(113);
-        let bits = num.checked_div(den).unwrap_or(0);
+            .map(|&c| u64::from(c))
+            .fold(0, u64::saturating_add);
+        let bits = counts
+            .saturating_mul(self.vm_per_count_q16)
+            .checked_div(u64::from(self.filled) << 16)
+            .unwrap_or(0);
         MetresPerSecond::from_bits(u32::try_from(bits).unwrap_or(u32::MAX))
     }
 
@@ -697,16 +714,19 @@ impl BeltPlanter {
         self.snapshot.target_plant_step_hz = Hertz::ZERO;
     }
 
-    /// Ground since Start: counts · π·D / counts_per_turn, mm.
+    /// Ground since Start, mm.
     fn distance_mm(&self) -> u32 {
-        // D in µm: bits · 10^6 / 2^20.
-        let d_um =
-            u128::from(self.hw.ground_wheel_diameter.to_bits()).saturating_mul(1_000_000) >> 20u32;
-        let um = u128::from(self.counts_since_start)
-            .saturating_mul(d_um)
-            .saturating_mul(355)
-            .checked_div(u128::from(self.hw.ground_counts_per_turn).saturating_mul(113))
-            .unwrap_or(0);
-        u32::try_from(um / 1000).unwrap_or(u32::MAX)
+        let nm = self.counts_since_start.saturating_mul(self.nm_per_count);
+        u32::try_from(nm / 1_000_000).unwrap_or(u32::MAX)
     }
+}
+
+/// `num · 2^16 / den` without overflow for `den < 2^47`; `None` if `den` is 0.
+fn mul_div_q16(num: u64, den: u64) -> Option<u64> {
+    let q = num.checked_div(den)?;
+    let r = num.checked_rem(den)?;
+    Some(
+        q.saturating_mul(1 << 16)
+            .saturating_add((r << 16).checked_div(den)?),
+    )
 }

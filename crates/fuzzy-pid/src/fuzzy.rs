@@ -27,7 +27,7 @@
 
 use fixed::types::I16F16;
 
-use crate::rules::{GainOutput, RuleBase, RuleBaseSize, Table, MAX_SETS};
+use crate::rules::{GainOutput, RuleBase, RuleBaseSize, Table};
 use crate::{Error, Gains};
 
 type Fix = I16F16;
@@ -201,7 +201,7 @@ fn strengths(and: AndOperator, w: Fix, v: Fix) -> ([Fix; 4], Option<Fix>) {
     match and {
         AndOperator::Product => {
             // Exact partition of unity: m00 + m10 + m01 + m11 == 1 bit for bit.
-            let m11 = w.saturating_mul(v);
+            let m11 = crate::smul(w, v);
             let m10 = w.saturating_sub(m11);
             let m01 = v.saturating_sub(m11);
             let m00 = w0.saturating_sub(m01);
@@ -269,28 +269,30 @@ fn singleton(values: &[Fix; 7], label: i8) -> Fix {
 
 impl FuzzyTuner {
     /// Validates `cfg` and precomputes scale factors and rule singletons.
+    #[inline(never)]
     pub fn new(cfg: &FuzzyConfig) -> Result<Self, Error> {
         cfg.validate()?;
         let n = cfg.rules.size();
         let e = Axis::new(n, cfg.e_domain)?;
         let ec = Axis::new(n, cfg.ec_domain)?;
-        let outputs = [GainOutput::Kp, GainOutput::Ki, GainOutput::Kd];
-        let ranges = [cfg.range.kp, cfg.range.ki, cfg.range.kd];
-        let mut labels = [[[0_i8; MAX_SETS]; MAX_SETS]; 3];
-        let mut values = [[Fix::ZERO; 7]; 3];
-        for (((table, vals), o), r) in labels.iter_mut().zip(&mut values).zip(outputs).zip(ranges) {
-            for (row, line) in table.iter_mut().enumerate().take(n) {
-                for (col, l) in line.iter_mut().enumerate().take(n) {
-                    *l = cfg.rules.label(o, row, col).unwrap_or(0);
+        // The rule base's tables, zero outside the `n × n` corner.
+        let mut labels = *cfg.rules.tables();
+        for table in &mut labels {
+            for (row, line) in table.iter_mut().enumerate() {
+                for (col, l) in line.iter_mut().enumerate() {
+                    if row >= n || col >= n {
+                        *l = 0;
+                    }
                 }
             }
+        }
+        let ranges = [cfg.range.kp, cfg.range.ki, cfg.range.kd];
+        let mut values = [[Fix::ZERO; 7]; 3];
+        for (vals, r) in values.iter_mut().zip(ranges) {
             for (label, v) in (-3_i32..=3).zip(vals.iter_mut()) {
                 // Exactly the former per-cell singleton: r·label, then
-                // truncated division by 3 (|r| ≤ 1000, no saturation).
-                *v = r
-                    .saturating_mul_int(label)
-                    .checked_div_int(3)
-                    .unwrap_or(Fix::ZERO);
+                // truncated division by 3 (|r| ≤ 1000: |r·label| < 2^28).
+                *v = Fix::from_bits(r.to_bits().wrapping_mul(label).wrapping_div(3));
             }
         }
         Ok(Self {
@@ -331,7 +333,7 @@ impl FuzzyTuner {
             };
             let mut x = weighted(&m, [at(i, j), at(i1, j), at(i, j1), at(i1, j1)]);
             if let Some(r) = recip {
-                x = x.saturating_mul(r);
+                x = crate::smul(x, r);
             }
             *slot = clamp_sym(x, values[6]);
         }
@@ -427,7 +429,7 @@ impl LutTuner {
                 &m,
                 c.map(|e| Fix::from_bits(i32::from(e.get(k).copied().unwrap_or(0)))),
             );
-            clamp_sym(n.saturating_mul(r).saturating_mul_int(2), r)
+            clamp_sym(crate::smul(n, r).saturating_mul_int(2), r)
         };
         Gains {
             kp: out(0, self.range.kp),

@@ -19,7 +19,7 @@
 use fixed::types::I16F16;
 
 use crate::fuzzy::{FuzzyConfig, FuzzyTuner, LutTuner};
-use crate::{Error, Gains};
+use crate::{smul, Error, Gains};
 
 type Fix = I16F16;
 
@@ -433,12 +433,11 @@ impl<S: GainSchedule> Controller<S> {
             kd: self.base.kd.saturating_add(delta.kd).max(self.min_gains.kd),
         };
         let raw_d = self.prev_measured.saturating_sub(measured);
-        self.derivative = self.derivative.saturating_add(
-            self.alpha
-                .saturating_mul(raw_d.saturating_sub(self.derivative)),
-        );
-        let p = gains.kp.saturating_mul(e);
-        let d = gains.kd.saturating_mul(self.derivative);
+        self.derivative = self
+            .derivative
+            .saturating_add(smul(self.alpha, raw_d.saturating_sub(self.derivative)));
+        let p = smul(gains.kp, e);
+        let d = smul(gains.kd, self.derivative);
         let base = feedforward.saturating_add(p).saturating_add(d);
 
         let (output, integral) = if self.mode == Mode::Manual {
@@ -446,7 +445,7 @@ impl<S: GainSchedule> Controller<S> {
             let u = self.clamp_output(self.manual_output);
             (u, self.clamp_integral(u.saturating_sub(base)))
         } else {
-            let di = gains.ki.saturating_mul(e);
+            let di = smul(gains.ki, e);
             let mut i = self.clamp_integral(self.integral.saturating_add(di));
             let mut v = base.saturating_add(i);
             if self.clamping
@@ -458,8 +457,7 @@ impl<S: GainSchedule> Controller<S> {
             }
             let u = self.clamp_output(v);
             if self.kb != Fix::ZERO && u != v {
-                i = self
-                    .clamp_integral(i.saturating_add(self.kb.saturating_mul(u.saturating_sub(v))));
+                i = self.clamp_integral(i.saturating_add(smul(self.kb, u.saturating_sub(v))));
             }
             (u, i)
         };

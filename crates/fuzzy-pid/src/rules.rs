@@ -163,6 +163,12 @@ impl RuleBase {
         Ok(Self { size, tables })
     }
 
+    /// The three tables `[ΔKp, ΔKi, ΔKd]` (only the `size × size` corner is
+    /// meaningful).
+    pub(crate) const fn tables(&self) -> &[Table; 3] {
+        &self.tables
+    }
+
     /// Number of fuzzy sets per input.
     #[must_use]
     pub const fn size(&self) -> usize {

@@ -154,6 +154,16 @@ pub struct ProfileB {
     s: ProfileBSettings,
 }
 
+impl Default for ProfileB {
+    /// [`ProfileBSettings::default`], which [`ProfileBSettings::build`]
+    /// accepts (tested), without a fallible build.
+    fn default() -> Self {
+        Self {
+            s: ProfileBSettings::default(),
+        }
+    }
+}
+
 impl ProfileB {
     /// The validated settings.
     #[must_use]

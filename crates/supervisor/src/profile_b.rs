@@ -217,7 +217,7 @@ impl From<ProfileBConfigError> for Error {
 /// (paper B's bench), β = 120°, N = 2, r = 25 mm, h = 1 mm, Y = 0.02 m/s,
 /// 1600 steps/rev (unpublished, SPEC §8; `machine-sim` models the same
 /// machine by default): `ProfileBConfig::new(ProfileBSettings::default())`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ProfileBConfig {
     plan: ProfileB,

@@ -1,11 +1,13 @@
 //! The persisted settings and their versioned byte format.
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
-//! multi-byte number is little endian. Format version 1:
+//! multi-byte number is little endian. Format version 2 (version 1 is
+//! version 2 without its last 34 bytes, written before profile B existed;
+//! [`decode`] still reads it, as profile A with profile B's defaults):
 //!
 //! | offset | size | field | encoding |
 //! |---|---|---|---|
-//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 1 |
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 2 |
 //! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
 //! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
 //! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
@@ -13,8 +15,10 @@
 //! | 8 | 1 | [`Settings::gear`] | screen wire index 1–6 (Low 1 … High 3) |
 //! | 9 | 1 | [`Settings::brightness`] | u8, %, 10–100 |
 //! | 10 | 199 | [`Settings::calibration`] | [`Calibration::to_bytes`] (its own version byte, then k1, k2, k3 tables padded to 66 bytes each) |
+//! | 209 | 1 | [`Settings::profile`] | 1 = A (drum belt), 2 = B (seedling belt) |
+//! | 210 | 33 | [`Settings::belt`] | [`ProfileBConfig::to_bytes`] |
 //!
-//! Total 209 bytes. Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! Total 243 bytes (version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -30,12 +34,12 @@
 //! s.spacing = Spacing::new(120).unwrap();
 //! let bytes = s.encode();
 //! assert_eq!(bytes.len(), SETTINGS_BYTES);
-//! // version 1, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // version 2, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
 //! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
 //! // brightness 100 (0x64).
 //! assert_eq!(
 //!     bytes[..10],
-//!     [1, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//!     [2, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
 //! );
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
@@ -47,15 +51,31 @@ use kinematics::consts::Gear;
 use kinematics::table::TableError;
 use kinematics::travel::{Calibration, CALIBRATION_BYTES};
 
+use crate::profile_b::{ProfileBConfig, CONFIG_BYTES};
+
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
-pub const SETTINGS_FORMAT_VERSION: u8 = 1;
+pub const SETTINGS_FORMAT_VERSION: u8 = 2;
 
 /// Bytes before the calibration block: version, mode, spacing, drum speed,
 /// motor coefficient, gear, brightness.
 const HEAD_BYTES: usize = 10;
 
-/// Size of an encoded [`Settings`] (format version 1): 10 + 199 = 209.
-pub const SETTINGS_BYTES: usize = HEAD_BYTES + CALIBRATION_BYTES;
+/// Size of a format-1 record: 10 + 199 = 209.
+pub const SETTINGS_V1_BYTES: usize = HEAD_BYTES + CALIBRATION_BYTES;
+
+/// Size of an encoded [`Settings`] (format version 2): 209 + 1 + 33 = 243.
+pub const SETTINGS_BYTES: usize = SETTINGS_V1_BYTES + 1 + CONFIG_BYTES;
+
+/// Which machine the firmware runs (SPEC §1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Profile {
+    /// Profile A: the tracked drum-belt transplanter (paper A).
+    #[default]
+    DrumBelt,
+    /// Profile B: the seedling-belt feeder/planter (paper B).
+    SeedlingBelt,
+}
 
 /// Everything the firmware persists: the operator's choices and the
 /// calibration tables.
@@ -77,6 +97,10 @@ pub struct Settings {
     pub brightness: Brightness,
     /// The k1/k2/k3 tables. Default: [`Calibration::paper_defaults`].
     pub calibration: Calibration,
+    /// Which machine this is. Default: profile A.
+    pub profile: Profile,
+    /// Profile B's parameters. Default: `ProfileBSettings::default()`.
+    pub belt: ProfileBConfig,
 }
 
 impl Default for Settings {
@@ -89,6 +113,8 @@ impl Default for Settings {
             gear: gear_from_screen(screen::Gear::default()),
             brightness: Brightness::DEFAULT,
             calibration: Calibration::paper_defaults(),
+            profile: Profile::DrumBelt,
+            belt: ProfileBConfig::default(),
         }
     }
 }
@@ -114,6 +140,10 @@ pub enum SettingsError {
     Param(ParamError),
     /// The calibration block failed validation.
     Calibration(TableError),
+    /// Unknown machine profile byte (offset 209).
+    Profile(u8),
+    /// Profile B's parameters failed validation.
+    Belt,
 }
 
 impl fmt::Display for SettingsError {
@@ -127,6 +157,8 @@ impl fmt::Display for SettingsError {
             Self::Gear(g) => write!(f, "invalid gear index {g}"),
             Self::Param(e) => write!(f, "{e}"),
             Self::Calibration(e) => write!(f, "calibration: {e}"),
+            Self::Profile(p) => write!(f, "invalid machine profile byte {p}"),
+            Self::Belt => f.write_str("invalid profile B parameters"),
         }
     }
 }
@@ -179,11 +211,19 @@ const fn mode_from_byte(b: u8) -> Option<Mode> {
 }
 
 impl Settings {
-    /// Serialises in format version 1 (layout in the [module docs](self)).
+    /// Serialises in format version 2 (layout in the [module docs](self)).
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
-        let (head, cal) = out.split_at_mut(HEAD_BYTES);
+        let (v1, tail) = out.split_at_mut(SETTINGS_V1_BYTES);
+        if let Some((profile, belt)) = tail.split_first_mut() {
+            *profile = match self.profile {
+                Profile::DrumBelt => 1,
+                Profile::SeedlingBelt => 2,
+            };
+            belt.copy_from_slice(&self.belt.to_bytes());
+        }
+        let (head, cal) = v1.split_at_mut(HEAD_BYTES);
         let [s0, s1] = self.spacing.raw().to_le_bytes();
         let [d0, d1] = self.fixed_drum_speed.raw().to_le_bytes();
         let [m0, m1] = self.motor_coefficient.raw().to_le_bytes();
@@ -211,13 +251,22 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         found: bytes.len(),
     };
     let (&version, _) = bytes.split_first().ok_or(length)?;
-    if version != SETTINGS_FORMAT_VERSION {
-        return Err(SettingsError::UnsupportedVersion(version));
-    }
-    if bytes.len() != SETTINGS_BYTES {
-        return Err(length);
-    }
-    let (head, cal) = bytes.split_at(HEAD_BYTES);
+    let (v1, tail) = match version {
+        1 if bytes.len() == SETTINGS_V1_BYTES => (bytes, None),
+        SETTINGS_FORMAT_VERSION if bytes.len() == SETTINGS_BYTES => {
+            let (v1, tail) = bytes.split_at(SETTINGS_V1_BYTES);
+            (v1, Some(tail))
+        }
+        1 => {
+            return Err(SettingsError::Length {
+                expected: SETTINGS_V1_BYTES,
+                found: bytes.len(),
+            })
+        }
+        SETTINGS_FORMAT_VERSION => return Err(length),
+        other => return Err(SettingsError::UnsupportedVersion(other)),
+    };
+    let (head, cal) = v1.split_at(HEAD_BYTES);
     let Ok::<[u8; HEAD_BYTES], _>([_, mode, s0, s1, d0, d1, m0, m1, gear, brightness]) =
         head.try_into()
     else {
@@ -232,6 +281,21 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         .ok_or(SettingsError::Gear(gear))?;
     let brightness = Brightness::new(i32::from(brightness))?;
     let calibration = Calibration::from_bytes(cal).map_err(SettingsError::Calibration)?;
+    let (profile, belt) = match tail.and_then(|t| t.split_first()) {
+        None => (Profile::DrumBelt, ProfileBConfig::default()),
+        Some((&p, belt)) => {
+            let profile = match p {
+                1 => Profile::DrumBelt,
+                2 => Profile::SeedlingBelt,
+                other => return Err(SettingsError::Profile(other)),
+            };
+            let belt: &[u8; CONFIG_BYTES] = belt.try_into().map_err(|_| length)?;
+            (
+                profile,
+                ProfileBConfig::from_bytes(belt).map_err(|_| SettingsError::Belt)?,
+            )
+        }
+    };
     Ok(Settings {
         mode,
         spacing,
@@ -240,6 +304,8 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         gear,
         brightness,
         calibration,
+        profile,
+        belt,
     })
 }
 
@@ -248,6 +314,7 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
 mod tests {
     use super::*;
     use hmi_proto::screen::Field;
+    use kinematics::profile_b::ProfileBSettings;
     use kinematics::table::{CoeffTable, K_MAX, K_MIN, MAX_POINTS};
     use proptest::prelude::*;
     use std::collections::BTreeSet;
@@ -257,7 +324,9 @@ mod tests {
     fn sizes() {
         // kinematics::travel: CALIBRATION_BYTES = 1 + 3 × 66 = 199.
         assert_eq!(CALIBRATION_BYTES, 199);
-        assert_eq!(SETTINGS_BYTES, 209);
+        assert_eq!(SETTINGS_V1_BYTES, 209);
+        // + profile byte + ProfileBConfig::to_bytes (33).
+        assert_eq!(SETTINGS_BYTES, 243);
     }
 
     #[test]
@@ -284,12 +353,35 @@ mod tests {
             gear: Gear::High3,
             brightness: Brightness::new(10).unwrap(),
             calibration: Calibration::identity(),
+            profile: Profile::SeedlingBelt,
+            belt: ProfileBConfig::default(),
         };
         let b = s.encode();
         // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
-        assert_eq!(b[..10], [1, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
-        assert_eq!(b[10..], Calibration::identity().to_bytes());
+        assert_eq!(b[..10], [2, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
+        assert_eq!(b[10..209], Calibration::identity().to_bytes());
+        // Profile B (2) and its parameters.
+        assert_eq!(b[209], 2);
+        assert_eq!(b[210..], s.belt.to_bytes());
         assert_eq!(decode(&b).unwrap(), s);
+    }
+
+    #[test]
+    fn a_version_1_record_reads_as_profile_a_with_profile_b_defaults() {
+        // A record written before profile B: version 1, the first 209 bytes.
+        let mut v1 = [0u8; SETTINGS_V1_BYTES];
+        let v2 = Settings::default().encode();
+        v1.copy_from_slice(&v2[..SETTINGS_V1_BYTES]);
+        v1[0] = 1;
+        let s = decode(&v1).unwrap();
+        assert_eq!(s.profile, Profile::DrumBelt);
+        assert_eq!(s.belt, ProfileBConfig::default());
+        assert_eq!(s, Settings::default());
+        // And the default profile B parameters are the validated defaults.
+        assert_eq!(
+            ProfileBConfig::new(kinematics::profile_b::ProfileBSettings::default()),
+            Ok(ProfileBConfig::default())
+        );
     }
 
     #[test]
@@ -300,7 +392,7 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(0, 2), Err(SettingsError::UnsupportedVersion(2)));
+        assert_eq!(with(0, 3), Err(SettingsError::UnsupportedVersion(3)));
         assert_eq!(with(0, 0xFF), Err(SettingsError::UnsupportedVersion(0xFF)));
         assert_eq!(with(1, 0), Err(SettingsError::Mode(0)));
         assert_eq!(with(1, 3), Err(SettingsError::Mode(3)));
@@ -342,27 +434,41 @@ mod tests {
         assert_eq!(
             decode(&[]),
             Err(SettingsError::Length {
-                expected: 209,
+                expected: 243,
                 found: 0
             })
         );
         assert_eq!(
-            decode(&good[..208]),
+            decode(&good[..242]),
             Err(SettingsError::Length {
-                expected: 209,
-                found: 208
+                expected: 243,
+                found: 242
             })
         );
-        let mut long = [0u8; 210];
-        long[..209].copy_from_slice(&good);
+        let mut long = [0u8; 244];
+        long[..243].copy_from_slice(&good);
         assert!(matches!(decode(&long), Err(SettingsError::Length { .. })));
+        // A version-1 record must be 209 bytes long.
+        let mut v1_short = good;
+        v1_short[0] = 1;
+        assert_eq!(
+            decode(&v1_short),
+            Err(SettingsError::Length {
+                expected: 209,
+                found: 243
+            })
+        );
         assert_eq!(
             decode(&[0xFF; SETTINGS_BYTES]),
             Err(SettingsError::UnsupportedVersion(0xFF))
         );
         let mut zero = [0u8; SETTINGS_BYTES];
-        zero[0] = 1;
+        zero[0] = SETTINGS_FORMAT_VERSION;
         assert_eq!(decode(&zero), Err(SettingsError::Mode(0)));
+        // An unknown profile byte.
+        let mut bad = good;
+        bad[209] = 3;
+        assert_eq!(decode(&bad), Err(SettingsError::Profile(3)));
     }
 
     #[test]
@@ -408,20 +514,33 @@ mod tests {
             0usize..6,
             Brightness::MIN..=Brightness::MAX,
             (table(), table(), table()),
+            (any::<bool>(), 110u32..=990),
         )
-            .prop_map(|(fixed, sp, ds, mc, g, br, (k1, k2, k3))| Settings {
-                mode: if fixed {
-                    Mode::Fixed
-                } else {
-                    Mode::SpeedAdaptive
+            .prop_map(
+                |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm))| Settings {
+                    mode: if fixed {
+                        Mode::Fixed
+                    } else {
+                        Mode::SpeedAdaptive
+                    },
+                    spacing: Spacing::new(i32::from(sp)).unwrap(),
+                    fixed_drum_speed: DrumSpeed::new(i32::from(ds)).unwrap(),
+                    motor_coefficient: MotorCoefficient::new(i32::from(mc)).unwrap(),
+                    gear: Gear::ALL[g],
+                    brightness: Brightness::new(i32::from(br)).unwrap(),
+                    calibration: Calibration { k1, k2, k3 },
+                    profile: if b {
+                        Profile::SeedlingBelt
+                    } else {
+                        Profile::DrumBelt
+                    },
+                    belt: ProfileBConfig::new(ProfileBSettings {
+                        plant_spacing: kinematics::units::Metres::from_mm(x_mm),
+                        ..ProfileBSettings::default()
+                    })
+                    .unwrap(),
                 },
-                spacing: Spacing::new(i32::from(sp)).unwrap(),
-                fixed_drum_speed: DrumSpeed::new(i32::from(ds)).unwrap(),
-                motor_coefficient: MotorCoefficient::new(i32::from(mc)).unwrap(),
-                gear: Gear::ALL[g],
-                brightness: Brightness::new(i32::from(br)).unwrap(),
-                calibration: Calibration { k1, k2, k3 },
-            })
+            )
     }
 
     proptest! {

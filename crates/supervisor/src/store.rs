@@ -89,7 +89,9 @@ use core::fmt;
 use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 
 use crate::crc::Crc32;
-use crate::settings::{decode, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION};
+use crate::settings::{
+    decode, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION, SETTINGS_V1_BYTES,
+};
 
 /// Record magic at offset 0: `"TPS1"` (transplanter settings, record format 1).
 pub const MAGIC: [u8; 4] = *b"TPS1";
@@ -103,7 +105,7 @@ pub const MAX_ACCESS_SIZE: usize = 32;
 
 const CRC_BYTES: usize = 4;
 /// Write buffer: header + padded payload + CRC, rounded up for any supported `WRITE_SIZE`.
-const BODY_BUF: usize = 256;
+const BODY_BUF: usize = 288;
 
 /// Where the parts of a record with an `len`-byte payload lie for a flash
 /// with `WRITE_SIZE` = `write`.
@@ -442,7 +444,7 @@ impl<F: NorFlash> SettingsStore<F> {
     /// When the newest valid record already holds equal settings nothing is
     /// written and its sequence is returned. Otherwise the slot that does not
     /// hold the newest valid record is erased and the new record is
-    /// programmed there (one erase and `end / WRITE_SIZE` programs: 1 + 116
+    /// programmed there (one erase and `end / WRITE_SIZE` programs: 1 + 132
     /// on the STM32F1), with a sequence one above the newest complete record.
     /// If a slot cannot be read, nothing is written.
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
@@ -651,10 +653,13 @@ impl<F: NorFlash> SettingsStore<F> {
         if self.crc(slot, 4, lay.crc_off)? != u32::from_le_bytes(word) {
             return Ok(Slot::Corrupt);
         }
-        if lay.len == SETTINGS_BYTES {
-            let mut payload = [0u8; SETTINGS_BYTES];
-            self.read(slot, HEADER_BYTES, &mut payload)?;
-            return Ok(match decode(&payload) {
+        // This format, or format 1 (written before profile B): the decoder
+        // reads both.
+        if lay.len == SETTINGS_BYTES || lay.len == SETTINGS_V1_BYTES {
+            let mut buf = [0u8; SETTINGS_BYTES];
+            let payload = buf.get_mut(..lay.len).ok_or(ReadFail::Bounds)?;
+            self.read(slot, HEADER_BYTES, payload)?;
+            return Ok(match decode(payload) {
                 Ok(s) => Slot::Valid(sequence, s),
                 Err(SettingsError::UnsupportedVersion(_)) => Slot::Unsupported(sequence),
                 Err(_) => Slot::Corrupt,
@@ -725,16 +730,16 @@ mod tests {
 
     #[test]
     fn f1_layout() {
-        // 209-byte payload, WRITE_SIZE 2: CRC at 12 + 212 = 224, commit at
-        // 228, end 232 = 116 half-words.
+        // 243-byte payload, WRITE_SIZE 2: CRC at 12 + 244 = 256, commit at
+        // 260, end 264 = 132 half-words.
         let l = layout(SETTINGS_BYTES, 2).unwrap();
         assert_eq!(
             (l.crc_off, l.commit_off, l.commit_len, l.end),
-            (224, 228, 4, 232)
+            (256, 260, 4, 264)
         );
-        // WRITE_SIZE 8: the commit gets its own double word at 232.
+        // WRITE_SIZE 8: the commit gets its own double word at 264.
         let l = layout(SETTINGS_BYTES, 8).unwrap();
-        assert_eq!((l.commit_off, l.commit_len, l.end), (232, 8, 240));
+        assert_eq!((l.commit_off, l.commit_len, l.end), (264, 8, 272));
     }
 
     #[test]

@@ -18,10 +18,12 @@ use embedded_storage::nor_flash::{
 };
 use hmi_proto::screen::{Brightness, DrumSpeed, Mode, MotorCoefficient, Spacing};
 use kinematics::consts::Gear;
+use kinematics::profile_b::ProfileBSettings;
 use kinematics::table::{CoeffTable, K_MAX, K_MIN, MAX_POINTS};
 use kinematics::travel::Calibration;
 use proptest::prelude::*;
-use supervisor::settings::{Settings, SETTINGS_BYTES};
+use supervisor::profile_b::ProfileBConfig;
+use supervisor::settings::{Profile, Settings, SETTINGS_BYTES};
 use supervisor::store::{DefaultsReason, Loaded, SettingsStore, SlotStatus, StoreError};
 
 // ---------------------------------------------------------------------------
@@ -272,6 +274,12 @@ fn settings_b() -> Settings {
         gear: Gear::High2,
         brightness: Brightness::new(40).unwrap(),
         calibration: Calibration::identity(),
+        profile: Profile::SeedlingBelt,
+        belt: ProfileBConfig::new(ProfileBSettings {
+            plant_spacing: kinematics::units::Metres::from_mm(300),
+            ..ProfileBSettings::default()
+        })
+        .unwrap(),
     }
 }
 
@@ -415,8 +423,9 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&a).unwrap();
     let only_a = st.into_inner();
     let total = sweep(&only_a, &a, &b);
-    // One erase + 232 bytes / 2 = 116 half-word programs.
-    assert_eq!(total, 117);
+    // One erase + 264 bytes / 2 = 132 half-word programs (243-byte payload:
+    // header 12, payload padded to 244, CRC 4, commit 4).
+    assert_eq!(total, 133);
 
     // 2. X (seq 1) in slot 0, A (seq 2) in slot 1; B overwrites X's slot.
     //    X must never come back, whatever the torn erase leaves of it.
@@ -424,30 +433,30 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&x).unwrap();
     st.save(&a).unwrap();
     let x_then_a = st.into_inner();
-    assert_eq!(sweep(&x_then_a, &a, &b), 117);
+    assert_eq!(sweep(&x_then_a, &a, &b), 133);
 
     // 3. Sequence wrap: X at u32::MAX − 1 in slot 0, A at u32::MAX in slot 1;
     //    B gets sequence 0 in slot 0.
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(u32::MAX - 1, &x.encode()));
     put_raw(&mut f, 1, &raw_record(u32::MAX, &a.encode()));
-    assert_eq!(sweep(&f, &a, &b), 117);
+    assert_eq!(sweep(&f, &a, &b), 133);
 }
 
 #[test]
 fn power_cut_with_wider_program_units() {
     // A flash with 8-byte program units (and 8-byte reads): the commit word
-    // takes its own unit at 232, the record ends at 240 = 30 units.
+    // takes its own unit at 264, the record ends at 272 = 34 units.
     let (a, b) = (settings_a(), settings_b());
     let mut st = store(SimFlash::<8>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 30);
-    // And 1-byte units: 232 programs.
+    assert_eq!(sweep(&f, &a, &b), 1 + 34);
+    // And 1-byte units: 264 programs.
     let mut st = store(SimFlash::<1>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 232);
+    assert_eq!(sweep(&f, &a, &b), 1 + 264);
 }
 
 #[test]
@@ -499,26 +508,26 @@ fn record_bytes_follow_the_documented_layout() {
     assert_eq!(st.save(&settings_b()), Ok(1));
     let f = st.into_inner();
     let rec = raw_record(1, &settings_b().encode());
-    assert_eq!(rec.len(), 232);
+    assert_eq!(rec.len(), 264);
     let slot0 = slot_bytes(&f, 0);
-    assert_eq!(&slot0[..232], &rec[..]);
-    assert!(slot0[232..].iter().all(|&b| b == 0xFF));
+    assert_eq!(&slot0[..264], &rec[..]);
+    assert!(slot0[264..].iter().all(|&b| b == 0xFF));
     assert!(slot_bytes(&f, 1).iter().all(|&b| b == 0xFF));
-    // Header bytes spelled out: "TPS1", seq 1, n = 209 = 0x00D1, !n = 0xFF2E.
+    // Header bytes spelled out: "TPS1", seq 1, n = 243 = 0x00F3, !n = 0xFF0C.
     assert_eq!(
         &slot0[..12],
-        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xD1, 0x00, 0x2E, 0xFF]
+        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xF3, 0x00, 0x0C, 0xFF]
     );
-    assert_eq!(SETTINGS_BYTES, 209);
+    assert_eq!(SETTINGS_BYTES, 243);
 }
 
 #[test]
-fn one_save_costs_one_erase_and_116_programs() {
+fn one_save_costs_one_erase_and_132_programs() {
     let mut st = store(SimFlash::<2>::new());
     st.save(&settings_a()).unwrap();
     let f = st.into_inner();
-    // 1 erase + 232 / 2 half-words (record layout: end of commit word at 232).
-    assert_eq!(f.ops, 117);
+    // 1 erase + 264 / 2 half-words (record layout: end of commit word at 264).
+    assert_eq!(f.ops, 133);
     assert_eq!(f.erases, [0, 1, 0, 0]);
 }
 
@@ -528,15 +537,15 @@ fn erase_first_then_body_in_order_then_commit_word_last() {
     st.save(&settings_a()).unwrap();
     st.save(&settings_b()).unwrap(); // into slot 1 at offset 2048
     let log = st.into_inner().log;
-    let second = &log[117..];
+    let second = &log[133..];
     assert_eq!(second[0], (true, 2 * PAGE));
-    // Half-words 0, 2, …, 226 of the page: header, payload, padding, CRC.
-    let body: Vec<_> = (0..114).map(|i| (false, 2 * PAGE + 2 * i)).collect();
-    assert_eq!(&second[1..115], &body[..]);
-    // Then, and only then, the commit word "DONE" at 228 and 230.
+    // Half-words 0, 2, …, 258 of the page: header, payload, padding, CRC.
+    let body: Vec<_> = (0..130).map(|i| (false, 2 * PAGE + 2 * i)).collect();
+    assert_eq!(&second[1..131], &body[..]);
+    // Then, and only then, the commit word "DONE" at 260 and 262.
     assert_eq!(
-        &second[115..],
-        &[(false, 2 * PAGE + 228), (false, 2 * PAGE + 230)]
+        &second[131..],
+        &[(false, 2 * PAGE + 260), (false, 2 * PAGE + 262)]
     );
 }
 
@@ -616,9 +625,9 @@ fn any_flipped_bit_in_the_newest_record_falls_back_to_the_older() {
     st.save(&settings_a()).unwrap(); // slot 0, seq 1
     st.save(&settings_b()).unwrap(); // slot 1, seq 2
     let good = st.into_inner();
-    // Every bit of every byte of the 232-byte record: magic, sequence,
+    // Every bit of every byte of the 264-byte record: magic, sequence,
     // length, !length, payload, padding, CRC, commit word.
-    for byte in 0..232 {
+    for byte in 0..264 {
         for bit in 0..8 {
             let mut f = good.clone();
             f.mem[2 * PAGE + byte] ^= 1 << bit;
@@ -666,10 +675,43 @@ fn a_record_with_valid_crc_but_invalid_field_is_corrupt() {
 }
 
 #[test]
+fn a_record_written_before_profile_b_still_loads() {
+    // Format 1: the first 209 bytes of today's payload, version byte 1
+    // (docs of supervisor::settings). It loads as profile A with profile B's
+    // defaults, and the next save writes format 2 into the other slot.
+    let b = settings_b();
+    let mut v1 = b.encode()[..209].to_vec();
+    v1[0] = 1;
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 0, &raw_record(8, &v1));
+    let expected = Settings {
+        profile: Profile::DrumBelt,
+        belt: ProfileBConfig::default(),
+        ..b.clone()
+    };
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: expected.clone(),
+            sequence: 8
+        }
+    );
+    let mut st = store(f);
+    assert_eq!(st.save(&b), Ok(9));
+    assert_eq!(
+        boot(&st.into_inner()),
+        Loaded::Saved {
+            settings: b,
+            sequence: 9
+        }
+    );
+}
+
+#[test]
 fn unsupported_version_falls_back_or_is_reported() {
     let a = settings_a();
-    // A record of a future format 2 (payload version byte 2, longer payload).
-    let mut v2 = vec![2u8; 300];
+    // A record of a future format 3 (payload version byte 3, longer payload).
+    let mut v2 = vec![3u8; 300];
     v2[1] = 7;
     // Alone: defaults, reason UnsupportedVersion.
     let mut f = SimFlash::new();
@@ -695,11 +737,11 @@ fn unsupported_version_falls_back_or_is_reported() {
         ]
     );
 
-    // Newer than a valid version-1 record: the valid one is used.
+    // Newer than a valid current record: the valid one is used.
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(5, &a.encode()));
     let mut same_len = settings_b().encode();
-    same_len[0] = 2;
+    same_len[0] = 3;
     put_raw(&mut f, 1, &raw_record(6, &same_len));
     assert_eq!(
         boot(&f),
@@ -708,7 +750,7 @@ fn unsupported_version_falls_back_or_is_reported() {
             sequence: 5
         }
     );
-    // The next save overwrites the v2 record (slot 1) with sequence 7.
+    // The next save overwrites the v3 record (slot 1) with sequence 7.
     let mut st = store(f);
     assert_eq!(st.save(&settings_b()), Ok(7));
     assert_eq!(
@@ -821,20 +863,33 @@ fn settings() -> impl Strategy<Value = Settings> {
         0usize..6,
         Brightness::MIN..=Brightness::MAX,
         (table(), table(), table()),
+        (any::<bool>(), 110u32..=990),
     )
-        .prop_map(|(fixed, sp, ds, mc, g, br, (k1, k2, k3))| Settings {
-            mode: if fixed {
-                Mode::Fixed
-            } else {
-                Mode::SpeedAdaptive
+        .prop_map(
+            |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm))| Settings {
+                mode: if fixed {
+                    Mode::Fixed
+                } else {
+                    Mode::SpeedAdaptive
+                },
+                spacing: Spacing::new(i32::from(sp)).unwrap(),
+                fixed_drum_speed: DrumSpeed::new(i32::from(ds)).unwrap(),
+                motor_coefficient: MotorCoefficient::new(i32::from(mc)).unwrap(),
+                gear: Gear::ALL[g],
+                brightness: Brightness::new(i32::from(br)).unwrap(),
+                calibration: Calibration { k1, k2, k3 },
+                profile: if b {
+                    Profile::SeedlingBelt
+                } else {
+                    Profile::DrumBelt
+                },
+                belt: ProfileBConfig::new(ProfileBSettings {
+                    plant_spacing: kinematics::units::Metres::from_mm(x_mm),
+                    ..ProfileBSettings::default()
+                })
+                .unwrap(),
             },
-            spacing: Spacing::new(i32::from(sp)).unwrap(),
-            fixed_drum_speed: DrumSpeed::new(i32::from(ds)).unwrap(),
-            motor_coefficient: MotorCoefficient::new(i32::from(mc)).unwrap(),
-            gear: Gear::ALL[g],
-            brightness: Brightness::new(i32::from(br)).unwrap(),
-            calibration: Calibration { k1, k2, k3 },
-        })
+        )
 }
 
 proptest! {

@@ -190,7 +190,7 @@ impl core::fmt::Display for Gear {
 /// Geometry in the working precision (`U32F32`), so that the calibration
 /// arithmetic reproduces the paper's tables to their printed digits.
 pub(crate) mod w {
-    use crate::fx::{const_mul, PI, W};
+    use crate::fx::{const_div, const_mul, PI, W};
     use fixed::types::U32F32;
     /// D1 + 2·H1.
     pub(crate) const WHEEL_D: W = U32F32::lit("0.2").to_bits();
@@ -202,4 +202,10 @@ pub(crate) mod w {
     pub(crate) const WHEEL_CIRC: W = const_mul(PI, WHEEL_D);
     /// π·(D2 + 2·H2), rounded down as the product of the two above.
     pub(crate) const DRUM_CIRC: W = const_mul(PI, DRUM_D);
+    /// Eq. 7's geometry times the spacing: `(D1+2H1)/(D2+2H2) · Lclap`, metres.
+    pub(crate) const GEOM_M: W = const_div(const_mul(WHEEL_D, L_CLAP), DRUM_D);
+    /// Travel speed (km/h) the belt allows per drum r/min and metre of
+    /// spacing: `π·(D2+2H2)/60 / Lclap · 3.6` (k3 = 1).
+    #[allow(clippy::arithmetic_side_effects)]
+    pub(crate) const VMAX_PER_RPM_M: W = const_div(DRUM_CIRC * 18 / 300, L_CLAP);
 }

@@ -77,19 +77,21 @@ impl DrumSettings {
         }
         let ovf = |_| DrumConfigError::Overflow;
         // G = (D1+2H1)/(D2+2H2) · Lclap/Lplant.
-        let geom = fx::div(
-            fx::mul(consts::w::WHEEL_D, consts::w::L_CLAP).map_err(ovf)?,
-            fx::mul(consts::w::DRUM_D, self.plant_spacing.w()).map_err(ovf)?,
-        )
-        .map_err(ovf)?;
+        let geom = fx::div(consts::w::GEOM_M, self.plant_spacing.w()).map_err(ovf)?;
         let period = (u64::from(self.arr).saturating_add(1)) << fx::FRAC;
         let ccr_per_rpm = fx::div(period, self.n_max.w()).map_err(ovf)?;
         let duty_per_rpm = fx::div(fx::ONE, self.n_max.w()).map_err(ovf)?;
+        let vmax_per_k3 = fx::mul(
+            fx::mul(consts::w::VMAX_PER_RPM_M, self.n_max.w()).map_err(ovf)?,
+            self.plant_spacing.w(),
+        )
+        .map_err(ovf)?;
         Ok(DrumPlan {
             settings: self,
             geom,
             ccr_per_rpm,
             duty_per_rpm,
+            vmax_per_k3,
         })
     }
 }
@@ -118,6 +120,9 @@ pub struct DrumPlan {
     ccr_per_rpm: W,
     /// 1/n_max.
     duty_per_rpm: W,
+    /// The feasibility limit for k3 = 1, km/h:
+    /// `π·(D2+2H2)·n_max/60 · Lplant/Lclap · 3.6`.
+    vmax_per_k3: W,
 }
 
 #[cfg(feature = "defmt")]
@@ -241,21 +246,19 @@ impl DrumPlan {
     pub fn target(&self, travel: &TravelSpeed, cal: &Calibration) -> Result<DrumTarget, Error> {
         let n = self.drum_speed(travel.gear_speed, travel.k2, cal)?;
         let n_max = self.settings.n_max;
+        // One command for both cases: at n (it follows) or at n_max.
+        let drum_speed = n.min(n_max);
+        let command = DrumCommand {
+            drum_speed,
+            k3: cal.k3_at(drum_speed),
+            duty: self.duty(drum_speed)?,
+            ccr: self.ccr(drum_speed)?,
+        };
         if n <= n_max {
-            return Ok(DrumTarget::Follow(DrumCommand {
-                drum_speed: n,
-                k3: cal.k3_at(n),
-                duty: self.duty(n)?,
-                ccr: self.ccr(n)?,
-            }));
+            return Ok(DrumTarget::Follow(command));
         }
         Ok(DrumTarget::Saturated {
-            command: DrumCommand {
-                drum_speed: n_max,
-                k3: cal.k3_at(n_max),
-                duty: self.duty(n_max)?,
-                ccr: self.ccr(n_max)?,
-            },
+            command,
             requested: n,
             max_travel_speed: self.max_travel_speed(cal)?,
         })
@@ -264,19 +267,8 @@ impl DrumPlan {
     /// The highest travel speed V1 the drum can follow at this spacing:
     /// `V1max = k3(n_max)·π·(D2+2H2)·n_max/60 · Lplant/Lclap`.
     pub fn max_travel_speed(&self, cal: &Calibration) -> Result<KilometresPerHour, Error> {
-        let n_max = self.settings.n_max;
-        let belt = fx::div_int(
-            fx::mul(
-                consts::w::DRUM_CIRC,
-                fx::mul(n_max.w(), cal.k3_at(n_max).w())?,
-            )?,
-            60,
-        )?;
-        let v = fx::div(
-            fx::mul(belt, self.settings.plant_spacing.w())?,
-            consts::w::L_CLAP,
-        )?;
-        MetresPerSecond::try_from_w(v)?.to_kmh()
+        let k3 = cal.k3_at(self.settings.n_max);
+        KilometresPerHour::try_from_w(fx::mul(self.vmax_per_k3, k3.w())?)
     }
 
     /// Plants per minute per row at travel speed V1: `60·V1/Lplant`.

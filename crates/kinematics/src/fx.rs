@@ -32,6 +32,12 @@ pub(crate) const fn const_mul(a: W, b: W) -> W {
     ((a as u128 * b as u128) >> FRAC) as u64
 }
 
+/// `⌊a·2^32 / b⌋` at compile time (for constants only; `b` must not be 0).
+#[allow(clippy::cast_possible_truncation, clippy::arithmetic_side_effects)]
+pub(crate) const fn const_div(a: W, b: W) -> W {
+    (((a as u128) << FRAC) / b as u128) as u64
+}
+
 const LOW: u64 = 0xffff_ffff;
 
 /// The full 128-bit product `a·b` as `(high, low)` 64-bit halves, from four

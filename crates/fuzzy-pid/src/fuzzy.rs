@@ -165,7 +165,8 @@ impl Axis {
     }
 
     /// Cell index and fraction `w ∈ [0, 1]` of a physical input (saturated).
-    #[inline]
+    /// Not inlined: one body for both inputs.
+    #[inline(never)]
     fn locate(&self, x: Fix) -> (usize, Fix) {
         // Saturate in physical units first: then |x_bits·gain_q32| ≤
         // cells·2^47 ≤ 12·2^47 < 2^51, well inside i64.

@@ -122,14 +122,32 @@ impl RuleBase {
     /// The paper's tables (SPEC §5), sampled down to `size` sets per input.
     #[must_use]
     pub fn paper(size: RuleBaseSize) -> Self {
+        // Sampled at compile time: at run time this is a copy of a constant.
+        match size {
+            RuleBaseSize::Three => const { Self::sampled(RuleBaseSize::Three) },
+            RuleBaseSize::Five => const { Self::sampled(RuleBaseSize::Five) },
+            RuleBaseSize::Seven => const { Self::sampled(RuleBaseSize::Seven) },
+        }
+    }
+
+    /// The paper's tables sampled down to `size` sets per input (compile time).
+    #[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+    const fn sampled(size: RuleBaseSize) -> Self {
         let mut tables = [[[0_i8; MAX_SETS]; MAX_SETS]; 3];
+        let src = [&PAPER_KP, &PAPER_KI, &PAPER_KD];
         let sample = size.sample();
-        for (out, src) in tables.iter_mut().zip([&PAPER_KP, &PAPER_KI, &PAPER_KD]) {
-            for (dst_row, &r) in out.iter_mut().zip(sample) {
-                for (dst, &c) in dst_row.iter_mut().zip(sample) {
-                    *dst = src.get(r).and_then(|row| row.get(c)).copied().unwrap_or(0);
+        let mut o = 0;
+        while o < 3 {
+            let mut r = 0;
+            while r < sample.len() {
+                let mut c = 0;
+                while c < sample.len() {
+                    tables[o][r][c] = src[o][sample[r]][sample[c]];
+                    c += 1;
                 }
+                r += 1;
             }
+            o += 1;
         }
         Self {
             size: size.sets(),

@@ -159,24 +159,19 @@ impl CoeffTable {
     /// The coefficient at `x`: linear between points, clamped at the ends.
     #[must_use]
     pub fn eval(&self, x: U16F16) -> Coefficient {
-        let (Some(first), Some(last)) = (self.points.first(), self.points.last()) else {
-            return Coefficient::ONE;
-        };
-        if x <= first.x {
-            return first.k;
-        }
-        if x >= last.x {
-            return last.k;
-        }
-        for pair in self.points.windows(2) {
-            let (Some(a), Some(b)) = (pair.first(), pair.get(1)) else {
-                continue;
-            };
-            if x >= a.x && x < b.x {
-                return interpolate(a, b, x).unwrap_or(a.k);
+        // The first point above x closes the segment that holds it; before
+        // the first point and from the last one on, the end value holds.
+        let mut below: Option<&TablePoint> = None;
+        for p in &self.points {
+            if x < p.x {
+                return match below {
+                    None => p.k,
+                    Some(a) => interpolate(a, p, x).unwrap_or(a.k),
+                };
             }
+            below = Some(p);
         }
-        last.k
+        below.map_or(Coefficient::ONE, |p| p.k)
     }
 
     /// Serialises into `out`; returns the number of bytes written.

@@ -276,9 +276,16 @@ impl FuzzyTuner {
         let n = cfg.rules.size();
         let e = Axis::new(n, cfg.e_domain)?;
         let ec = Axis::new(n, cfg.ec_domain)?;
-        // The rule base's tables, zero outside the `n × n` corner.
-        let mut labels = *cfg.rules.tables();
-        for table in &mut labels {
+        // Built in place: the rule base's tables, zeroed outside the `n × n`
+        // corner, and the singletons.
+        let mut t = Self {
+            e,
+            ec,
+            and: cfg.and,
+            labels: *cfg.rules.tables(),
+            values: [[Fix::ZERO; 7]; 3],
+        };
+        for table in &mut t.labels {
             for (row, line) in table.iter_mut().enumerate() {
                 for (col, l) in line.iter_mut().enumerate() {
                     if row >= n || col >= n {
@@ -288,21 +295,14 @@ impl FuzzyTuner {
             }
         }
         let ranges = [cfg.range.kp, cfg.range.ki, cfg.range.kd];
-        let mut values = [[Fix::ZERO; 7]; 3];
-        for (vals, r) in values.iter_mut().zip(ranges) {
+        for (vals, r) in t.values.iter_mut().zip(ranges) {
             for (label, v) in (-3_i32..=3).zip(vals.iter_mut()) {
                 // Exactly the former per-cell singleton: r·label, then
                 // truncated division by 3 (|r| ≤ 1000: |r·label| < 2^28).
                 *v = Fix::from_bits(r.to_bits().wrapping_mul(label).wrapping_div(3));
             }
         }
-        Ok(Self {
-            e,
-            ec,
-            and: cfg.and,
-            labels,
-            values,
-        })
+        Ok(t)
     }
 
     /// ΔKp, ΔKi, ΔKd for error `e` (r/min, `target − measured`) and error change

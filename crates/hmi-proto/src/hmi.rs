@@ -13,9 +13,18 @@
 //! Boot handshake: until the screen answers, [`Hmi::tick`] sends a lone
 //! terminator (to end any partial instruction) and `sendme` every
 //! [`HANDSHAKE_RETRY_MS`]. The first `0x66` reply, or a `0x88` ready frame,
-//! connects: the MCU sends `bkcmd=2`, `dims=…`, shows the mode page and
-//! reports [`Event::Connected`]. A later `0x88`/startup frame (screen reset)
-//! repeats this.
+//! connects: the MCU sends `bkcmd=2`, `dims=…`, shows the home page of the
+//! profile running ([`MachineProfile::home`]: page 1 `mode` for profile A,
+//! page 7 `belt` for profile B) and reports [`Event::Connected`]. A later
+//! `0x88`/startup frame (screen reset) repeats this.
+//!
+//! Machine profile: the profile running is the one in the settings given to
+//! [`Hmi::new`] ([`Hmi::active_profile`]); it decides the home page, and
+//! *Back* on page 6 goes there. The profile button on page 6 only changes the
+//! selection in [`Settings::profile`] (reported as
+//! [`Command::SelectProfile`]); while the selection differs from the profile
+//! running, page 6's `tmsg` shows [`PROFILE_RESTART_MESSAGE`]: the firmware
+//! applies the new profile after *Save settings* and a restart.
 //!
 //! ```
 //! use hmi_proto::hmi::{Event, Hmi};
@@ -47,8 +56,8 @@ use crate::decoder::{Decoder, DecoderStats};
 use crate::encoder::{Attr, BkCmd, Instruction, ScreenText, MAX_INSTRUCTION_LEN};
 use crate::frame::{ErrorCode, Frame, TouchEvent};
 use crate::screen::{
-    page_instructions, status_instructions, Action, Command, Component, Field, Page, ParamError,
-    Role, Settings, Status,
+    page_instructions, status_instructions, Action, Command, Component, Field, MachineProfile,
+    Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
 };
 
 /// Bytes the transmit queue holds (a page refresh plus a message fits).
@@ -133,6 +142,7 @@ pub struct Hmi {
     link: Link,
     page: Page,
     page_before_alarm: Page,
+    active_profile: MachineProfile,
     settings: Settings,
     version: ScreenText<'static>,
     pending: Option<Pending>,
@@ -146,12 +156,15 @@ pub struct Hmi {
 impl Hmi {
     /// A link that will start the handshake at the first [`tick`](Self::tick).
     /// `version` (≤ 40 characters, else shown empty) goes to the `tver` boxes.
+    /// `settings.profile` is the profile the machine runs
+    /// ([`active_profile`](Self::active_profile)): it picks the home page.
     pub fn new(settings: Settings, version: &'static str) -> Self {
         Self {
             decoder: Decoder::new(),
             link: Link::Connecting { last_try_ms: None },
             page: Page::Boot,
-            page_before_alarm: Page::Mode,
+            page_before_alarm: settings.profile.home(),
+            active_profile: settings.profile,
             settings,
             version: ScreenText::new(version).unwrap_or(ScreenText::EMPTY),
             pending: None,
@@ -171,6 +184,17 @@ impl Hmi {
     /// The page the MCU believes is shown.
     pub fn page(&self) -> Page {
         self.page
+    }
+
+    /// The profile the machine runs (from the settings given to
+    /// [`new`](Self::new)); a profile selected later applies after a restart.
+    pub fn active_profile(&self) -> MachineProfile {
+        self.active_profile
+    }
+
+    /// The home page of the profile running (shown after the handshake).
+    pub fn home_page(&self) -> Page {
+        self.active_profile.home()
     }
 
     /// The settings as displayed.
@@ -369,7 +393,7 @@ impl Hmi {
         self.touches.clear();
         let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
         let _ = self.send(&Instruction::Dims(self.settings.brightness.raw()));
-        let _ = self.show_page(Page::Mode);
+        let _ = self.show_page(self.home_page());
         self.event(Event::Connected);
     }
 
@@ -378,7 +402,13 @@ impl Hmi {
             Frame::CurrentPage(p) => match self.link {
                 Link::Connecting { .. } => self.connect(),
                 Link::Connected => {
-                    if let Some(page) = Page::from_id(p) {
+                    // The screen shows page 0 `boot` only at power-on, before
+                    // the handshake (a restart announces itself with the
+                    // startup frame first): a reply naming it now is a late
+                    // answer to a handshake `sendme` (the screen booted and
+                    // sent `0x88` before answering it) and would hide the
+                    // home page's live status; ignore it.
+                    if let Some(page) = Page::from_id(p).filter(|&pg| pg != Page::Boot) {
                         self.page = page;
                     }
                 }
@@ -454,6 +484,21 @@ impl Hmi {
                 let _ = self.show_page(p);
                 None
             }
+            Action::ShowHome => {
+                let _ = self.show_page(self.home_page());
+                None
+            }
+            Action::NextProfile => {
+                let mut s = self.settings;
+                s.profile = s.profile.next();
+                let _ = self.set_settings(s);
+                let _ = self.show_message(if s.profile == self.active_profile {
+                    ""
+                } else {
+                    PROFILE_RESTART_MESSAGE
+                });
+                Some(Command::SelectProfile(s.profile))
+            }
             Action::SelectMode(m) => {
                 let _ = self.show_page(m.page());
                 Some(Command::SelectMode(m))
@@ -516,6 +561,13 @@ impl Hmi {
                         s.brightness = v;
                         let _ = self.send(&Instruction::Dims(v.raw()));
                     }
+                    Command::SetBeltSpacing(v) => s.belt.spacing = v,
+                    Command::SetSeedlingPitch(v) => s.belt.seedling_pitch = v,
+                    Command::SetClampAngle(v) => s.belt.clamp_angle = v,
+                    Command::SetClampCount(v) => s.belt.clamp_count = v,
+                    Command::SetRollerRadius(v) => s.belt.roller_radius = v,
+                    Command::SetBeltThickness(v) => s.belt.belt_thickness = v,
+                    Command::SetSpeedThreshold(v) => s.belt.speed_threshold = v,
                     _ => {}
                 }
                 self.settings = s;

@@ -18,6 +18,27 @@
 //! | distance travelled | dm (0.1 m) | 0–2³¹ | 1, shown in m |
 //! | plants planted | count | 0–2³¹ | – (Number) |
 //! | brightness | % | 10–100 | – (Number) |
+//!
+//! Profile B (the seedling-belt planter, paper B; pages 7 and 8):
+//!
+//! | quantity | unit on the wire | range | component |
+//! |---|---|---|---|
+//! | target plant spacing X | mm | 100–1000 (10–100 cm) | Xfloat `ws1`=1, shown in cm |
+//! | belt seedling pitch B | mm | 20–500 (2–50 cm) | Xfloat `ws1`=1, shown in cm |
+//! | clamping angle β | degrees | 1–360 | Number |
+//! | seedlings clamped N | count | 1–12 | Number |
+//! | roller radius r | 0.1 mm | 50–1000 (5.0–100.0 mm) | Xfloat `ws1`=1, shown in mm |
+//! | belt thickness h | 0.01 mm | 1–1000 (0.01–10.00 mm) | Xfloat `ws1`=2, shown in mm |
+//! | speed threshold Y | mm/s | 1–500 (0.001–0.500 m/s) | Xfloat `ws1`=3, shown in m/s |
+//! | travel speed | m/s × 100 | 0–65535 | Xfloat `ws1`=2 |
+//! | planting / feeding motor speed n1, n2 | r/min × 100 | 0–65535 | Xfloat `ws1`=2 |
+//! | roller turns j | count | 0–2³¹ | Number |
+//! | roller radius r' = r + h·j | 0.1 mm | 0–65535 | Xfloat `ws1`=1 |
+//!
+//! **Home page.** The machine runs one [`MachineProfile`]; its home page
+//! ([`MachineProfile::home`]) is page 1 `mode` for profile A and page 7
+//! `belt` for profile B. [`Hmi`](crate::hmi::Hmi) shows it after the
+//! handshake, and *Back* on page 6 ([`Action::ShowHome`]) returns to it.
 
 use core::fmt;
 
@@ -39,13 +60,17 @@ pub enum Page {
     Calibration = 4,
     /// 5 `alarm`: an alarm text and its acknowledge button.
     Alarm = 5,
-    /// 6 `settings`: brightness, save settings, firmware version.
+    /// 6 `settings`: brightness, save settings, firmware version, machine profile.
     Settings = 6,
+    /// 7 `belt`: profile B run page (start/stop, motor speeds, roller).
+    Belt = 7,
+    /// 8 `beltpar`: profile B parameters (X, B, β, N, r, h, Y).
+    BeltParameters = 8,
 }
 
 impl Page {
     /// All pages in id order.
-    pub const ALL: [Page; 7] = [
+    pub const ALL: [Page; 9] = [
         Self::Boot,
         Self::Mode,
         Self::Fixed,
@@ -53,6 +78,8 @@ impl Page {
         Self::Calibration,
         Self::Alarm,
         Self::Settings,
+        Self::Belt,
+        Self::BeltParameters,
     ];
 
     /// The page id.
@@ -75,9 +102,68 @@ impl Page {
             Self::Calibration => "calib",
             Self::Alarm => "alarm",
             Self::Settings => "settings",
+            Self::Belt => "belt",
+            Self::BeltParameters => "beltpar",
+        }
+    }
+
+    /// The home page of `profile` (see [`MachineProfile::home`]).
+    pub const fn home(profile: MachineProfile) -> Self {
+        profile.home()
+    }
+}
+
+/// The machine the firmware drives (SPEC §8): the same firmware runs either.
+///
+/// The profile is a setting ([`Settings::profile`]). Changing it on page 6
+/// (`bprofile`) only selects it: the firmware applies it after *Save
+/// settings* and a restart, because it switches the motor outputs (profile A:
+/// one drum motor; profile B: the feeding and planting steppers). Until then
+/// the machine keeps running the profile it started with, and the screen
+/// says so ([`PROFILE_RESTART_MESSAGE`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MachineProfile {
+    /// Profile A: the drum-belt transplanter (paper A; pages 1–4). The default.
+    #[default]
+    DrumBelt,
+    /// Profile B: the seedling-belt planter (paper B; pages 7–8).
+    SeedlingBelt,
+}
+
+impl MachineProfile {
+    /// Both profiles, A first.
+    pub const ALL: [MachineProfile; 2] = [Self::DrumBelt, Self::SeedlingBelt];
+
+    /// The label shown in `tprofile` (ASCII, ≤ 40 characters).
+    pub const fn label(self) -> &'static str {
+        match self {
+            Self::DrumBelt => "A: drum-belt transplanter",
+            Self::SeedlingBelt => "B: seedling-belt planter",
+        }
+    }
+
+    /// The next profile (A → B → A), for the selector button.
+    pub const fn next(self) -> Self {
+        match self {
+            Self::DrumBelt => Self::SeedlingBelt,
+            Self::SeedlingBelt => Self::DrumBelt,
+        }
+    }
+
+    /// The page shown after the handshake and by *Back* on page 6:
+    /// page 1 `mode` (A) or page 7 `belt` (B).
+    pub const fn home(self) -> Page {
+        match self {
+            Self::DrumBelt => Page::Mode,
+            Self::SeedlingBelt => Page::Belt,
         }
     }
 }
+
+/// Shown in page 6's `tmsg` when the profile selected differs from the one
+/// running: the change takes effect after *Save settings* and a restart.
+pub const PROFILE_RESTART_MESSAGE: &str = "Save, then restart to switch machine";
 
 /// Operating mode (paper A: Fixed Mode and Speed-Adaptive Mode).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -214,6 +300,39 @@ pub enum Field {
     CalibrationCoefficient,
     /// Screen brightness, %.
     Brightness,
+    /// Profile B: target plant spacing X, mm.
+    BeltSpacing,
+    /// Profile B: seedling pitch on the belt B, mm.
+    SeedlingPitch,
+    /// Profile B: clamping angle β of the flexible disc, degrees.
+    ClampAngle,
+    /// Profile B: seedlings clamped at once N.
+    ClampCount,
+    /// Profile B: initial roller radius r, 0.1 mm.
+    RollerRadius,
+    /// Profile B: seedling-belt thickness h, 0.01 mm.
+    BeltThickness,
+    /// Profile B: speed-change threshold Y, mm/s.
+    SpeedThreshold,
+}
+
+impl Field {
+    /// Every field.
+    pub const ALL: [Field; 13] = [
+        Self::MotorCoefficient,
+        Self::FixedDrumSpeed,
+        Self::Spacing,
+        Self::CalibrationDistance,
+        Self::CalibrationCoefficient,
+        Self::Brightness,
+        Self::BeltSpacing,
+        Self::SeedlingPitch,
+        Self::ClampAngle,
+        Self::ClampCount,
+        Self::RollerRadius,
+        Self::BeltThickness,
+        Self::SpeedThreshold,
+    ];
 }
 
 /// An operator value outside its range: nothing changed; [`message`](Self::message)
@@ -237,6 +356,13 @@ impl ParamError {
             Field::CalibrationDistance => "Distance must be 1-1000 m",
             Field::CalibrationCoefficient => "Calib coef must be 0.800-1.200",
             Field::Brightness => "Brightness must be 10-100 %",
+            Field::BeltSpacing => "Spacing X must be 10.0-100.0 cm",
+            Field::SeedlingPitch => "Belt pitch B must be 2.0-50.0 cm",
+            Field::ClampAngle => "Clamp angle must be 1-360 deg",
+            Field::ClampCount => "Seedlings clamped must be 1-12",
+            Field::RollerRadius => "Roller radius must be 5.0-100.0 mm",
+            Field::BeltThickness => "Belt thickness must be 0.01-10.00 mm",
+            Field::SpeedThreshold => "Threshold Y must be 0.001-0.500 m/s",
         }
     }
 }
@@ -311,6 +437,46 @@ bounded!(
     Brightness, u8, Field::Brightness, 10, 100, 100
 );
 
+// Profile B. The defaults equal `kinematics::profile_b::ProfileBSettings::default()`
+// (X 0.25 m, B 0.10 m, β 120°, N 2, r 25 mm, h 1 mm, Y 0.02 m/s); this crate
+// stays free of a kinematics dependency, so the numbers are written out here
+// and the supervisor crate converts them (`belt_defaults_match_paper_b_defaults`
+// below pins the figures).
+bounded!(
+    /// Profile B target plant spacing X in mm, 100–1000 (10–100 cm).
+    /// Default 250 (paper B's bench value, 25 cm).
+    BeltSpacing, u16, Field::BeltSpacing, 100, 1000, 250
+);
+bounded!(
+    /// Profile B seedling pitch on the belt B in mm, 20–500 (2–50 cm).
+    /// Default 100 (paper B's bench value, 10 cm).
+    SeedlingPitch, u16, Field::SeedlingPitch, 20, 500, 100
+);
+bounded!(
+    /// Profile B clamping angle β of the flexible disc in degrees, 1–360.
+    /// Default 120.
+    ClampAngle, u16, Field::ClampAngle, 1, 360, 120
+);
+bounded!(
+    /// Profile B seedlings clamped at once within β, N, 1–12. Default 2.
+    ClampCount, u8, Field::ClampCount, 1, 12, 2
+);
+bounded!(
+    /// Profile B initial roller radius r in 0.1 mm, 50–1000 (5.0–100.0 mm).
+    /// Default 250 (25.0 mm).
+    RollerRadius, u16, Field::RollerRadius, 50, 1000, 250
+);
+bounded!(
+    /// Profile B seedling-belt thickness h in 0.01 mm, 1–1000 (0.01–10.00 mm).
+    /// Default 100 (1.00 mm).
+    BeltThickness, u16, Field::BeltThickness, 1, 1000, 100
+);
+bounded!(
+    /// Profile B speed-change threshold Y in mm/s, 1–500 (0.001–0.500 m/s).
+    /// Default 20 (0.02 m/s).
+    SpeedThreshold, u16, Field::SpeedThreshold, 1, 500, 20
+);
+
 impl CalibrationCoefficient {
     /// `actual / measured`, rounded to 0.001, then range-checked; a zero
     /// `measured` distance is out of range too.
@@ -337,6 +503,13 @@ impl Field {
                 Command::SetCalibrationCoefficient(CalibrationCoefficient::new(raw)?)
             }
             Self::Brightness => Command::SetBrightness(Brightness::new(raw)?),
+            Self::BeltSpacing => Command::SetBeltSpacing(BeltSpacing::new(raw)?),
+            Self::SeedlingPitch => Command::SetSeedlingPitch(SeedlingPitch::new(raw)?),
+            Self::ClampAngle => Command::SetClampAngle(ClampAngle::new(raw)?),
+            Self::ClampCount => Command::SetClampCount(ClampCount::new(raw)?),
+            Self::RollerRadius => Command::SetRollerRadius(RollerRadius::new(raw)?),
+            Self::BeltThickness => Command::SetBeltThickness(BeltThickness::new(raw)?),
+            Self::SpeedThreshold => Command::SetSpeedThreshold(SpeedThreshold::new(raw)?),
         })
     }
 
@@ -351,6 +524,13 @@ impl Field {
             }
             Self::CalibrationCoefficient => i32::from(s.calibration_coefficient.raw()),
             Self::Brightness => i32::from(s.brightness.raw()),
+            Self::BeltSpacing => i32::from(s.belt.spacing.raw()),
+            Self::SeedlingPitch => i32::from(s.belt.seedling_pitch.raw()),
+            Self::ClampAngle => i32::from(s.belt.clamp_angle.raw()),
+            Self::ClampCount => i32::from(s.belt.clamp_count.raw()),
+            Self::RollerRadius => i32::from(s.belt.roller_radius.raw()),
+            Self::BeltThickness => i32::from(s.belt.belt_thickness.raw()),
+            Self::SpeedThreshold => i32::from(s.belt.speed_threshold.raw()),
         }
     }
 }
@@ -391,6 +571,45 @@ pub enum Command {
     SaveSettings,
     /// New screen brightness (already sent to the screen as `dims`).
     SetBrightness(Brightness),
+    /// Select the machine profile (page 6 `bprofile`). It takes effect after
+    /// [`SaveSettings`](Self::SaveSettings) and a restart (the firmware
+    /// switches the motor outputs); the screen says so.
+    SelectProfile(MachineProfile),
+    /// Profile B: new target plant spacing X.
+    SetBeltSpacing(BeltSpacing),
+    /// Profile B: new belt seedling pitch B.
+    SetSeedlingPitch(SeedlingPitch),
+    /// Profile B: new clamping angle β.
+    SetClampAngle(ClampAngle),
+    /// Profile B: new number of seedlings clamped N.
+    SetClampCount(ClampCount),
+    /// Profile B: new initial roller radius r.
+    SetRollerRadius(RollerRadius),
+    /// Profile B: new belt thickness h.
+    SetBeltThickness(BeltThickness),
+    /// Profile B: new speed-change threshold Y.
+    SetSpeedThreshold(SpeedThreshold),
+}
+
+/// Profile B's parameters as the screen shows them (paper B; the defaults are
+/// `kinematics::profile_b::ProfileBSettings::default()`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BeltSettings {
+    /// Target plant spacing X.
+    pub spacing: BeltSpacing,
+    /// Seedling pitch on the belt B.
+    pub seedling_pitch: SeedlingPitch,
+    /// Clamping angle β.
+    pub clamp_angle: ClampAngle,
+    /// Seedlings clamped at once N.
+    pub clamp_count: ClampCount,
+    /// Initial roller radius r.
+    pub roller_radius: RollerRadius,
+    /// Belt thickness h.
+    pub belt_thickness: BeltThickness,
+    /// Speed-change threshold Y.
+    pub speed_threshold: SpeedThreshold,
 }
 
 /// The settings the screen displays (the firmware owns and persists them).
@@ -413,6 +632,11 @@ pub struct Settings {
     pub calibration_kind: CalibrationKind,
     /// Screen brightness.
     pub brightness: Brightness,
+    /// The machine profile selected (the one running is fixed at start-up:
+    /// see [`MachineProfile`]).
+    pub profile: MachineProfile,
+    /// Profile B's parameters.
+    pub belt: BeltSettings,
 }
 
 /// Live values written to the screen; each goes to the components showing it
@@ -434,6 +658,17 @@ pub struct Status {
     pub measured_distance_cm: u32,
     /// Coefficient computed by the calibration, × 1000 (0 = none yet).
     pub calibration_result_x1000: u16,
+    /// Profile B: travel speed, m/s × 100 (paper B's unit; profile A shows
+    /// [`travel_speed_kmh_x100`](Self::travel_speed_kmh_x100)).
+    pub travel_speed_mps_x100: u16,
+    /// Profile B: planting motor speed n1, r/min × 100 (saturating).
+    pub plant_motor_rpm_x100: u16,
+    /// Profile B: feeding motor speed n2, r/min × 100 (saturating).
+    pub feed_motor_rpm_x100: u16,
+    /// Profile B: seedling-roller turns j since the belt was loaded.
+    pub roller_turns: u32,
+    /// Profile B: effective roller radius r' = r + h·j, 0.1 mm (saturating).
+    pub roller_radius_dmm: u16,
 }
 
 /// Live values shown by display-only components.
@@ -454,6 +689,16 @@ pub enum StatusField {
     MeasuredDistance,
     /// [`Status::calibration_result_x1000`].
     CalibrationResult,
+    /// [`Status::travel_speed_mps_x100`].
+    TravelSpeedMps,
+    /// [`Status::plant_motor_rpm_x100`].
+    PlantMotorSpeed,
+    /// [`Status::feed_motor_rpm_x100`].
+    FeedMotorSpeed,
+    /// [`Status::roller_turns`].
+    RollerTurns,
+    /// [`Status::roller_radius_dmm`].
+    RollerRadius,
 }
 
 impl StatusField {
@@ -468,6 +713,11 @@ impl StatusField {
             Self::Distance => sat(s.distance_dm),
             Self::MeasuredDistance => sat(s.measured_distance_cm),
             Self::CalibrationResult => i32::from(s.calibration_result_x1000),
+            Self::TravelSpeedMps => i32::from(s.travel_speed_mps_x100),
+            Self::PlantMotorSpeed => i32::from(s.plant_motor_rpm_x100),
+            Self::FeedMotorSpeed => i32::from(s.feed_motor_rpm_x100),
+            Self::RollerTurns => sat(s.roller_turns),
+            Self::RollerRadius => i32::from(s.roller_radius_dmm),
         }
     }
 }
@@ -478,6 +728,11 @@ impl StatusField {
 pub enum Action {
     /// Navigate (no machine command).
     ShowPage(Page),
+    /// Navigate to the home page of the profile running
+    /// ([`MachineProfile::home`]; no machine command).
+    ShowHome,
+    /// [`Command::SelectProfile`] with the next profile.
+    NextProfile,
     /// [`Command::SelectMode`] and show the mode's page.
     SelectMode(Mode),
     /// Read the page's input for this field with `get`, validate, command.
@@ -518,6 +773,8 @@ pub enum Role {
     GearLabel,
     /// The calibration kind's label, written with `tkind.txt=`.
     CalibrationLabel,
+    /// The selected machine profile's label, written with `tprofile.txt=`.
+    ProfileLabel,
     /// The firmware version, written with `tver.txt=`.
     Version,
     /// The alarm text, written with `talarm.txt=`.
@@ -879,22 +1136,191 @@ pub const COMPONENTS: &[Component] = &[
         K::Button,
         R::Action(A::SaveSettings),
     ),
-    c(
-        P::Settings,
-        4,
-        "bback",
-        K::Button,
-        R::Action(A::ShowPage(P::Mode)),
-    ),
+    c(P::Settings, 4, "bback", K::Button, R::Action(A::ShowHome)),
     c(P::Settings, 5, "tver", K::Text, R::Version),
     c(P::Settings, 6, "tmsg", K::Text, R::Message),
+    c(
+        P::Settings,
+        7,
+        "bprofile",
+        K::Button,
+        R::Action(A::NextProfile),
+    ),
+    c(P::Settings, 8, "tprofile", K::Text, R::ProfileLabel),
+    // 7 belt (profile B home)
+    c(P::Belt, 1, "bstart", K::Button, R::Action(A::Start)),
+    c(P::Belt, 2, "bstop", K::Button, R::Action(A::Stop)),
+    c(
+        P::Belt,
+        3,
+        "bpar",
+        K::Button,
+        R::Action(A::ShowPage(P::BeltParameters)),
+    ),
+    c(
+        P::Belt,
+        4,
+        "bset",
+        K::Button,
+        R::Action(A::ShowPage(P::Settings)),
+    ),
+    c(
+        P::Belt,
+        5,
+        "xtravel",
+        K::Xfloat(2),
+        R::Status(StatusField::TravelSpeedMps),
+    ),
+    c(
+        P::Belt,
+        6,
+        "xn1",
+        K::Xfloat(2),
+        R::Status(StatusField::PlantMotorSpeed),
+    ),
+    c(
+        P::Belt,
+        7,
+        "xn2",
+        K::Xfloat(2),
+        R::Status(StatusField::FeedMotorSpeed),
+    ),
+    c(
+        P::Belt,
+        8,
+        "nj",
+        K::Number,
+        R::Status(StatusField::RollerTurns),
+    ),
+    c(
+        P::Belt,
+        9,
+        "xrad",
+        K::Xfloat(1),
+        R::Status(StatusField::RollerRadius),
+    ),
+    c(
+        P::Belt,
+        10,
+        "nplants",
+        K::Number,
+        R::Status(StatusField::Plants),
+    ),
+    c(P::Belt, 11, "tmsg", K::Text, R::Message),
+    // 8 beltpar (profile B parameters)
+    c(
+        P::BeltParameters,
+        1,
+        "nspacing",
+        K::Xfloat(1),
+        R::Input(Field::BeltSpacing),
+    ),
+    c(
+        P::BeltParameters,
+        2,
+        "bspacing",
+        K::Button,
+        R::Action(A::Apply(Field::BeltSpacing)),
+    ),
+    c(
+        P::BeltParameters,
+        3,
+        "npitch",
+        K::Xfloat(1),
+        R::Input(Field::SeedlingPitch),
+    ),
+    c(
+        P::BeltParameters,
+        4,
+        "bpitch",
+        K::Button,
+        R::Action(A::Apply(Field::SeedlingPitch)),
+    ),
+    c(
+        P::BeltParameters,
+        5,
+        "nangle",
+        K::Number,
+        R::Input(Field::ClampAngle),
+    ),
+    c(
+        P::BeltParameters,
+        6,
+        "bangle",
+        K::Button,
+        R::Action(A::Apply(Field::ClampAngle)),
+    ),
+    c(
+        P::BeltParameters,
+        7,
+        "nclamp",
+        K::Number,
+        R::Input(Field::ClampCount),
+    ),
+    c(
+        P::BeltParameters,
+        8,
+        "bclamp",
+        K::Button,
+        R::Action(A::Apply(Field::ClampCount)),
+    ),
+    c(
+        P::BeltParameters,
+        9,
+        "nradius",
+        K::Xfloat(1),
+        R::Input(Field::RollerRadius),
+    ),
+    c(
+        P::BeltParameters,
+        10,
+        "bradius",
+        K::Button,
+        R::Action(A::Apply(Field::RollerRadius)),
+    ),
+    c(
+        P::BeltParameters,
+        11,
+        "nthick",
+        K::Xfloat(2),
+        R::Input(Field::BeltThickness),
+    ),
+    c(
+        P::BeltParameters,
+        12,
+        "bthick",
+        K::Button,
+        R::Action(A::Apply(Field::BeltThickness)),
+    ),
+    c(
+        P::BeltParameters,
+        13,
+        "nthresh",
+        K::Xfloat(3),
+        R::Input(Field::SpeedThreshold),
+    ),
+    c(
+        P::BeltParameters,
+        14,
+        "bthresh",
+        K::Button,
+        R::Action(A::Apply(Field::SpeedThreshold)),
+    ),
+    c(
+        P::BeltParameters,
+        15,
+        "bback",
+        K::Button,
+        R::Action(A::ShowPage(P::Belt)),
+    ),
+    c(P::BeltParameters, 16, "tmsg", K::Text, R::Message),
 ];
 
 /// Most instructions one page refresh needs ([`page_instructions`]).
 pub const MAX_PAGE_INSTRUCTIONS: usize = 8;
 
 /// The instructions that show the settings on `page`: each input's current
-/// value, the gear label and the version text.
+/// value, the gear, calibration-kind and profile labels and the version text.
 pub fn page_instructions(
     page: Page,
     settings: &Settings,
@@ -911,6 +1337,10 @@ pub fn page_instructions(
             Role::CalibrationLabel => Instruction::SetText(
                 comp.obj(),
                 ScreenText::new(settings.calibration_kind.label()).unwrap_or(version),
+            ),
+            Role::ProfileLabel => Instruction::SetText(
+                comp.obj(),
+                ScreenText::new(settings.profile.label()).unwrap_or(version),
             ),
             Role::Version => Instruction::SetText(comp.obj(), version),
             _ => continue,
@@ -968,6 +1398,7 @@ mod tests {
                             Role::Input(_)
                                 | Role::GearLabel
                                 | Role::CalibrationLabel
+                                | Role::ProfileLabel
                                 | Role::Version
                         )
                     })
@@ -985,17 +1416,81 @@ mod tests {
 
     #[test]
     fn messages_fit_the_screen() {
-        let fields = [
-            Field::MotorCoefficient,
-            Field::FixedDrumSpeed,
-            Field::Spacing,
-            Field::CalibrationDistance,
-            Field::CalibrationCoefficient,
-            Field::Brightness,
-        ];
-        for f in fields {
+        for f in Field::ALL {
             let m = ParamError { field: f, value: 0 }.message();
             assert!(m.is_ascii() && m.len() <= crate::MAX_TEXT_LEN, "{m}");
         }
+        for p in MachineProfile::ALL {
+            let l = p.label();
+            assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
+        }
+        let m = PROFILE_RESTART_MESSAGE;
+        assert!(m.is_ascii() && m.len() <= crate::MAX_TEXT_LEN, "{m}");
+    }
+
+    #[test]
+    fn every_field_has_one_input_and_one_apply_button() {
+        for f in Field::ALL {
+            let inputs: std::vec::Vec<_> = COMPONENTS
+                .iter()
+                .filter(|c| c.role == Role::Input(f))
+                .collect();
+            assert_eq!(inputs.len(), 1, "{f:?}");
+            let page = inputs.first().unwrap().page;
+            assert!(
+                Component::on_page(page).any(|c| c.role == Role::Action(Action::Apply(f))),
+                "{f:?}"
+            );
+            // The raw default validates to the command that sets it.
+            let raw = f.current(&Settings::default());
+            assert!(f.validate(raw).is_ok(), "{f:?}");
+        }
+    }
+
+    #[test]
+    fn profiles_have_their_home_pages() {
+        assert_eq!(MachineProfile::default(), MachineProfile::DrumBelt);
+        assert_eq!(Page::home(MachineProfile::DrumBelt), Page::Mode);
+        assert_eq!(Page::home(MachineProfile::SeedlingBelt), Page::Belt);
+        for p in MachineProfile::ALL {
+            assert_eq!(p.next().next(), p);
+            assert_ne!(p.next(), p);
+        }
+        // Every page is reachable: a button on another page shows it, or it is
+        // a home page, the boot page or the alarm page (shown by the MCU).
+        for p in Page::ALL {
+            let reachable = matches!(p, Page::Boot | Page::Alarm)
+                || MachineProfile::ALL.iter().any(|m| m.home() == p)
+                || COMPONENTS.iter().any(|c| {
+                    c.page != p
+                        && matches!(
+                            c.role,
+                            Role::Action(Action::ShowPage(q)) if q == p
+                        )
+                })
+                || COMPONENTS.iter().any(|c| {
+                    matches!(
+                        c.role,
+                        Role::Action(Action::SelectMode(m)) if m.page() == p
+                    )
+                });
+            assert!(reachable, "{p:?}");
+        }
+    }
+
+    #[test]
+    fn belt_defaults_match_paper_b_defaults() {
+        // kinematics::profile_b::ProfileBSettings::default(): X 0.25 m,
+        // B 0.10 m, beta 120 deg, N 2, r 25 mm, h 1 mm, Y 0.02 m/s.
+        let b = BeltSettings::default();
+        assert_eq!(b.spacing.raw(), 250);
+        assert_eq!(b.seedling_pitch.raw(), 100);
+        assert_eq!(b.clamp_angle.raw(), 120);
+        assert_eq!(b.clamp_count.raw(), 2);
+        assert_eq!(b.roller_radius.raw(), 250);
+        assert_eq!(b.belt_thickness.raw(), 100);
+        assert_eq!(b.speed_threshold.raw(), 20);
+        assert_eq!(Settings::default().belt, b);
+        assert_eq!(Settings::default().profile, MachineProfile::DrumBelt);
     }
 }

@@ -414,6 +414,367 @@ fn virtual_screen_answers_like_the_real_one() {
     assert_eq!(s.take_output(), b"\x24\xff\xff\xff");
 }
 
+/// Connected in profile B (the settings given to `Hmi::new` name it).
+fn connected_b() -> (Hmi, VirtualScreen) {
+    let mut screen = VirtualScreen::with_contract();
+    let settings = Settings {
+        profile: MachineProfile::SeedlingBelt,
+        ..Settings::default()
+    };
+    let mut hmi = Hmi::new(settings, "fw 0.1.0");
+    screen.boot();
+    hmi.tick(0);
+    let ev = pump(&mut hmi, &mut screen);
+    assert!(ev.contains(&Event::Connected), "{ev:?}");
+    (hmi, screen)
+}
+
+#[test]
+fn the_profile_button_cycles_a_b_and_labels_it() {
+    let (mut hmi, mut screen) = connected();
+    assert_eq!(hmi.active_profile(), MachineProfile::DrumBelt);
+    screen.release("bset").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), Page::Settings.id());
+    assert_eq!(screen.text("tprofile"), Some("A: drum-belt transplanter"));
+
+    screen.release("bprofile").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SelectProfile(MachineProfile::SeedlingBelt))]
+    );
+    assert_eq!(screen.text("tprofile"), Some("B: seedling-belt planter"));
+    assert_eq!(hmi.settings().profile, MachineProfile::SeedlingBelt);
+    // Only selected: the machine keeps running A until Save and a restart.
+    assert_eq!(screen.text("tmsg"), Some(PROFILE_RESTART_MESSAGE));
+    assert_eq!(hmi.active_profile(), MachineProfile::DrumBelt);
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), Page::Mode.id());
+
+    // Back to A: the selection equals the profile running, no notice.
+    screen.release("bset").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tprofile"), Some("B: seedling-belt planter"));
+    screen.release("bprofile").unwrap();
+    screen.release("bsave").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![
+            cmd(Command::SelectProfile(MachineProfile::DrumBelt)),
+            cmd(Command::SaveSettings)
+        ]
+    );
+    assert_eq!(screen.text("tprofile"), Some("A: drum-belt transplanter"));
+    assert_eq!(screen.text("tmsg"), Some(""));
+    assert_eq!(hmi.settings().profile, MachineProfile::DrumBelt);
+}
+
+#[test]
+fn profile_b_starts_on_the_belt_page_and_returns_home() {
+    let (mut hmi, mut screen) = connected_b();
+    assert_eq!(hmi.home_page(), Page::Belt);
+    assert_eq!(screen.page(), Page::Belt.id());
+    assert_eq!(
+        &screen.instructions()[..5],
+        ["", "sendme", "bkcmd=2", "dims=100", "page 7"]
+    );
+
+    // Parameters page: the defaults of paper B's settings, then Back to 7.
+    screen.release("bpar").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![]);
+    assert_eq!(screen.page(), Page::BeltParameters.id());
+    for (name, v) in [
+        ("nspacing", 250),
+        ("npitch", 100),
+        ("nangle", 120),
+        ("nclamp", 2),
+        ("nradius", 250),
+        ("nthick", 100),
+        ("nthresh", 20),
+    ] {
+        assert_eq!(screen.value(name), Some(v), "{name}");
+    }
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), Page::Belt.id());
+
+    // Settings page: its Back goes to the profile's home page, page 7.
+    screen.release("bset").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), Page::Settings.id());
+    assert_eq!(screen.text("tprofile"), Some("B: seedling-belt planter"));
+    assert_eq!(screen.text("tver"), Some("fw 0.1.0"));
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), Page::Belt.id());
+
+    // Start and Stop on page 7.
+    screen.release("bstart").unwrap();
+    screen.release("bstop").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::Start), cmd(Command::Stop)]
+    );
+
+    // An alarm returns to page 7; a screen reset sets it up on page 7 again.
+    hmi.show_alarm("Seedling belt empty").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bok").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::AcknowledgeAlarm)]
+    );
+    assert_eq!(screen.page(), Page::Belt.id());
+    screen.feed(b"rest\xff\xff\xff");
+    assert_eq!(pump(&mut hmi, &mut screen), vec![Event::Connected]);
+    assert_eq!(screen.page(), Page::Belt.id());
+}
+
+/// One page-8 field: its input and Apply button, a valid and an
+/// out-of-range value, the command and the message.
+struct BeltCase {
+    input: &'static str,
+    apply: &'static str,
+    field: Field,
+    valid: i32,
+    invalid: i32,
+    command: Command,
+    message: &'static str,
+}
+
+fn belt_cases() -> Vec<BeltCase> {
+    vec![
+        BeltCase {
+            input: "nspacing",
+            apply: "bspacing",
+            field: Field::BeltSpacing,
+            valid: 300,
+            invalid: 99,
+            command: Command::SetBeltSpacing(BeltSpacing::new(300).unwrap()),
+            message: "Spacing X must be 10.0-100.0 cm",
+        },
+        BeltCase {
+            input: "npitch",
+            apply: "bpitch",
+            field: Field::SeedlingPitch,
+            valid: 120,
+            invalid: 501,
+            command: Command::SetSeedlingPitch(SeedlingPitch::new(120).unwrap()),
+            message: "Belt pitch B must be 2.0-50.0 cm",
+        },
+        BeltCase {
+            input: "nangle",
+            apply: "bangle",
+            field: Field::ClampAngle,
+            valid: 90,
+            invalid: 0,
+            command: Command::SetClampAngle(ClampAngle::new(90).unwrap()),
+            message: "Clamp angle must be 1-360 deg",
+        },
+        BeltCase {
+            input: "nclamp",
+            apply: "bclamp",
+            field: Field::ClampCount,
+            valid: 3,
+            invalid: 13,
+            command: Command::SetClampCount(ClampCount::new(3).unwrap()),
+            message: "Seedlings clamped must be 1-12",
+        },
+        BeltCase {
+            input: "nradius",
+            apply: "bradius",
+            field: Field::RollerRadius,
+            valid: 305,
+            invalid: 49,
+            command: Command::SetRollerRadius(RollerRadius::new(305).unwrap()),
+            message: "Roller radius must be 5.0-100.0 mm",
+        },
+        BeltCase {
+            input: "nthick",
+            apply: "bthick",
+            field: Field::BeltThickness,
+            valid: 80,
+            invalid: 1001,
+            command: Command::SetBeltThickness(BeltThickness::new(80).unwrap()),
+            message: "Belt thickness must be 0.01-10.00 mm",
+        },
+        BeltCase {
+            input: "nthresh",
+            apply: "bthresh",
+            field: Field::SpeedThreshold,
+            valid: 30,
+            invalid: -1,
+            command: Command::SetSpeedThreshold(SpeedThreshold::new(30).unwrap()),
+            message: "Threshold Y must be 0.001-0.500 m/s",
+        },
+    ]
+}
+
+#[test]
+fn every_belt_parameter_is_applied_or_rejected_with_a_message() {
+    let (mut hmi, mut screen) = connected_b();
+    screen.release("bpar").unwrap();
+    pump(&mut hmi, &mut screen);
+    for case in belt_cases() {
+        // Valid: the command, the settings copy follows, the message clears.
+        screen.set_value(case.input, case.valid).unwrap();
+        screen.release(case.apply).unwrap();
+        assert_eq!(
+            pump(&mut hmi, &mut screen),
+            vec![cmd(case.command)],
+            "{}",
+            case.input
+        );
+        assert_eq!(screen.text("tmsg"), Some(""));
+        assert_eq!(case.field.current(hmi.settings()), case.valid);
+        // Out of range: rejected, message shown, the value in force written back.
+        screen.set_value(case.input, case.invalid).unwrap();
+        screen.release(case.apply).unwrap();
+        assert_eq!(
+            pump(&mut hmi, &mut screen),
+            vec![Event::Rejected(ParamError {
+                field: case.field,
+                value: case.invalid
+            })],
+            "{}",
+            case.input
+        );
+        assert_eq!(screen.text("tmsg"), Some(case.message));
+        assert_eq!(screen.value(case.input), Some(case.valid), "{}", case.input);
+        assert_eq!(case.field.current(hmi.settings()), case.valid);
+        assert_eq!(
+            Field::ALL
+                .iter()
+                .find(|f| **f == case.field)
+                .map(|f| f.validate(case.invalid).unwrap_err().to_string()),
+            Some(case.message.to_string())
+        );
+    }
+    let b = hmi.settings().belt;
+    assert_eq!(
+        (
+            b.spacing.raw(),
+            b.seedling_pitch.raw(),
+            b.clamp_angle.raw(),
+            b.clamp_count.raw(),
+            b.roller_radius.raw(),
+            b.belt_thickness.raw(),
+            b.speed_threshold.raw()
+        ),
+        (300, 120, 90, 3, 305, 80, 30)
+    );
+    // Shown again after a page change.
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bpar").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.value("nradius"), Some(305));
+    assert_eq!(hmi.stats().tx_dropped, 0);
+}
+
+#[test]
+fn belt_validation_ranges_match_the_contract() {
+    assert!(BeltSpacing::new(99).is_err() && BeltSpacing::new(100).is_ok());
+    assert!(BeltSpacing::new(1000).is_ok() && BeltSpacing::new(1001).is_err());
+    assert!(SeedlingPitch::new(19).is_err() && SeedlingPitch::new(20).is_ok());
+    assert!(SeedlingPitch::new(500).is_ok() && SeedlingPitch::new(501).is_err());
+    assert!(ClampAngle::new(0).is_err() && ClampAngle::new(1).is_ok());
+    assert!(ClampAngle::new(360).is_ok() && ClampAngle::new(361).is_err());
+    assert!(ClampCount::new(0).is_err() && ClampCount::new(1).is_ok());
+    assert!(ClampCount::new(12).is_ok() && ClampCount::new(13).is_err());
+    assert!(RollerRadius::new(49).is_err() && RollerRadius::new(50).is_ok());
+    assert!(RollerRadius::new(1000).is_ok() && RollerRadius::new(1001).is_err());
+    assert!(BeltThickness::new(0).is_err() && BeltThickness::new(1).is_ok());
+    assert!(BeltThickness::new(1000).is_ok() && BeltThickness::new(1001).is_err());
+    assert!(SpeedThreshold::new(0).is_err() && SpeedThreshold::new(1).is_ok());
+    assert!(SpeedThreshold::new(500).is_ok() && SpeedThreshold::new(501).is_err());
+    assert!(ClampCount::new(i32::MAX).is_err() && ClampAngle::new(i32::MIN).is_err());
+}
+
+#[test]
+fn belt_page_status_lands_on_its_components() {
+    let (mut hmi, mut screen) = connected_b();
+    // The screen's late answer to the handshake `sendme` (page 0) does not
+    // make the MCU forget that it shows page 7: its status is written at once.
+    assert_eq!(hmi.page(), Page::Belt);
+    let status = Status {
+        travel_speed_kmh_x100: 108,
+        travel_speed_mps_x100: 30,
+        plant_motor_rpm_x100: 2149,
+        feed_motor_rpm_x100: 1146,
+        roller_turns: 17,
+        roller_radius_dmm: 420,
+        plants: 321,
+        ..Status::default()
+    };
+    hmi.write_status(&status).unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.value("xtravel"), Some(30)); // m/s x 100, not km/h
+    assert_eq!(screen.value("xn1"), Some(2149));
+    assert_eq!(screen.value("xn2"), Some(1146));
+    assert_eq!(screen.value("nj"), Some(17));
+    assert_eq!(screen.value("xrad"), Some(420));
+    assert_eq!(screen.value("nplants"), Some(321));
+    // Page 8 shows no status: nothing is written there.
+    screen.release("bpar").unwrap();
+    pump(&mut hmi, &mut screen);
+    let before = screen.instructions().len();
+    hmi.write_status(&status).unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.instructions().len(), before);
+}
+
+#[test]
+fn stop_on_the_belt_page_is_never_delayed() {
+    let (mut hmi, mut screen) = connected_b();
+    screen.release("bpar").unwrap();
+    pump(&mut hmi, &mut screen);
+    hmi.tick(1000);
+    screen.set_value("nspacing", 400).unwrap();
+    screen.release("bspacing").unwrap();
+    hmi.push_slice(&screen.take_output());
+    let mut buf = [0u8; 128];
+    let n = hmi.poll_transmit(&mut buf);
+    assert_eq!(&buf[..n], b"get nspacing.val\xff\xff\xff");
+    assert!(hmi.awaiting_reply());
+    // Back is queued behind the reply; a Stop from page 7 (id 2) is not.
+    screen.release("bback").unwrap();
+    screen.send(&Frame::Touch {
+        page: Page::Belt.id(),
+        component: 2,
+        event: hmi_proto::TouchEvent::Release,
+    });
+    hmi.push_slice(&screen.take_output());
+    assert_eq!(hmi.poll_event(), Some(cmd(Command::Stop)));
+    assert_eq!(hmi.poll_event(), None);
+    // The reply arrives: the value, then the queued Back to page 7.
+    screen.feed(&buf[..n]);
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetBeltSpacing(BeltSpacing::new(400).unwrap()))]
+    );
+    assert_eq!(screen.page(), Page::Belt.id());
+    // And with the reply lost, Stop on page 7 still goes through at once.
+    screen.release("bpar").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bthresh").unwrap();
+    hmi.push_slice(&screen.take_output());
+    assert!(hmi.awaiting_reply());
+    screen.send(&Frame::Touch {
+        page: Page::Belt.id(),
+        component: 2,
+        event: hmi_proto::TouchEvent::Release,
+    });
+    hmi.push_slice(&screen.take_output());
+    assert_eq!(hmi.poll_event(), Some(cmd(Command::Stop)));
+    hmi.tick(1000 + GET_TIMEOUT_MS);
+    assert_eq!(
+        hmi.poll_event(),
+        Some(Event::ReplyTimeout(Field::SpeedThreshold))
+    );
+}
+
 #[test]
 fn docs_list_every_component() {
     let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/hmi.md"))

@@ -34,6 +34,11 @@ fn burst(page: Page) -> (usize, u32) {
         distance_dm: u32::MAX,
         measured_distance_cm: u32::MAX,
         calibration_result_x1000: u16::MAX,
+        travel_speed_mps_x100: u16::MAX,
+        plant_motor_rpm_x100: u16::MAX,
+        feed_motor_rpm_x100: u16::MAX,
+        roller_turns: u32::MAX,
+        roller_radius_dmm: u16::MAX,
     };
     let _ = hmi.show_page(page);
     let _ = hmi.write_status(&status);
@@ -53,4 +58,42 @@ fn longest_burst_fits_the_transmit_queue() {
     // The figure documented in docs/hmi.md; update both if the pages change.
     assert_eq!(longest, 207);
     assert!(longest <= TX_CAPACITY);
+}
+
+/// Profile B's pages with every parameter at its widest (and profile B
+/// running, so its home page is shown at connect): still below the bound.
+#[test]
+fn profile_b_pages_fit_with_the_widest_parameters() {
+    use hmi_proto::screen::{
+        BeltSettings, BeltSpacing, BeltThickness, ClampAngle, ClampCount, MachineProfile,
+        RollerRadius, SeedlingPitch, SpeedThreshold,
+    };
+    let settings = Settings {
+        profile: MachineProfile::SeedlingBelt,
+        belt: BeltSettings {
+            spacing: BeltSpacing::new(1000).unwrap(),
+            seedling_pitch: SeedlingPitch::new(500).unwrap(),
+            clamp_angle: ClampAngle::new(360).unwrap(),
+            clamp_count: ClampCount::new(12).unwrap(),
+            roller_radius: RollerRadius::new(1000).unwrap(),
+            belt_thickness: BeltThickness::new(1000).unwrap(),
+            speed_threshold: SpeedThreshold::new(500).unwrap(),
+        },
+        ..Settings::default()
+    };
+    let mut hmi = Hmi::new(settings, LONG);
+    for b in [0x66, 0x00, 0xFF, 0xFF, 0xFF] {
+        hmi.push(b);
+    }
+    assert_eq!(hmi.page(), Page::Belt);
+    let mut sink = [0u8; 512];
+    let _ = hmi.poll_transmit(&mut sink);
+    let _ = hmi.show_page(Page::BeltParameters);
+    let _ = hmi.show_message(LONG);
+    let n = hmi.tx_pending();
+    println!("BeltParameters (widest): {n} bytes");
+    assert_eq!(hmi.stats().tx_dropped, 0);
+    // The figure documented in docs/hmi.md.
+    assert_eq!(n, 188);
+    assert!(n < 207);
 }

@@ -649,6 +649,15 @@ impl Supervisor {
                 self.settings.brightness = b;
                 Effect::SettingsChanged
             }
+            // profile B: handled by the firmware's profile B supervisor (issue 9)
+            Command::SelectProfile(_)
+            | Command::SetBeltSpacing(_)
+            | Command::SetSeedlingPitch(_)
+            | Command::SetClampAngle(_)
+            | Command::SetClampCount(_)
+            | Command::SetRollerRadius(_)
+            | Command::SetBeltThickness(_)
+            | Command::SetSpeedThreshold(_) => Effect::None,
         }
     }
 
@@ -1030,6 +1039,8 @@ impl Supervisor {
             distance_dm: s.distance_mm / 100,
             measured_distance_cm,
             calibration_result_x1000,
+            // profile B: handled by the firmware's profile B supervisor (issue 9)
+            ..screen::Status::default()
         }
     }
 }
@@ -1062,6 +1073,9 @@ impl Supervisor {
             calibration_distance: screen::CalibrationDistance::default(),
             brightness: settings.brightness,
             calibration_kind: self.calibration_kind,
+            // profile B: handled by the firmware's profile B supervisor (issue 9)
+            profile: screen::MachineProfile::DrumBelt,
+            belt: screen::BeltSettings::default(),
         }
     }
 }

@@ -649,15 +649,30 @@ impl Supervisor {
                 self.settings.brightness = b;
                 Effect::SettingsChanged
             }
-            // profile B: handled by the firmware's profile B supervisor (issue 9)
-            Command::SelectProfile(_)
-            | Command::SetBeltSpacing(_)
+            // The machine profile applies after Save and a restart
+            // (crate::machine).
+            Command::SelectProfile(p) => {
+                // The screen link shows the "restart" message itself.
+                self.settings.profile = crate::machine::profile_from_screen(p);
+                Effect::None
+            }
+            // Profile B's parameters are kept (and saved) here too, so that
+            // they survive a switch of machine.
+            Command::SetBeltSpacing(_)
             | Command::SetSeedlingPitch(_)
             | Command::SetClampAngle(_)
             | Command::SetClampCount(_)
             | Command::SetRollerRadius(_)
             | Command::SetBeltThickness(_)
-            | Command::SetSpeedThreshold(_) => Effect::None,
+            | Command::SetSpeedThreshold(_) => {
+                match crate::machine::belt_with(&self.settings.belt, cmd) {
+                    Some(Ok(belt)) => {
+                        self.settings.belt = belt;
+                        Effect::SettingsChanged
+                    }
+                    _ => Effect::Message("Parameters rejected"),
+                }
+            }
         }
     }
 
@@ -1039,7 +1054,7 @@ impl Supervisor {
             distance_dm: s.distance_mm / 100,
             measured_distance_cm,
             calibration_result_x1000,
-            // profile B: handled by the firmware's profile B supervisor (issue 9)
+            // Profile B's live values: not this machine's.
             ..screen::Status::default()
         }
     }
@@ -1073,9 +1088,8 @@ impl Supervisor {
             calibration_distance: screen::CalibrationDistance::default(),
             brightness: settings.brightness,
             calibration_kind: self.calibration_kind,
-            // profile B: handled by the firmware's profile B supervisor (issue 9)
-            profile: screen::MachineProfile::DrumBelt,
-            belt: screen::BeltSettings::default(),
+            profile: crate::machine::screen_profile(settings.profile),
+            belt: crate::machine::belt_to_screen(&settings.belt),
         }
     }
 }

@@ -9,6 +9,7 @@ extern crate std;
 
 pub mod control;
 pub mod crc;
+pub mod machine;
 pub mod profile_b;
 pub mod settings;
 pub mod store;

@@ -117,8 +117,8 @@ impl ProfileBHardware {
 
     fn validate(&self) -> Result<(), Error> {
         let ok = (1_000..=100_000).contains(&self.control_period_us)
-            && self.ground_wheel_diameter >= Metres::lit("0.05")
-            && self.ground_wheel_diameter <= Metres::lit("2")
+            && self.ground_wheel_diameter >= const { Metres::lit("0.05") }
+            && self.ground_wheel_diameter <= const { Metres::lit("2") }
             && (1..=100_000).contains(&self.ground_counts_per_turn)
             && (1..=SPEED_WINDOW_MAX).contains(&usize::from(self.speed_window_periods))
             && (1..=100).contains(&self.standstill_periods)
@@ -232,15 +232,18 @@ impl ProfileBConfig {
     pub fn new(s: ProfileBSettings) -> Result<Self, Error> {
         let range = |ok: bool, field| if ok { Ok(()) } else { Err(Error::Range(field)) };
         range(
-            s.plant_spacing >= Metres::lit("0.10") && s.plant_spacing <= Metres::lit("1.00"),
+            s.plant_spacing >= const { Metres::lit("0.10") }
+                && s.plant_spacing <= const { Metres::lit("1.00") },
             ConfigField::PlantSpacing,
         )?;
         range(
-            s.belt_pitch >= Metres::lit("0.02") && s.belt_pitch <= Metres::lit("0.50"),
+            s.belt_pitch >= const { Metres::lit("0.02") }
+                && s.belt_pitch <= const { Metres::lit("0.50") },
             ConfigField::BeltPitch,
         )?;
         range(
-            s.clamping_angle_deg >= U16F16::ONE && s.clamping_angle_deg <= U16F16::lit("360"),
+            s.clamping_angle_deg >= U16F16::ONE
+                && s.clamping_angle_deg <= const { U16F16::lit("360") },
             ConfigField::ClampingAngle,
         )?;
         range(
@@ -248,15 +251,16 @@ impl ProfileBConfig {
             ConfigField::SeedlingsClamped,
         )?;
         range(
-            s.roller_radius >= Metres::lit("0.005") && s.roller_radius <= Metres::lit("0.200"),
+            s.roller_radius >= const { Metres::lit("0.005") }
+                && s.roller_radius <= const { Metres::lit("0.200") },
             ConfigField::RollerRadius,
         )?;
         range(
-            s.belt_thickness <= Metres::lit("0.010"),
+            s.belt_thickness <= const { Metres::lit("0.010") },
             ConfigField::BeltThickness,
         )?;
         range(
-            s.threshold <= MetresPerSecond::lit("0.2"),
+            s.threshold <= const { MetresPerSecond::lit("0.2") },
             ConfigField::Threshold,
         )?;
         range(

@@ -77,10 +77,10 @@
 //!
 //! // The bytes in flash follow the documented layout.
 //! let flash = store.into_inner();
-//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xD1\x00\x2E\xFF"); // magic, seq 1, n = 209, !n
-//! assert_eq!(flash.0[12], 1); // settings format version
-//! assert_eq!(&flash.0[228..232], b"DONE");
-//! assert_eq!(flash.0[232], 0xFF); // the record ends there
+//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xF3\x00\x0C\xFF"); // magic, seq 1, n = 243, !n
+//! assert_eq!(flash.0[12], 2); // settings format version
+//! assert_eq!(&flash.0[260..264], b"DONE");
+//! assert_eq!(flash.0[264], 0xFF); // the record ends there
 //! # Ok::<(), supervisor::store::StoreError<NorFlashErrorKind>>(())
 //! ```
 

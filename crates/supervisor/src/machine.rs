@@ -1,0 +1,338 @@
+//! The machine the firmware runs, chosen once at start-up from the saved
+//! settings: profile A ([`Supervisor`]) or profile B ([`BeltMachine`]).
+//!
+//! A machine builder sets the profile once, on the settings page: the two
+//! profiles drive different motors from the same pins (the drum's PWM timer
+//! becomes the planting stepper's pulse timer), so a change takes effect
+//! after Save and a restart, never while motors may run.
+
+use fixed::types::U16F16;
+use hmi_proto::screen::{self, Command, MachineProfile};
+use kinematics::profile_b::ProfileBSettings;
+use kinematics::units::{Metres, MetresPerSecond};
+
+use crate::control::{Effect, Supervisor};
+use crate::profile_b::{
+    BeltPlanter, Error as BeltError, PlanterState, ProfileBConfig, ProfileBHardware, StepperCommand,
+};
+use crate::settings::{Profile, Settings};
+
+/// The screen's profile for ours.
+pub const fn screen_profile(p: Profile) -> MachineProfile {
+    match p {
+        Profile::DrumBelt => MachineProfile::DrumBelt,
+        Profile::SeedlingBelt => MachineProfile::SeedlingBelt,
+    }
+}
+
+/// Ours for the screen's profile.
+pub const fn profile_from_screen(p: MachineProfile) -> Profile {
+    match p {
+        MachineProfile::DrumBelt => Profile::DrumBelt,
+        MachineProfile::SeedlingBelt => Profile::SeedlingBelt,
+    }
+}
+
+/// Profile B's parameters as the screen shows them (its scaled integers).
+pub fn belt_to_screen(c: &ProfileBConfig) -> screen::BeltSettings {
+    let s = c.settings();
+    let int = |v: u32| i32::try_from(v).unwrap_or(i32::MAX);
+    // Metres → mm, 0.1 mm, 0.01 mm; m/s → mm/s (rounded to the nearest).
+    // U12F20 / U8F24 bits × units per metre, rounded to the nearest.
+    let round_shift = |x: u64, frac: u32| {
+        let half = 1u64.checked_shl(frac.saturating_sub(1)).unwrap_or(0);
+        int(
+            u32::try_from(x.saturating_add(half).checked_shr(frac).unwrap_or(0))
+                .unwrap_or(u32::MAX),
+        )
+    };
+    let scaled = |m: Metres, per_m: u32| {
+        round_shift(u64::from(m.to_bits()).saturating_mul(u64::from(per_m)), 20)
+    };
+    let mm_s = |v: MetresPerSecond| round_shift(u64::from(v.to_bits()).saturating_mul(1000), 24);
+    screen::BeltSettings {
+        spacing: screen::BeltSpacing::new(scaled(s.plant_spacing, 1000)).unwrap_or_default(),
+        seedling_pitch: screen::SeedlingPitch::new(scaled(s.belt_pitch, 1000)).unwrap_or_default(),
+        clamp_angle: screen::ClampAngle::new(int(s.clamping_angle_deg.to_num::<u32>()))
+            .unwrap_or_default(),
+        clamp_count: screen::ClampCount::new(i32::from(s.seedlings_clamped)).unwrap_or_default(),
+        roller_radius: screen::RollerRadius::new(scaled(s.roller_radius, 10_000))
+            .unwrap_or_default(),
+        belt_thickness: screen::BeltThickness::new(scaled(s.belt_thickness, 100_000))
+            .unwrap_or_default(),
+        speed_threshold: screen::SpeedThreshold::new(mm_s(s.threshold)).unwrap_or_default(),
+    }
+}
+
+/// Applies one profile B parameter from the screen to `c`; the result is
+/// validated as a whole (the screen checked each value's own range).
+pub fn belt_with(c: &ProfileBConfig, cmd: Command) -> Option<Result<ProfileBConfig, BeltError>> {
+    let mut s: ProfileBSettings = *c.settings();
+    match cmd {
+        Command::SetBeltSpacing(v) => s.plant_spacing = Metres::from_mm(u32::from(v.raw())),
+        Command::SetSeedlingPitch(v) => s.belt_pitch = Metres::from_mm(u32::from(v.raw())),
+        Command::SetClampAngle(v) => s.clamping_angle_deg = U16F16::from_num(v.raw()),
+        Command::SetClampCount(v) => s.seedlings_clamped = v.raw(),
+        Command::SetRollerRadius(v) => {
+            s.roller_radius = Metres::from_ratio(u32::from(v.raw()), 10_000)?;
+        }
+        Command::SetBeltThickness(v) => {
+            s.belt_thickness = Metres::from_ratio(u32::from(v.raw()), 100_000)?;
+        }
+        Command::SetSpeedThreshold(v) => {
+            s.threshold = MetresPerSecond::from_ratio(u32::from(v.raw()), 1000)?;
+        }
+        _ => return None,
+    }
+    Some(ProfileBConfig::new(s))
+}
+
+/// A short text for the screen.
+fn belt_error_text(e: BeltError) -> &'static str {
+    match e {
+        BeltError::Range(field) => field.text(),
+        _ => "Parameters rejected",
+    }
+}
+
+/// Profile B with its settings: the [`BeltPlanter`] plus what the screen and
+/// the settings store need.
+pub struct BeltMachine {
+    planter: BeltPlanter,
+    settings: Settings,
+    roller_turns: u32,
+}
+
+impl BeltMachine {
+    /// A stopped planter with these settings (their profile B part).
+    pub fn new(settings: Settings, hw: ProfileBHardware) -> Result<Self, BeltError> {
+        Ok(Self {
+            planter: BeltPlanter::new(settings.belt, hw)?,
+            settings,
+            roller_turns: 0,
+        })
+    }
+
+    /// The settings in force.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The planter (snapshot, state).
+    pub fn planter(&self) -> &BeltPlanter {
+        &self.planter
+    }
+
+    /// One control period: the ground-wheel encoder counter and the number
+    /// of roller index pulses (one per feeding-roller turn) since the last
+    /// period.
+    pub fn control_step(&mut self, ground_encoder: u16, roller_pulses: u32) -> StepperCommand {
+        self.roller_turns = self.roller_turns.saturating_add(roller_pulses);
+        self.planter.control_step(ground_encoder, self.roller_turns)
+    }
+
+    /// Applies one operator command.
+    pub fn command(&mut self, cmd: Command) -> Effect {
+        match cmd {
+            Command::Start => {
+                self.planter.start();
+                Effect::None
+            }
+            Command::Stop => {
+                self.planter.stop();
+                Effect::None
+            }
+            Command::SelectProfile(p) => {
+                // The screen link shows the "restart" message itself.
+                self.settings.profile = profile_from_screen(p);
+                Effect::None
+            }
+            Command::SaveSettings => {
+                if self.planter.state() == PlanterState::Running {
+                    Effect::Message("Stop the motors before saving")
+                } else {
+                    Effect::Save
+                }
+            }
+            Command::SetBrightness(b) => {
+                self.settings.brightness = b;
+                Effect::SettingsChanged
+            }
+            Command::AcknowledgeAlarm => Effect::AlarmCleared,
+            other => match belt_with(&self.settings.belt, other) {
+                Some(Ok(config)) => match self.planter.set_config(config) {
+                    Ok(()) => {
+                        self.settings.belt = config;
+                        Effect::SettingsChanged
+                    }
+                    Err(BeltError::Running) => Effect::Message("Stop the motors first"),
+                    Err(_) => Effect::Message("Parameters rejected"),
+                },
+                Some(Err(e)) => Effect::Message(belt_error_text(e)),
+                // A profile A command: not for this machine.
+                None => Effect::None,
+            },
+        }
+    }
+
+    /// The settings as the screen shows them.
+    pub fn screen_settings(&self) -> screen::Settings {
+        screen::Settings {
+            brightness: self.settings.brightness,
+            profile: screen_profile(self.settings.profile),
+            belt: belt_to_screen(&self.settings.belt),
+            ..screen::Settings::default()
+        }
+    }
+
+    /// The live values as the screen shows them.
+    pub fn screen_status(&self) -> screen::Status {
+        let s = self.planter.snapshot();
+        let x100 =
+            |milli: u32| u16::try_from(milli.checked_div(10).unwrap_or(0)).unwrap_or(u16::MAX);
+        // Metres → 0.1 mm.
+        let dmm = u16::try_from(
+            u64::from(s.roller_radius.to_bits())
+                .saturating_mul(10_000)
+                .checked_shr(20)
+                .unwrap_or(0),
+        )
+        .unwrap_or(u16::MAX);
+        screen::Status {
+            travel_speed_mps_x100: x100(s.travel_speed.to_milli()),
+            plant_motor_rpm_x100: x100(s.planting_speed.to_milli()),
+            feed_motor_rpm_x100: x100(s.feeding_speed.to_milli()),
+            roller_turns: s.roller_turns,
+            roller_radius_dmm: dmm,
+            distance_dm: s.distance_mm.checked_div(100).unwrap_or(0),
+            ..screen::Status::default()
+        }
+    }
+}
+
+/// One of the two machines.
+#[allow(clippy::large_enum_variant)]
+pub enum Machine {
+    /// Profile A: the drum-belt transplanter.
+    DrumBelt(Supervisor),
+    /// Profile B: the seedling-belt planter.
+    SeedlingBelt(BeltMachine),
+}
+
+impl Machine {
+    /// The settings in force.
+    pub fn settings(&self) -> &Settings {
+        match self {
+            Self::DrumBelt(m) => m.settings(),
+            Self::SeedlingBelt(m) => m.settings(),
+        }
+    }
+
+    /// Applies one operator command.
+    pub fn command(&mut self, cmd: Command) -> Effect {
+        match self {
+            Self::DrumBelt(m) => m.command(cmd),
+            Self::SeedlingBelt(m) => m.command(cmd),
+        }
+    }
+
+    /// The settings as the screen shows them.
+    pub fn screen_settings(&self) -> screen::Settings {
+        match self {
+            Self::DrumBelt(m) => m.screen_settings(),
+            Self::SeedlingBelt(m) => m.screen_settings(),
+        }
+    }
+
+    /// The live values as the screen shows them.
+    pub fn screen_status(&self) -> screen::Status {
+        match self {
+            Self::DrumBelt(m) => m.screen_status(),
+            Self::SeedlingBelt(m) => m.screen_status(),
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_screens_belt_defaults_are_the_kinematics_defaults() {
+        // hmi-proto writes profile B's defaults as scaled integers (it does
+        // not depend on kinematics); they must be ProfileBSettings::default().
+        assert_eq!(
+            belt_to_screen(&ProfileBConfig::default()),
+            screen::BeltSettings::default()
+        );
+    }
+
+    #[test]
+    fn each_screen_parameter_lands_in_its_field_and_reads_back() {
+        let c = ProfileBConfig::default();
+        let set = |cmd| belt_with(&c, cmd).unwrap().unwrap();
+        // r = 30.0 mm entered as 300 (0.1 mm).
+        let r = set(Command::SetRollerRadius(
+            screen::RollerRadius::new(300).unwrap(),
+        ));
+        assert_eq!(belt_to_screen(&r).roller_radius.raw(), 300);
+        assert!((r.settings().roller_radius.to_f64() - 0.030).abs() < 1e-6);
+        // h = 2.50 mm entered as 250 (0.01 mm).
+        let h = set(Command::SetBeltThickness(
+            screen::BeltThickness::new(250).unwrap(),
+        ));
+        assert_eq!(belt_to_screen(&h).belt_thickness.raw(), 250);
+        // Y = 35 mm/s.
+        let y = set(Command::SetSpeedThreshold(
+            screen::SpeedThreshold::new(35).unwrap(),
+        ));
+        assert_eq!(belt_to_screen(&y).speed_threshold.raw(), 35);
+        // X = 40 cm, B = 12 cm, β = 90°, N = 3.
+        let x = set(Command::SetBeltSpacing(
+            screen::BeltSpacing::new(400).unwrap(),
+        ));
+        assert_eq!(belt_to_screen(&x).spacing.raw(), 400);
+        let b = set(Command::SetSeedlingPitch(
+            screen::SeedlingPitch::new(120).unwrap(),
+        ));
+        assert_eq!(belt_to_screen(&b).seedling_pitch.raw(), 120);
+        let a = set(Command::SetClampAngle(screen::ClampAngle::new(90).unwrap()));
+        assert_eq!(belt_to_screen(&a).clamp_angle.raw(), 90);
+        let n = set(Command::SetClampCount(screen::ClampCount::new(3).unwrap()));
+        assert_eq!(belt_to_screen(&n).clamp_count.raw(), 3);
+        // Not a profile B parameter.
+        assert!(belt_with(&c, Command::Start).is_none());
+    }
+
+    #[test]
+    fn profile_b_refuses_changes_and_saving_while_running() {
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let mut m = BeltMachine::new(settings, ProfileBHardware::BOARD).unwrap();
+        assert_eq!(m.command(Command::Start), Effect::None);
+        let x = screen::BeltSpacing::new(300).unwrap();
+        assert_eq!(
+            m.command(Command::SetBeltSpacing(x)),
+            Effect::Message("Stop the motors first")
+        );
+        assert!(matches!(
+            m.command(Command::SaveSettings),
+            Effect::Message(_)
+        ));
+        m.command(Command::Stop);
+        assert_eq!(
+            m.command(Command::SetBeltSpacing(x)),
+            Effect::SettingsChanged
+        );
+        assert_eq!(m.screen_settings().belt.spacing.raw(), 300);
+        assert_eq!(m.command(Command::SaveSettings), Effect::Save);
+        assert_eq!(
+            m.command(Command::SelectProfile(MachineProfile::DrumBelt)),
+            Effect::None
+        );
+        assert_eq!(m.settings().profile, Profile::DrumBelt);
+    }
+}

@@ -66,19 +66,39 @@ mod app {
     };
     use supervisor::{
         control::{Alarm, Effect, RunState, Supervisor},
+        machine::{BeltMachine, Machine},
+        profile_b::{PlanterAlarm, PlanterState, ProfileBHardware},
         settings::Settings,
         store::{Loaded, SettingsStore},
     };
 
     type Store = SettingsStore<board::SettingsFlash>;
 
+    /// The motor outputs of the profile in force.
+    pub enum Actuators {
+        /// Profile A: the drum motor's PWM and enable.
+        Drum(board::DrumDrive),
+        /// Profile B: the two step-pulse outputs.
+        Steppers(board::Steppers),
+    }
+
+    /// What a control step decided, per profile.
+    enum Step {
+        Drum(supervisor::control::Actuation, Option<Alarm>, RunState),
+        Belt(
+            supervisor::profile_b::StepperCommand,
+            Option<PlanterAlarm>,
+            PlanterState,
+        ),
+    }
+
     // The large objects live in `static`s owned by `init` and are shared by
     // reference: returning them by value from `init` would need their size
     // twice over on the QEMU board's 8 KB of RAM.
     #[shared]
     struct Shared {
-        /// The operating logic: control (2), hmi (1), status (1).
-        supervisor: &'static mut Supervisor,
+        /// The operating logic (profile A or B): control (2), hmi (1), status (1).
+        machine: &'static mut Machine,
         /// The screen link: control (2, alarms), hmi (1), status (1), settings (1).
         hmi: &'static mut Hmi,
         /// TIM2: its interrupt (3) and the control task's clock (2).
@@ -93,10 +113,10 @@ mod app {
         bytes_out: Receiver<'static, u8, RX_QUEUE>,
         edges_in: Producer<'static, u32>,
         edges_out: Consumer<'static, u32>,
-        saves_in: Sender<'static, Settings, 1>,
-        saves_out: Receiver<'static, Settings, 1>,
+        saves_in: Sender<'static, (), 1>,
+        saves_out: Receiver<'static, (), 1>,
         sensors: board::Sensors,
-        drum: board::DrumDrive,
+        actuators: Actuators,
         watchdog: board::Watchdog,
         led: board::StatusLed,
         store: Option<Store>,
@@ -106,14 +126,14 @@ mod app {
 
     #[init(local = [
         edge_queue: Queue<u32, EDGE_QUEUE> = Queue::new(),
-        supervisor_slot: MaybeUninit<Supervisor> = MaybeUninit::uninit(),
+        machine_slot: MaybeUninit<Machine> = MaybeUninit::uninit(),
         hmi_slot: MaybeUninit<Hmi> = MaybeUninit::uninit(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let board = board::init(cx.device);
         Mono::start(cx.core.SYST, board.sysclk_hz);
         let (bytes_in, bytes_out) = make_channel!(u8, RX_QUEUE);
-        let (saves_in, saves_out) = make_channel!(Settings, 1);
+        let (saves_in, saves_out) = make_channel!((), 1);
         let (edges_in, edges_out) = cx.local.edge_queue.split();
         defmt::info!(
             "boot: transplanter firmware {=str}, sysclk {=u32} Hz, run limit {=?} ms",
@@ -123,10 +143,16 @@ mod app {
         );
 
         let (store, settings, boot_notice) = load_settings(board.settings_flash);
-        let supervisor = build_supervisor(cx.local.supervisor_slot, settings);
-        let hmi = build_hmi(cx.local.hmi_slot, supervisor);
+        let machine = build_machine(cx.local.machine_slot, settings);
+        let hmi = build_hmi(cx.local.hmi_slot, machine);
         let mut drum = board.drum;
         drum.set_enabled(false);
+        let actuators = match machine {
+            Machine::DrumBelt(_) => Actuators::Drum(drum),
+            Machine::SeedlingBelt(_) => {
+                Actuators::Steppers(board::Steppers::new(drum, board.feed_step))
+            }
+        };
         // Spawning at init cannot fail: each task is spawned once.
         control::spawn().ok();
         status::spawn().ok();
@@ -134,7 +160,7 @@ mod app {
         settings::spawn().ok();
         (
             Shared {
-                supervisor,
+                machine,
                 hmi,
                 hall: board.hall,
             },
@@ -148,7 +174,7 @@ mod app {
                 saves_in,
                 saves_out,
                 sensors: board.sensors,
-                drum,
+                actuators,
                 watchdog: board.watchdog,
                 led: board.led,
                 store,
@@ -185,12 +211,12 @@ mod app {
         (store, settings, notice)
     }
 
-    /// Builds the supervisor in its static slot.
+    /// Builds the machine of the saved profile in its static slot.
     #[inline(never)]
-    fn build_supervisor(
-        slot: &'static mut MaybeUninit<Supervisor>,
+    fn build_machine(
+        slot: &'static mut MaybeUninit<Machine>,
         settings: Settings,
-    ) -> &'static mut Supervisor {
+    ) -> &'static mut Machine {
         let settings = match Supervisor::check(board::HARDWARE, &settings) {
             Ok(()) => settings,
             Err(e) => {
@@ -198,22 +224,53 @@ mod app {
                 Settings::default()
             }
         };
-        match Supervisor::new(board::HARDWARE, settings) {
-            Ok(s) => slot.write(s),
-            Err(e) => {
+        let built = match settings.profile {
+            supervisor::settings::Profile::DrumBelt => {
+                defmt::info!("machine: profile A, drum-belt transplanter");
+                build_drum_belt(slot, settings)
+            }
+            supervisor::settings::Profile::SeedlingBelt => {
+                defmt::info!("machine: profile B, seedling-belt planter");
+                build_seedling_belt(slot, settings)
+            }
+        };
+        match built {
+            Some(m) => m,
+            None => {
                 // The defaults are valid by construction: a build-time bug,
                 // caught on the first boot of any board.
-                defmt::error!("default settings rejected: {}", e);
+                defmt::error!("machine settings rejected");
                 board::fatal()
             }
         }
     }
 
+    /// Profile A, in its own stack frame (the two profiles' temporaries
+    /// must not add up on the QEMU board's 8 KB).
+    #[inline(never)]
+    fn build_drum_belt(
+        slot: &'static mut MaybeUninit<Machine>,
+        settings: Settings,
+    ) -> Option<&'static mut Machine> {
+        let sup = Supervisor::new(board::HARDWARE, settings).ok()?;
+        Some(slot.write(Machine::DrumBelt(sup)))
+    }
+
+    /// Profile B, in its own stack frame.
+    #[inline(never)]
+    fn build_seedling_belt(
+        slot: &'static mut MaybeUninit<Machine>,
+        settings: Settings,
+    ) -> Option<&'static mut Machine> {
+        let belt = BeltMachine::new(settings, ProfileBHardware::BOARD).ok()?;
+        Some(slot.write(Machine::SeedlingBelt(belt)))
+    }
+
     /// Builds the screen link in its static slot.
     #[inline(never)]
-    fn build_hmi(slot: &'static mut MaybeUninit<Hmi>, supervisor: &Supervisor) -> &'static mut Hmi {
+    fn build_hmi(slot: &'static mut MaybeUninit<Hmi>, machine: &Machine) -> &'static mut Hmi {
         slot.write(Hmi::new(
-            supervisor.screen_settings(),
+            machine.screen_settings(),
             env!("CARGO_PKG_VERSION"),
         ))
     }
@@ -274,69 +331,133 @@ mod app {
     ///   ends after its next release is counted as an overrun and does not
     ///   feed the watchdog.
     /// - Budget: 1 ms (measured cost: docs/PERFORMANCE.md).
-    #[task(priority = 2, local = [sensors, drum, watchdog, edges_out], shared = [supervisor, hmi, hall])]
+    #[task(priority = 2, local = [sensors, actuators, watchdog, edges_out], shared = [machine, hmi, hall])]
     async fn control(mut cx: control::Context) {
         let mut next = Mono::now();
         let mut last_alarm: Option<Alarm> = None;
         let mut last_run = RunState::Stopped;
+        let mut last_belt_alarm: Option<PlanterAlarm> = None;
+        let mut last_belt_state = PlanterState::Stopped;
         loop {
             let sample = cx.local.sensors.sample(uptime_ms());
             let now = Ticks(cx.shared.hall.lock(|h| h.now()));
             let edges_out = &mut cx.local.edges_out;
-            let (actuation, alarm, run) = cx.shared.supervisor.lock(|sup| {
-                while let Some(edge) = edges_out.dequeue() {
-                    sup.hall_edge(Ticks(edge));
+            let step = cx.shared.machine.lock(|m| match m {
+                Machine::DrumBelt(sup) => {
+                    while let Some(edge) = edges_out.dequeue() {
+                        sup.hall_edge(Ticks(edge));
+                    }
+                    for &edge in &sample.hall_edges {
+                        sup.hall_edge(Ticks(edge));
+                    }
+                    let a = sup.control_step(now, sample.drum_encoder);
+                    Step::Drum(a, sup.alarm(), sup.run_state())
                 }
-                for &edge in &sample.hall_edges {
-                    sup.hall_edge(Ticks(edge));
+                Machine::SeedlingBelt(belt) => {
+                    // Profile B wiring: TIM3 counts the ground-wheel encoder,
+                    // TIM2 captures one index pulse per feeding-roller turn.
+                    let mut pulses = sample.hall_edges.len() as u32;
+                    while edges_out.dequeue().is_some() {
+                        pulses = pulses.saturating_add(1);
+                    }
+                    let c = belt.control_step(sample.drum_encoder, pulses);
+                    let snap = belt.planter().snapshot();
+                    Step::Belt(c, snap.alarm, snap.state)
                 }
-                let a = sup.control_step(now, sample.drum_encoder);
-                (a, sup.alarm(), sup.run_state())
             });
-            cx.local.drum.set_enabled(actuation.driver_enabled);
-            cx.local.drum.set_compare(actuation.ccr);
             stats::HALL_EDGES.add(sample.hall_edges.len() as u32);
 
-            if alarm != last_alarm {
-                match alarm {
-                    Some(a) => {
-                        defmt::warn!("alarm: {}", a);
-                        let mut text: heapless::String<40> = heapless::String::new();
-                        let _ = a.write_text(&mut text);
-                        cx.shared.hmi.lock(|hmi| {
-                            if hmi.show_alarm(&text).is_err() {
-                                stats::HMI_TX_DROPPED.inc();
-                            }
-                        });
-                    }
-                    None => defmt::info!("alarm cleared"),
+            match (&step, &mut *cx.local.actuators) {
+                (Step::Drum(a, ..), Actuators::Drum(drum)) => {
+                    drum.set_enabled(a.driver_enabled);
+                    drum.set_compare(a.ccr);
                 }
-                last_alarm = alarm;
-            }
-            if run != last_run {
-                defmt::info!("drum: {}", run);
-                last_run = run;
+                (Step::Belt(c, ..), Actuators::Steppers(steppers)) => {
+                    steppers.set(c.feed_step_hz, c.plant_step_hz, c.enabled);
+                }
+                // The outputs were built for the machine: never mixed.
+                _ => board::safe_state(),
             }
 
-            // The simulated machine's own view next to the firmware's, ten
-            // times a second, for the QEMU tests and the main job's log (the
-            // real board has no such truth, and logs only its 1 Hz summary).
-            #[cfg(feature = "board-qemu")]
-            if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
-                let (v, n, plants, pos) = cx.local.sensors.truth();
-                let target = cx
-                    .shared
-                    .supervisor
-                    .lock(|sup| sup.snapshot().target_drum_rpm_x1000);
-                defmt::info!(
-                    "sim: ground {=u32} mm/s, drum {=u32} mr/min, target {=u32} mr/min, ccr {=u16}, plants {=u32}, ground position {=u32} mm",
-                    v,
-                    n,
-                    target,
-                    actuation.ccr,
-                    plants,
-                    pos
-                );
+            match step {
+                Step::Drum(actuation, alarm, run) => {
+                    if alarm != last_alarm {
+                        match alarm {
+                            Some(a) => {
+                                defmt::warn!("alarm: {}", a);
+                                let mut text: heapless::String<40> = heapless::String::new();
+                                let _ = a.write_text(&mut text);
+                                cx.shared.hmi.lock(|hmi| {
+                                    if hmi.show_alarm(&text).is_err() {
+                                        stats::HMI_TX_DROPPED.inc();
+                                    }
+                                });
+                            }
+                            None => defmt::info!("alarm cleared"),
+                        }
+                        last_alarm = alarm;
+                    }
+                    if run != last_run {
+                        defmt::info!("drum: {}", run);
+                        last_run = run;
+                    }
+                    // The simulated machine's own view next to the firmware's,
+                    // ten times a second, for the QEMU tests and the main job's
+                    // log (the real board has no such truth).
+                    #[cfg(feature = "board-qemu")]
+                    if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
+                        let (v, n, plants, pos) = cx.local.sensors.truth();
+                        let target = cx.shared.machine.lock(|m| match m {
+                            Machine::DrumBelt(sup) => sup.snapshot().target_drum_rpm_x1000,
+                            Machine::SeedlingBelt(_) => 0,
+                        });
+                        defmt::info!(
+                            "sim: ground {=u32} mm/s, drum {=u32} mr/min, target {=u32} mr/min, ccr {=u16}, plants {=u32}, ground position {=u32} mm",
+                            v,
+                            n,
+                            target,
+                            actuation.ccr,
+                            plants,
+                            pos
+                        );
+                    }
+                    #[cfg(not(feature = "board-qemu"))]
+                    let _ = actuation;
+                }
+                Step::Belt(command, alarm, state) => {
+                    if alarm != last_belt_alarm {
+                        if let Some(a) = alarm {
+                            defmt::warn!("planter: {}", a);
+                            let text = match a {
+                                PlanterAlarm::TooFast => "Too fast for the stepper motors",
+                                PlanterAlarm::OutOfRange => "Travel speed out of range",
+                            };
+                            cx.shared.hmi.lock(|hmi| {
+                                let _ = hmi.show_message(text);
+                            });
+                        }
+                        last_belt_alarm = alarm;
+                    }
+                    if state != last_belt_state {
+                        defmt::info!("planter: {}", state);
+                        last_belt_state = state;
+                    }
+                    #[cfg(feature = "board-qemu")]
+                    if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
+                        let (plants, mean_um, cv_x100, pos) = cx.local.sensors.truth_b();
+                        defmt::info!(
+                            "sim-b: plants {=u32}, mean spacing {=u32} um, cv {=u32} x0.01%, ground position {=u32} mm, feed {=u32} mHz, plant {=u32} mHz",
+                            plants,
+                            mean_um,
+                            cv_x100,
+                            pos,
+                            command.feed_step_hz.to_milli(),
+                            command.plant_step_hz.to_milli()
+                        );
+                    }
+                    #[cfg(not(feature = "board-qemu"))]
+                    let _ = command;
+                }
             }
 
             stats::CONTROL_LOOPS.inc();
@@ -356,7 +477,7 @@ mod app {
     /// - Released by received bytes, and at least every 20 ms to time the
     ///   link (handshake retries, `get` timeouts).
     /// - Budget: 3 ms, most of it writing instructions at 115200 baud.
-    #[task(priority = 1, local = [bytes_out, hmi_tx, saves_in, boot_notice], shared = [supervisor, hmi])]
+    #[task(priority = 1, local = [bytes_out, hmi_tx, saves_in, boot_notice], shared = [machine, hmi])]
     async fn hmi(mut cx: hmi::Context) {
         let mut connected = false;
         loop {
@@ -407,18 +528,17 @@ mod app {
         match event {
             Event::Command(cmd) => {
                 defmt::info!("screen: {}", cmd);
-                let effect = cx.shared.supervisor.lock(|sup| sup.command(cmd));
+                let effect = cx.shared.machine.lock(|m| m.command(cmd));
                 match effect {
                     Effect::None => {}
                     Effect::SettingsChanged => {
-                        let screen = cx.shared.supervisor.lock(|sup| sup.screen_settings());
+                        let screen = cx.shared.machine.lock(|m| m.screen_settings());
                         cx.shared.hmi.lock(|hmi| {
                             let _ = hmi.set_settings(screen);
                         });
                     }
                     Effect::Save => {
-                        let settings = cx.shared.supervisor.lock(|sup| sup.settings().clone());
-                        if cx.local.saves_in.try_send(settings).is_err() {
+                        if cx.local.saves_in.try_send(()).is_err() {
                             cx.shared.hmi.lock(|hmi| {
                                 let _ = hmi.show_message("Save already in progress");
                             });
@@ -443,7 +563,7 @@ mod app {
                 );
             }
             Event::Connected => {
-                let screen = cx.shared.supervisor.lock(|sup| sup.screen_settings());
+                let screen = cx.shared.machine.lock(|m| m.screen_settings());
                 cx.shared.hmi.lock(|hmi| {
                     let _ = hmi.set_settings(screen);
                 });
@@ -459,45 +579,21 @@ mod app {
     /// - Priority 1.
     /// - Period 200 ms (5 Hz).
     /// - Budget: 2 ms.
-    #[task(priority = 1, local = [led, run_limit_ms], shared = [supervisor, hmi])]
+    #[task(priority = 1, local = [led, run_limit_ms], shared = [machine, hmi])]
     async fn status(mut cx: status::Context) {
         let mut next = Mono::now();
         let mut runs: u32 = 0;
         loop {
             let uptime = uptime_ms();
             cx.local.led.set(runs.is_multiple_of(2));
-            let (snapshot, screen, alarm, run, mode) = cx.shared.supervisor.lock(|sup| {
-                (
-                    sup.snapshot(),
-                    sup.screen_status(),
-                    sup.alarm(),
-                    sup.run_state(),
-                    sup.settings().mode,
-                )
-            });
+            let screen = cx.shared.machine.lock(|m| m.screen_status());
             cx.shared.hmi.lock(|hmi| {
                 if hmi.write_status(&screen).is_err() {
                     stats::HMI_TX_DROPPED.inc();
                 }
             });
             if runs.is_multiple_of(STATUS_LOG_EVERY) {
-                defmt::info!(
-                    "status: uptime {=u32} ms, {} {}, travel {=u32} m/h, drum target {=u32} actual {=u32} mr/min, ccr {=u16}, plants {=u32}, distance {=u32} mm, alarm {}, loops {=u32} (overruns {=u32}), hall edges {=u32}, hmi rx {=u32} B",
-                    uptime,
-                    mode,
-                    run,
-                    snapshot.travel_speed_kmh_x1000,
-                    snapshot.target_drum_rpm_x1000,
-                    snapshot.actual_drum_rpm_x1000,
-                    snapshot.ccr,
-                    snapshot.plants,
-                    snapshot.distance_mm,
-                    alarm,
-                    stats::CONTROL_LOOPS.get(),
-                    stats::CONTROL_OVERRUNS.get(),
-                    stats::HALL_EDGES.get(),
-                    stats::HMI_RX_BYTES.get()
-                );
+                cx.shared.machine.lock(|m| log_status(m, uptime));
             }
             if let Some(limit) = *cx.local.run_limit_ms {
                 if uptime >= limit {
@@ -511,15 +607,60 @@ mod app {
         }
     }
 
+    /// The 1 Hz summary line of the log.
+    fn log_status(machine: &Machine, uptime: u32) {
+        match machine {
+            Machine::DrumBelt(sup) => {
+                let snapshot = sup.snapshot();
+                defmt::info!(
+                    "status: uptime {=u32} ms, {} {}, travel {=u32} m/h, drum target {=u32} actual {=u32} mr/min, ccr {=u16}, plants {=u32}, distance {=u32} mm, alarm {}, loops {=u32} (overruns {=u32}), hall edges {=u32}, hmi rx {=u32} B",
+                    uptime,
+                    sup.settings().mode,
+                    sup.run_state(),
+                    snapshot.travel_speed_kmh_x1000,
+                    snapshot.target_drum_rpm_x1000,
+                    snapshot.actual_drum_rpm_x1000,
+                    snapshot.ccr,
+                    snapshot.plants,
+                    snapshot.distance_mm,
+                    sup.alarm(),
+                    stats::CONTROL_LOOPS.get(),
+                    stats::CONTROL_OVERRUNS.get(),
+                    stats::HALL_EDGES.get(),
+                    stats::HMI_RX_BYTES.get()
+                );
+            }
+            Machine::SeedlingBelt(belt) => {
+                let s = belt.planter().snapshot();
+                defmt::info!(
+                    "status: uptime {=u32} ms, profile B {}, travel {=u32} mm/s, n1 {=u32} n2 {=u32} mr/min, j {=u32}, radius {=u32} um, {}, alarm {}, loops {=u32} (overruns {=u32}), hmi rx {=u32} B",
+                    uptime,
+                    s.state,
+                    s.travel_speed.to_milli(),
+                    s.planting_speed.to_milli(),
+                    s.feeding_speed.to_milli(),
+                    s.roller_turns,
+                    s.roller_radius.to_milli().saturating_mul(1000),
+                    s.action,
+                    s.alarm,
+                    stats::CONTROL_LOOPS.get(),
+                    stats::CONTROL_OVERRUNS.get(),
+                    stats::HMI_RX_BYTES.get()
+                );
+            }
+        }
+    }
+
     /// Persists the settings when the operator saves (the drum is stopped:
     /// a flash page erase stalls the CPU for up to 40 ms).
     ///
     /// - Priority 1.
     /// - Released by each Save.
     /// - Budget: 50 ms (one page erase and ≤ 130 half-word programs).
-    #[task(priority = 1, local = [saves_out, store], shared = [hmi])]
+    #[task(priority = 1, local = [saves_out, store], shared = [machine, hmi])]
     async fn settings(mut cx: settings::Context) {
-        while let Ok(settings) = cx.local.saves_out.recv().await {
+        while let Ok(()) = cx.local.saves_out.recv().await {
+            let settings = cx.shared.machine.lock(|m| m.settings().clone());
             let text = match cx.local.store.as_mut().map(|s| s.save(&settings)) {
                 Some(Ok(sequence)) => {
                     defmt::info!("settings: saved as record {=u32}", sequence);

@@ -55,6 +55,9 @@ static DRUM_CCR: AtomicU16 = AtomicU16::new(0);
 static DRIVER_ENABLE: AtomicBool = AtomicBool::new(false);
 /// Stand-in for TIM2's counter, extended to 32 bits (1 MHz).
 static HALL_TIMER_NOW: AtomicU32 = AtomicU32::new(0);
+/// Stand-ins for the step-pulse timers of profile B (rate, U16F16 Hz bits).
+static FEED_STEP_BITS: AtomicU32 = AtomicU32::new(0);
+static PLANT_STEP_BITS: AtomicU32 = AtomicU32::new(0);
 
 /// Everything the application owns after [`init`].
 pub struct Board {
@@ -72,6 +75,8 @@ pub struct Board {
     pub led: StatusLed,
     /// The watchdog stand-in.
     pub watchdog: Watchdog,
+    /// Profile B's feeding step output stand-in.
+    pub feed_step: FeedStep,
     /// The settings flash stand-in, if the command line named a file.
     pub settings_flash: Option<SettingsFlash>,
     /// Run limit from the command line.
@@ -107,6 +112,12 @@ struct Scenario {
     enc_loss: Option<u32>,
     noiseless: bool,
     seed: Option<u32>,
+    /// Profile B machine (`profile=b`).
+    profile_b: bool,
+    /// Travel speed override, mm/s (`speed=N`).
+    speed_mm_s: Option<u32>,
+    /// Restart the field metrics at this time (`metrics_from=T`).
+    metrics_from: Option<u32>,
 }
 
 /// Brings up the emulated peripherals. Called once from `init`.
@@ -149,6 +160,11 @@ pub fn init(dp: pac::Peripherals) -> Board {
     if let Some(tau) = scenario.tau_ms {
         config.track_tau_s = tau as f32 / 1000.0;
     }
+    if scenario.profile_b {
+        config.profile = machine_sim::Profile::B;
+        // The metrics' target: profile B's default spacing X = 25 cm.
+        config.target_spacing_m = 0.25;
+    }
     config.initial_gear = scenario
         .gear
         .and_then(|g| kinematics::consts::Gear::ALL.get(usize::from(g).wrapping_sub(1)))
@@ -164,6 +180,9 @@ pub fn init(dp: pac::Peripherals) -> Board {
         defmt::error!("machine model configuration rejected");
         fatal()
     };
+    if let Some(v) = scenario.speed_mm_s {
+        machine.set_travel_speed_m_s(v as f32 / 1000.0);
+    }
     Board {
         hmi_tx,
         hmi_rx,
@@ -172,10 +191,12 @@ pub fn init(dp: pac::Peripherals) -> Board {
             machine,
             scenario,
             now_ms: 0,
+            roller_turns_seen: 0,
         },
         hall: HallCapture,
         led: StatusLed,
         watchdog: Watchdog,
+        feed_step: FeedStep,
         settings_flash,
         run_limit_ms: cmd.run_ms,
         sysclk_hz: SYSCLK_HZ,
@@ -218,11 +239,52 @@ impl DrumDrive {
     }
 }
 
+/// Profile B's two step-pulse outputs (stand-ins for TIM1 CH1 and TIM4 CH1)
+/// and the drivers' enable.
+pub struct Steppers {
+    _drum: DrumDrive,
+    _feed: FeedStep,
+}
+
+/// Profile B's feeding step output stand-in (TIM4 is not emulated).
+pub struct FeedStep;
+
+impl Steppers {
+    /// Takes over the drum PWM's timer for step pulses (profile B).
+    pub fn new(drum: DrumDrive, feed: FeedStep) -> Self {
+        FEED_STEP_BITS.store(0, Relaxed);
+        PLANT_STEP_BITS.store(0, Relaxed);
+        Self {
+            _drum: drum,
+            _feed: feed,
+        }
+    }
+
+    /// Sets both pulse rates (U16F16 Hz) and the drivers' enable.
+    pub fn set(
+        &mut self,
+        feed: kinematics::units::Hertz,
+        plant: kinematics::units::Hertz,
+        enabled: bool,
+    ) {
+        DRIVER_ENABLE.store(enabled, Relaxed);
+        let (feed, plant) = if enabled {
+            (feed.to_bits(), plant.to_bits())
+        } else {
+            (0, 0)
+        };
+        FEED_STEP_BITS.store(feed, Relaxed);
+        PLANT_STEP_BITS.store(plant, Relaxed);
+    }
+}
+
 /// The simulated machine, read like the real board's sensors.
 pub struct Sensors {
     machine: &'static mut Machine,
     scenario: Scenario,
     now_ms: u32,
+    /// Feeding-roller turns already reported as index pulses (profile B).
+    roller_turns_seen: u32,
 }
 
 fn due(at: Option<u32>, from: u32, to: u32) -> bool {
@@ -242,6 +304,10 @@ impl Sensors {
                 defmt::info!("sim: travel speed step {=i32} %", pct);
             }
         }
+        if due(s.metrics_from, from, to) {
+            self.machine.reset_metrics();
+            defmt::info!("sim: field metrics restarted");
+        }
         if due(s.stop, from, to) {
             self.machine.stop_travel();
             defmt::info!("sim: tractor stops");
@@ -258,21 +324,60 @@ impl Sensors {
             self.machine.inject_fault(Fault::EncoderLoss);
             defmt::warn!("sim: encoder loss injected");
         }
+        let hz = |bits: u32| bits as f32 / 65_536.0;
+        let steppers_on = DRIVER_ENABLE.load(Relaxed);
         let inputs = Inputs {
             drum_duty: f32::from(DRUM_CCR.load(Relaxed)) / f32::from(DRUM_PERIOD),
-            driver_enabled: DRIVER_ENABLE.load(Relaxed),
-            ..Inputs::default()
+            driver_enabled: steppers_on,
+            feed_step_rate_hz: if steppers_on {
+                hz(FEED_STEP_BITS.load(Relaxed))
+            } else {
+                0.0
+            },
+            plant_step_rate_hz: if steppers_on {
+                hz(PLANT_STEP_BITS.load(Relaxed))
+            } else {
+                0.0
+            },
         };
         let dt_us = to.saturating_sub(from).saturating_mul(1000);
         self.machine.step(dt_us, &inputs, &mut |t| {
             let _ = edges.push(t);
         });
         self.now_ms = to;
-        HALL_TIMER_NOW.store(self.machine.capture_ticks(), Relaxed);
+        let now_ticks = self.machine.capture_ticks();
+        HALL_TIMER_NOW.store(now_ticks, Relaxed);
+        if self.scenario.profile_b {
+            // Profile B wiring: TIM3 counts the ground-wheel encoder and TIM2
+            // captures one index pulse per feeding-roller turn (there is no
+            // Hall gear on this machine).
+            edges.clear();
+            let turns = self.machine.feed_roller_turns();
+            while self.roller_turns_seen < turns {
+                self.roller_turns_seen = self.roller_turns_seen.wrapping_add(1);
+                let _ = edges.push(now_ticks);
+            }
+            return SensorSample {
+                drum_encoder: self.machine.ground_encoder_count(),
+                hall_edges: edges,
+            };
+        }
         SensorSample {
             drum_encoder: self.machine.drum_encoder_count(),
             hall_edges: edges,
         }
+    }
+
+    /// Profile B's truth for the log: plants, their mean spacing (µm) and
+    /// CV (0.01 %) since the metrics were last reset, ground position (mm).
+    pub fn truth_b(&self) -> (u32, u32, u32, u32) {
+        let m = self.machine.metrics();
+        (
+            m.plants,
+            (m.mean_spacing_m * 1e6) as u32,
+            (m.cv_pct * 100.0) as u32,
+            (self.machine.ground_position_m() * 1000.0) as u32,
+        )
     }
 
     /// The model's own view, for the log: ground travel speed (mm/s), drum
@@ -318,9 +423,12 @@ impl Watchdog {
     pub fn feed(&mut self) {}
 }
 
-/// Zeroes the PWM stand-in and the enable (the model coasts the drum down).
+/// Zeroes the PWM and step stand-ins and the enable (the model coasts the
+/// drum down; the steppers stop).
 pub fn safe_state() {
     DRUM_CCR.store(0, Relaxed);
+    FEED_STEP_BITS.store(0, Relaxed);
+    PLANT_STEP_BITS.store(0, Relaxed);
     DRIVER_ENABLE.store(false, Relaxed);
 }
 
@@ -390,6 +498,9 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             }
             b"stop" => s.stop = parse_u32(value),
             b"tau" => s.tau_ms = parse_u32(value),
+            b"profile" => s.profile_b = value == b"b" || value == b"B",
+            b"speed" => s.speed_mm_s = parse_u32(value),
+            b"metrics_from" => s.metrics_from = parse_u32(value),
             b"stall" => s.stall = parse_u32(value),
             b"hall_loss" => s.hall_loss = parse_u32(value),
             b"enc_loss" => s.enc_loss = parse_u32(value),

@@ -17,7 +17,7 @@ use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use kinematics::speed::CaptureExtender;
 use stm32f1xx_hal::{
     flash::{self, FlashSize, SectorSize},
-    gpio::{Output, PushPull, PA1, PB12, PB13, PC13},
+    gpio::{self, Output, PushPull, PA1, PB12, PB13, PC13},
     pac::{self, IWDG, TIM1, TIM2, TIM3, USART1, USART2},
     prelude::*,
     rcc,
@@ -65,6 +65,8 @@ pub struct Board {
     pub led: StatusLed,
     /// The independent watchdog (running).
     pub watchdog: Watchdog,
+    /// Profile B's feeding-motor step output (TIM4 CH1 on PB6), idle.
+    pub feed_step: FeedStep,
     /// The settings pages of the MCU's flash.
     pub settings_flash: Option<SettingsFlash>,
     /// The real board runs until it is switched off.
@@ -135,6 +137,13 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let tim1 = Timer::new(dp.TIM1, &mut rcc).release();
     let drum = DrumDrive::new(tim1, enable, direction);
 
+    // Profile B: feeding STEP on PB6 (TIM4 CH1), directions on PB14/PB15.
+    let _feed_pin = gpiob.pb6.into_alternate_push_pull(&mut gpiob.crl);
+    let feed_dir = gpiob.pb14.into_push_pull_output(&mut gpiob.crh);
+    let plant_dir = gpiob.pb15.into_push_pull_output(&mut gpiob.crh);
+    let tim4 = Timer::new(dp.TIM4, &mut rcc).release();
+    let feed_step = FeedStep::new(tim4, feed_dir, plant_dir);
+
     // Hall input capture, TIM2 CH1 on PA0 (NPN switch: pull-up, falling edge).
     let _hall_pin = gpioa.pa0.into_pull_up_input(&mut gpioa.crl);
     let tim2 = Timer::new(dp.TIM2, &mut rcc).release();
@@ -158,6 +167,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         rs485: Rs485 { tx, rx, de },
         led,
         watchdog,
+        feed_step,
         settings_flash: Some(SettingsFlash { flash }),
         run_limit_ms: None,
         sysclk_hz: SYSCLK_HZ,
@@ -222,6 +232,107 @@ impl DrumDrive {
         } else {
             self.set_compare(0);
             self.enable.set_low();
+        }
+    }
+}
+
+/// Timer settings for a square wave of `rate` (U16F16 Hz) from 72 MHz:
+/// `(PSC, ARR)`, the finest prescaler that keeps ARR within 16 bits; `None`
+/// for 0 Hz (or a rate below 0.14 Hz).
+fn step_timing(rate_bits: u32) -> Option<(u16, u16)> {
+    if rate_bits == 0 {
+        return None;
+    }
+    for psc in [0u32, 71, 7199] {
+        // ARR + 1 = clk / (PSC + 1) / f, f = bits / 65536.
+        let ticks = (u64::from(TIMER_CLOCK_HZ / (psc + 1)) << 16) / u64::from(rate_bits);
+        if (2..=65_536).contains(&ticks) {
+            return Some((psc as u16, (ticks - 1) as u16));
+        }
+    }
+    None
+}
+
+/// Programs a timer's CH1 for step pulses at `rate` (50 % duty), or off.
+macro_rules! set_step_rate {
+    ($tim:expr, $rate_bits:expr) => {
+        match step_timing($rate_bits) {
+            Some((psc, arr)) => {
+                $tim.psc().write(|w| w.psc().set(psc));
+                $tim.arr().write(|w| w.arr().set(arr));
+                $tim.ccr1().write(|w| w.ccr().set(arr / 2 + 1));
+            }
+            None => {
+                $tim.ccr1().write(|w| w.ccr().set(0));
+            }
+        }
+    };
+}
+
+/// Profile B's feeding-motor step output, TIM4 CH1 on PB6, with both
+/// motors' direction pins (forward = low).
+pub struct FeedStep {
+    tim: pac::TIM4,
+    _feed_dir: gpio::PB14<Output<PushPull>>,
+    _plant_dir: gpio::PB15<Output<PushPull>>,
+}
+
+impl FeedStep {
+    fn new(
+        tim: pac::TIM4,
+        mut feed_dir: gpio::PB14<Output<PushPull>>,
+        mut plant_dir: gpio::PB15<Output<PushPull>>,
+    ) -> Self {
+        feed_dir.set_low();
+        plant_dir.set_low();
+        // SAFETY: raw register values for PWM mode 1 on CH1 with preload
+        // (RM0008 §15.4), as for TIM1; TIM4 is owned by this struct.
+        tim.ccr1().write(|w| w.ccr().set(0));
+        tim.ccmr1_output()
+            .write(|w| unsafe { w.bits((0b110 << 4) | (1 << 3)) });
+        tim.ccer().write(|w| unsafe { w.bits(1) });
+        tim.egr().write(|w| w.ug().set_bit());
+        tim.cr1().write(|w| unsafe { w.bits((1 << 7) | 1) });
+        Self {
+            tim,
+            _feed_dir: feed_dir,
+            _plant_dir: plant_dir,
+        }
+    }
+}
+
+/// Profile B's two step outputs: the planting motor on TIM1 CH1 (PA8, the
+/// drum PWM pin of profile A) and the feeding motor on TIM4 CH1 (PB6); the
+/// drivers share the enable on PB12.
+pub struct Steppers {
+    drum: DrumDrive,
+    feed: FeedStep,
+}
+
+impl Steppers {
+    /// Takes over the drum PWM's timer for step pulses (profile B).
+    pub fn new(drum: DrumDrive, feed: FeedStep) -> Self {
+        Self { drum, feed }
+    }
+
+    /// Sets both pulse rates (U16F16 Hz) and the drivers' enable.
+    pub fn set(
+        &mut self,
+        feed: kinematics::units::Hertz,
+        plant: kinematics::units::Hertz,
+        enabled: bool,
+    ) {
+        let (feed, plant) = if enabled {
+            (feed.to_bits(), plant.to_bits())
+        } else {
+            (0, 0)
+        };
+        set_step_rate!(self.feed.tim, feed);
+        set_step_rate!(self.drum.tim, plant);
+        if enabled {
+            self.drum.enable.set_high();
+        } else {
+            self.drum.enable.set_low();
         }
     }
 }
@@ -411,6 +522,8 @@ pub fn safe_state() {
         let tim1 = &*TIM1::ptr();
         tim1.ccr1().write(|w| w.ccr().set(0));
         tim1.bdtr().write(|w| w.bits(0));
+        let tim4 = &*pac::TIM4::ptr();
+        tim4.ccr1().write(|w| w.ccr().set(0));
         let gpiob = &*pac::GPIOB::ptr();
         gpiob.bsrr().write(|w| w.bits(1 << (12 + 16)));
     }

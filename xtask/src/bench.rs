@@ -3,6 +3,7 @@
 use std::path::Path;
 use std::process::Command;
 
+mod belt;
 mod drum;
 mod field;
 mod speed;
@@ -112,16 +113,8 @@ pub fn run() -> Result {
     speed::section(&mut doc)?;
     eprintln!("xtask: bench 3/3 field runs");
     field::section(&mut doc, &img)?;
-    doc.push_str(
-        "## 4. Profile B bench replica (paper B)\n\n\
-         Not in this benchmark yet: when this section was written profile B (the \
-         seedling-belt feeder/planter) had no firmware; its logic is arriving in \
-         `supervisor::profile_b` with host tests of its own against `machine-sim` \
-         (`crates/supervisor/tests/profile_b.rs`). Paper B's bench figures (SPEC §8: \
-         feeding-spacing error 5.1/7.8/11.4 %, plant-spacing CV 7.42/9.34/13.29 % at \
-         0.2/0.3/0.4 m/s) are to be reproduced here side by side once profile B runs on a \
-         board.\n\n",
-    );
+    eprintln!("xtask: bench 4 profile B");
+    belt::section(&mut doc)?;
     doc.push_str(
         "## 5. Cost on the target ISA (QEMU instruction counts)\n\n\
          `bench/` runs each case 1024 times over 64 varying inputs in \

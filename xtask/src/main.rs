@@ -454,8 +454,8 @@ fn ci() -> Result {
     Ok(())
 }
 
-/// Section sizes of an ELF, from `llvm-size -A` (rustup's llvm-tools).
-fn sections(elf: &Path) -> Result<Vec<(String, u64)>> {
+/// A tool of rustup's llvm-tools component (`llvm-size`, `llvm-nm`).
+fn llvm_tool(name: &str) -> Result<PathBuf> {
     let sysroot = Command::new("rustc")
         .current_dir(root())
         .args(["--print", "sysroot"])
@@ -468,10 +468,51 @@ fn sections(elf: &Path) -> Result<Vec<(String, u64)>> {
         .output()
         .map_err(|e| e.to_string())?;
     let host = String::from_utf8_lossy(&host.stdout).trim().to_string();
-    let llvm_size = Path::new(&sysroot)
+    Ok(Path::new(&sysroot)
         .join("lib/rustlib")
         .join(host)
-        .join("bin/llvm-size");
+        .join("bin")
+        .join(name))
+}
+
+/// Code that must never reach the real board's image: it costs kilobytes
+/// and means a slip (a decimal literal parsed at run time instead of in a
+/// `const`, or floating-point formatting).
+const FORBIDDEN_SYMBOLS: &[(&str, &str)] = &[
+    (
+        "fixed::from_str",
+        "a fixed-point literal parsed at run time: wrap `X::lit(\"…\")` in `const { … }`",
+    ),
+    ("core::fmt::float", "floating-point formatting"),
+];
+
+/// Fails when the image holds any of [`FORBIDDEN_SYMBOLS`].
+fn check_forbidden_symbols(elf: &Path) -> Result {
+    let nm = llvm_tool("llvm-nm")?;
+    let out = Command::new(&nm)
+        .args(["--demangle", "--defined-only"])
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("{}: {e}", nm.display()))?;
+    let symbols = String::from_utf8_lossy(&out.stdout);
+    for (needle, why) in FORBIDDEN_SYMBOLS {
+        if let Some(line) = symbols.lines().find(|l| l.contains(needle)) {
+            return Err(format!(
+                "{} contains `{}` ({why})",
+                elf.display(),
+                line.split_whitespace()
+                    .skip(2)
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Section sizes of an ELF, from `llvm-size -A` (rustup's llvm-tools).
+fn sections(elf: &Path) -> Result<Vec<(String, u64)>> {
+    let llvm_size = llvm_tool("llvm-size")?;
     let out = Command::new(&llvm_size)
         .arg("-A")
         .arg(elf)
@@ -541,11 +582,10 @@ fn size() -> Result {
             over.push(format!("{}: RAM {ram} B > {ram_budget} B", board.name()));
         }
     }
-    if over.is_empty() {
-        Ok(())
-    } else {
-        Err(format!("over budget: {}", over.join("; ")))
+    if !over.is_empty() {
+        return Err(format!("over budget: {}", over.join("; ")));
     }
+    check_forbidden_symbols(&Board::Stm32f103.elf())
 }
 
 /// `cargo xtask flash`: a real board on a debug probe.

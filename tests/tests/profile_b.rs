@@ -21,7 +21,13 @@ fn boot(scenario: &[&str], run_ms: u32, flash: &PathBuf) -> Bench {
 /// One `sim-b:` line: (time ms, plants, mean spacing m, CV %, feed Hz, plant Hz).
 fn sim_b(line: &str) -> Option<(u32, u32, f64, f64, f64, f64)> {
     let num = |key: &str| -> Option<f64> {
-        line.split(key).nth(1)?.split_whitespace().next()?.trim_end_matches(',').parse().ok()
+        line.split(key)
+            .nth(1)?
+            .split_whitespace()
+            .next()?
+            .trim_end_matches(',')
+            .parse()
+            .ok()
     };
     Some((
         log_time_ms(line)?,
@@ -36,7 +42,9 @@ fn sim_b(line: &str) -> Option<(u32, u32, f64, f64, f64, f64)> {
 /// Selects profile B on the settings page and saves it.
 fn commission_profile_b(flash: &PathBuf) {
     let mut bench = boot(&["profile=b"], 20_000, flash);
-    assert!(bench.pump_until(Duration::from_secs(5), |s| s.page() == 1).unwrap());
+    assert!(bench
+        .pump_until(Duration::from_secs(5), |s| s.page() == 1)
+        .unwrap());
     bench.tap("bset").unwrap();
     bench.tap("bprofile").unwrap();
     assert!(bench
@@ -47,7 +55,8 @@ fn commission_profile_b(flash: &PathBuf) {
     bench.tap("bsave").unwrap();
     assert!(
         bench
-            .pump_until(Duration::from_secs(3), |s| s.text("tmsg") == Some("Settings saved"))
+            .pump_until(Duration::from_secs(3), |s| s.text("tmsg")
+                == Some("Settings saved"))
             .unwrap(),
         "{:?}",
         bench.screen.text("tmsg")
@@ -81,7 +90,9 @@ fn profile_b_at_25_cm_beats_paper_b_at_0_2_0_3_0_4_m_per_s_and_stops_with_the_tr
             ..BootOptions::default()
         };
         let mut bench = Bench::boot(&options).expect("boot QEMU");
-        assert!(bench.pump_until(Duration::from_secs(30), |s| s.page() == 7).unwrap());
+        assert!(bench
+            .pump_until(Duration::from_secs(30), |s| s.page() == 7)
+            .unwrap());
         bench.tap("bstart").unwrap();
         let deadline = std::time::Instant::now() + Duration::from_secs(120);
         while std::time::Instant::now() < deadline {
@@ -104,14 +115,20 @@ fn profile_b_at_25_cm_beats_paper_b_at_0_2_0_3_0_4_m_per_s_and_stops_with_the_tr
             .expect("samples before the stop");
         // 54 s at the bench speed over 25 cm (e.g. 43 plants at 0.2 m/s).
         let expected = f64::from(mm_s) / 1000.0 * 54.0 / 0.25;
-        assert!(f64::from(plants) > 0.9 * expected, "{plants} plants, expected ≈ {expected:.0}");
+        assert!(
+            f64::from(plants) > 0.9 * expected,
+            "{plants} plants, expected ≈ {expected:.0}"
+        );
         // Feeding-spacing error: |mean − X| / X (paper B Table 2).
         let error = (mean - 0.25).abs() / 0.25 * 100.0;
         eprintln!(
             "profile B at {mm_s} mm/s: {plants} plants, feeding-spacing error {error:.2} % \
              (paper {paper_error} %), CV {cv:.2} % (paper {paper_cv} %)"
         );
-        assert!(error < paper_error, "feeding-spacing error {error:.2} % at {mm_s} mm/s");
+        assert!(
+            error < paper_error,
+            "feeding-spacing error {error:.2} % at {mm_s} mm/s"
+        );
         assert!(cv < paper_cv, "CV {cv:.2} % at {mm_s} mm/s");
 
         // Both motors stop within one control period of the ground encoder

@@ -3,15 +3,15 @@
 //! steppers of the simulated machine from the ground-wheel encoder. Expected
 //! values: paper B's bench figures (SPEC §8) and the simulator's truth.
 
-use std::path::PathBuf;
+use std::path::Path;
 use std::time::Duration;
 
 use qemu_tests::{log_time_ms, Bench, BootOptions};
 
-fn boot(scenario: &[&str], run_ms: u32, flash: &PathBuf) -> Bench {
+fn boot(scenario: &[&str], run_ms: u32, flash: &Path) -> Bench {
     let options = BootOptions {
         run_ms: Some(run_ms),
-        flash: Some(flash.clone()),
+        flash: Some(flash.to_path_buf()),
         scenario: scenario.iter().map(|s| s.to_string()).collect(),
         ..BootOptions::default()
     };
@@ -40,7 +40,7 @@ fn sim_b(line: &str) -> Option<(u32, u32, f64, f64, f64, f64)> {
 }
 
 /// Selects profile B on the settings page and saves it.
-fn commission_profile_b(flash: &PathBuf) {
+fn commission_profile_b(flash: &Path) {
     let mut bench = boot(&["profile=b"], 20_000, flash);
     assert!(bench
         .pump_until(Duration::from_secs(5), |s| s.page() == 1)
@@ -81,7 +81,7 @@ fn profile_b_at_25_cm_beats_paper_b_at_0_2_0_3_0_4_m_per_s_and_stops_with_the_tr
         let speed = format!("speed={mm_s}");
         let options = BootOptions {
             run_ms: Some(62_000),
-            flash: Some(flash.clone()),
+            flash: Some(flash.to_path_buf()),
             scenario: ["profile=b", &speed, "metrics_from=6000", "stop=60000"]
                 .iter()
                 .map(|s| s.to_string())
@@ -110,8 +110,7 @@ fn profile_b_at_25_cm_beats_paper_b_at_0_2_0_3_0_4_m_per_s_and_stops_with_the_tr
         // Just before the stop: the field metrics of 54 s of travel.
         let (_, plants, mean, cv, _, _) = *samples
             .iter()
-            .filter(|s| s.0 < 60_000)
-            .last()
+            .rfind(|s| s.0 < 60_000)
             .expect("samples before the stop");
         // 54 s at the bench speed over 25 cm (e.g. 43 plants at 0.2 m/s).
         let expected = f64::from(mm_s) / 1000.0 * 54.0 / 0.25;

@@ -162,6 +162,44 @@ fn fixed_mode_holds_20_rpm_within_half_a_percent() {
     assert!((mean - 20.0).abs() <= 0.1, "true mean {mean}");
 }
 
+/// A drive twice as fast as the drum model assumes (motor lag 12.5 ms instead
+/// of 25 ms; a different motor or a lighter belt). With paper A's ΔKp range
+/// (±5) the 7×7 tuner raised Kp to ≈ 5 at overspeed and the drum oscillated
+/// between ≈ 13 and 34 r/min without end (docs/PERFORMANCE.md §1,
+/// robustness); the product's narrowed range must settle. Expected: the
+/// set 20 r/min, every 10 ms mean of the true drum speed within ±5 % (the
+/// seedlings' load ripple alone is ±5 % droop, mostly absorbed by the loop).
+#[test]
+fn fixed_mode_settles_on_a_drive_twice_as_fast_as_the_model() {
+    let settings = Settings {
+        mode: Mode::Fixed,
+        fixed_drum_speed: DrumSpeed::new(2000).unwrap(),
+        ..Settings::default()
+    };
+    let nominal = Config::default();
+    let fast = Config {
+        motor_tau_s: nominal.motor_tau_s * 0.5,
+        ..nominal
+    };
+    let mut rig = Rig::new(fast, settings);
+    rig.sup.command(Command::Start);
+    rig.run_ms(3_000);
+    let (mut lowest, mut highest, mut sum) = (f64::MAX, f64::MIN, 0.0);
+    for _ in 0..200 {
+        let turns = rig.m.drum_turns();
+        rig.period();
+        let mean_rpm = (rig.m.drum_turns() - turns) * 6_000.0;
+        lowest = lowest.min(mean_rpm);
+        highest = highest.max(mean_rpm);
+        sum += mean_rpm;
+    }
+    assert!(
+        lowest >= 19.0 && highest <= 21.0,
+        "10 ms means {lowest:.2} … {highest:.2} r/min"
+    );
+    assert!((sum / 200.0 - 20.0).abs() <= 0.1, "mean {}", sum / 200.0);
+}
+
 #[test]
 fn a_row_of_70_m_gets_its_plant_count_within_half_a_percent() {
     // Theoretical count: 70 m / 0.07 m = 1000 plants in one row. The belt runs

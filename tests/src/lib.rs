@@ -477,6 +477,15 @@ impl Bench {
         self.pump(Duration::from_millis(60))
     }
 
+    /// The operator taps Save on the settings page; `Ok(true)` once the
+    /// screen confirms "Settings saved" (within 3 s), else `Ok(false)`.
+    pub fn save_settings(&mut self) -> io::Result<bool> {
+        self.tap("bsave")?;
+        self.pump_until(Duration::from_secs(3), |s| {
+            s.text("tmsg") == Some("Settings saved")
+        })
+    }
+
     /// The operator types `value` into the number field `field` and taps
     /// `apply`.
     pub fn enter(&mut self, field: &str, value: i32, apply: &str) -> io::Result<()> {
@@ -515,7 +524,8 @@ pub fn log_time_ms(line: &str) -> Option<u32> {
     Some((t * 1000.0).round() as u32)
 }
 
-fn number_after(line: &str, key: &str) -> Option<f64> {
+/// The number after `key` in a log line (`"… plants 12, …"` → 12).
+pub fn number_after(line: &str, key: &str) -> Option<f64> {
     line.split(key)
         .nth(1)?
         .split_whitespace()

@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::time::Duration;
 
-use qemu_tests::{log_time_ms, Bench, BootOptions};
+use qemu_tests::{log_time_ms, number_after, Bench, BootOptions};
 
 fn boot(scenario: &[&str], run_ms: u32, flash: &Path) -> Bench {
     let options = BootOptions {
@@ -20,15 +20,7 @@ fn boot(scenario: &[&str], run_ms: u32, flash: &Path) -> Bench {
 
 /// One `sim-b:` line: (time ms, plants, mean spacing m, CV %, feed Hz, plant Hz).
 fn sim_b(line: &str) -> Option<(u32, u32, f64, f64, f64, f64)> {
-    let num = |key: &str| -> Option<f64> {
-        line.split(key)
-            .nth(1)?
-            .split_whitespace()
-            .next()?
-            .trim_end_matches(',')
-            .parse()
-            .ok()
-    };
+    let num = |key: &str| number_after(line, key);
     Some((
         log_time_ms(line)?,
         num("plants ")? as u32,
@@ -52,12 +44,8 @@ fn commission_profile_b(flash: &Path) {
             .text("tprofile")
             .is_some_and(|t| t.starts_with("B")))
         .unwrap());
-    bench.tap("bsave").unwrap();
     assert!(
-        bench
-            .pump_until(Duration::from_secs(3), |s| s.text("tmsg")
-                == Some("Settings saved"))
-            .unwrap(),
+        bench.save_settings().unwrap(),
         "{:?}",
         bench.screen.text("tmsg")
     );

@@ -27,7 +27,7 @@
 
 use fixed::types::I16F16;
 
-use crate::rules::{GainOutput, RuleBase, RuleBaseSize, Table};
+use crate::rules::{GainOutput, RuleBase, RuleBaseSize, Table, MAX_SETS};
 use crate::{Error, Gains};
 
 type Fix = I16F16;
@@ -318,6 +318,10 @@ impl FuzzyTuner {
     /// Inference at cell `(i, j)` with fractions `(w, v)`.
     fn infer_cell(&self, i: usize, w: Fix, j: usize, v: Fix) -> Gains {
         let (m, recip) = strengths(self.and, w, v);
+        // `locate` never returns a cell beyond `MAX_SETS − 2`; saying so lets
+        // the compiler drop the twelve bounds checks below.
+        let i = i.min(MAX_SETS - 2);
+        let j = j.min(MAX_SETS - 2);
         let i1 = i.saturating_add(1);
         let j1 = j.saturating_add(1);
         let mut out = [Fix::ZERO; 3];
@@ -408,29 +412,44 @@ impl LutTuner {
     }
 
     /// ΔKp, ΔKi, ΔKd by bilinear interpolation of the precomputed surface.
+    ///
+    /// All in 32-bit integers: with product weights `m ∈ [0, 2^16]` summing
+    /// to exactly `2^16` and Q15 entries `|c| ≤ 32767`, `|Σ m·c| ≤ 2^16·32767
+    /// < 2^31`; one 64-bit multiply per output scales to the range.
     #[must_use]
     pub fn infer(&self, e: Fix, ec: Fix) -> Gains {
         let (i, w) = self.e.locate(e);
         let (j, v) = self.ec.locate(ec);
-        let (m, _) = strengths(AndOperator::Product, w, v);
-        let i1 = i.saturating_add(1);
+        // `locate` never returns a cell beyond `LUT_POINTS − 2`; the clamp
+        // lets the compiler drop the bounds checks of the reads below.
+        let i = i.min(LUT_POINTS - 2);
+        let j = j.min(LUT_POINTS - 2);
+        // Product weights, as `strengths` computes them, in plain integers:
+        // w, v ∈ [0, 2^16], so every difference below stays in [0, 2^16].
+        let (w, v) = (w.to_bits(), v.to_bits());
+        let m11 = i32::try_from(i64::from(w).wrapping_mul(i64::from(v)) >> 16).unwrap_or(0);
+        let m10 = w.wrapping_sub(m11);
+        let m01 = v.wrapping_sub(m11);
+        let m00 = (1_i32 << 16).wrapping_sub(w).wrapping_sub(m01);
+        let row = |r: usize| self.table.get(r).unwrap_or(&[[0; 3]; LUT_POINTS]);
+        let (r0, r1) = (row(i), row(i.saturating_add(1)));
+        let cell = |line: &[[i16; 3]; LUT_POINTS], c: usize| line.get(c).copied().unwrap_or([0; 3]);
         let j1 = j.saturating_add(1);
-        let at = |r: usize, c: usize| {
-            self.table
-                .get(r)
-                .and_then(|line| line.get(c))
-                .copied()
-                .unwrap_or([0; 3])
-        };
-        let c = [at(i, j), at(i1, j), at(i, j1), at(i1, j1)];
-        // A Q15 entry read as Q16 bits is half the normalised value; `weighted`
-        // rounds to Q16 and the doubling is folded into the final scale.
+        let (c00, c10, c01, c11) = (cell(r0, j), cell(r1, j), cell(r0, j1), cell(r1, j1));
         let out = |k: usize, r: Fix| {
-            let n = weighted(
-                &m,
-                c.map(|e| Fix::from_bits(i32::from(e.get(k).copied().unwrap_or(0)))),
-            );
-            clamp_sym(crate::smul(n, r).saturating_mul_int(2), r)
+            let at = |c: [i16; 3]| i32::from(c.get(k).copied().unwrap_or(0));
+            // Bounded as above: no wrap can occur.
+            let acc = m00
+                .wrapping_mul(at(c00))
+                .wrapping_add(m10.wrapping_mul(at(c10)))
+                .wrapping_add(m01.wrapping_mul(at(c01)))
+                .wrapping_add(m11.wrapping_mul(at(c11)));
+            // acc = value/range · 2^31; · range (Q16) / 2^31, rounded.
+            let q = i64::from(acc)
+                .wrapping_mul(i64::from(r.to_bits()))
+                .wrapping_add(1 << 30)
+                .wrapping_shr(31);
+            Fix::from_bits(i32::try_from(q).unwrap_or(0))
         };
         Gains {
             kp: out(0, self.range.kp),

@@ -192,6 +192,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
             scenario,
             now_ms: 0,
             roller_turns_seen: 0,
+            stop_watch: StopWatch::default(),
         },
         hall: HallCapture,
         led: StatusLed,
@@ -285,6 +286,19 @@ pub struct Sensors {
     now_ms: u32,
     /// Feeding-roller turns already reported as index pulses (profile B).
     roller_turns_seen: u32,
+    /// Profile B: when the steppers came to rest after the tractor stopped.
+    stop_watch: StopWatch,
+}
+
+/// Profile B's stop check, on the simulator's side: after the scenario's
+/// `stop`, the sample time of the last ground-encoder count and the first
+/// sample that finds both step rates at zero, logged once as
+/// `sim-b: steppers at rest at T ms, last ground count at C ms`.
+#[derive(Default)]
+struct StopWatch {
+    last_ground_count: u16,
+    last_count_ms: u32,
+    reported: bool,
 }
 
 fn due(at: Option<u32>, from: u32, to: u32) -> bool {
@@ -352,6 +366,21 @@ impl Sensors {
             // captures one index pulse per feeding-roller turn (there is no
             // Hall gear on this machine).
             edges.clear();
+            let count = self.machine.ground_encoder_count();
+            let watch = &mut self.stop_watch;
+            if count != watch.last_ground_count {
+                watch.last_ground_count = count;
+                watch.last_count_ms = to;
+            }
+            let at_rest = inputs.feed_step_rate_hz == 0.0 && inputs.plant_step_rate_hz == 0.0;
+            if s.stop.is_some_and(|t| to > t) && at_rest && !watch.reported {
+                watch.reported = true;
+                defmt::info!(
+                    "sim-b: steppers at rest at {=u32} ms, last ground count at {=u32} ms",
+                    to,
+                    watch.last_count_ms
+                );
+            }
             let turns = self.machine.feed_roller_turns();
             while self.roller_turns_seen < turns {
                 self.roller_turns_seen = self.roller_turns_seen.wrapping_add(1);

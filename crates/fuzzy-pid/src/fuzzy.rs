@@ -308,6 +308,24 @@ impl FuzzyTuner {
     /// ΔKp, ΔKi, ΔKd for error `e` (r/min, `target − measured`) and error change
     /// `ec` (r/min per sample). Any input is accepted; outside the basic
     /// domains it saturates. Each output lies within `±range`.
+    ///
+    /// ```
+    /// use fuzzy_pid::{FuzzyConfig, FuzzyTuner, I16F16};
+    ///
+    /// let tuner = FuzzyTuner::new(&FuzzyConfig::default())?;
+    /// // e = 2 r/min with the 7 sets 25/3 r/min apart: 24 % of the way from
+    /// // ZO to PS; ec = 0 (ZO). Rules (ZO, ZO) and (PS, ZO) fire with 0.76
+    /// // and 0.24. From SPEC §5's tables: ΔKp = 0.24·NS(−5/3) = −0.4,
+    /// // ΔKi = 0.24·PS(1.25/3) = 0.1, ΔKd = 0.76·NS(−2.5/3) = −0.6333.
+    /// let g = tuner.infer(I16F16::from_num(2), I16F16::ZERO);
+    /// assert!((g.kp.to_num::<f64>() + 0.4).abs() < 1e-3);
+    /// assert!((g.ki.to_num::<f64>() - 0.1).abs() < 1e-3);
+    /// assert!((g.kd.to_num::<f64>() + 0.6333).abs() < 1e-3);
+    /// // Far outside the domain the input saturates at PB: the corner rule.
+    /// let far = tuner.infer(I16F16::from_num(1000), I16F16::ZERO);
+    /// assert_eq!(far, tuner.infer(I16F16::from_num(25), I16F16::ZERO));
+    /// # Ok::<(), fuzzy_pid::Error>(())
+    /// ```
     #[must_use]
     pub fn infer(&self, e: Fix, ec: Fix) -> Gains {
         let (i, w) = self.e.locate(e);
@@ -416,6 +434,23 @@ impl LutTuner {
     /// All in 32-bit integers: with product weights `m ∈ [0, 2^16]` summing
     /// to exactly `2^16` and Q15 entries `|c| ≤ 32767`, `|Σ m·c| ≤ 2^16·32767
     /// < 2^31`; one 64-bit multiply per output scales to the range.
+    ///
+    /// ```
+    /// use fuzzy_pid::{FuzzyConfig, LutTuner, I16F16};
+    ///
+    /// let lut = LutTuner::new(&FuzzyConfig::default())?;
+    /// // The same point as `FuzzyTuner::infer`'s example. The 13 grid points
+    /// // split each of the 6 rule cells in two, so with product AND the
+    /// // table reproduces the bilinear rule surface up to its Q15 rounding
+    /// // (range/32768): e = 2 r/min sits 48 % of the way from grid point
+    /// // 6 (e = 0: ΔKp 0, ΔKd −0.8333) to 7 (e = 4.1667: ΔKp −0.8333,
+    /// // ΔKd −0.4167), so ΔKp = −0.4 and ΔKd = −0.6333.
+    /// let g = lut.infer(I16F16::from_num(2), I16F16::ZERO);
+    /// assert!((g.kp.to_num::<f64>() + 0.4).abs() < 1e-3);
+    /// assert!((g.ki.to_num::<f64>() - 0.1).abs() < 1e-3);
+    /// assert!((g.kd.to_num::<f64>() + 0.6333).abs() < 1e-3);
+    /// # Ok::<(), fuzzy_pid::Error>(())
+    /// ```
     #[must_use]
     pub fn infer(&self, e: Fix, ec: Fix) -> Gains {
         let (i, w) = self.e.locate(e);

@@ -858,6 +858,34 @@ impl Supervisor {
     ///
     /// `now` is the Hall timer's time (1 MHz, extended); `drum_encoder` the
     /// free-running encoder counter.
+    ///
+    /// ```
+    /// use hmi_proto::screen::{Command, DrumSpeed, Mode};
+    /// use kinematics::units::Ticks;
+    /// use supervisor::control::{Alarm, Hardware, Supervisor};
+    /// use supervisor::settings::Settings;
+    ///
+    /// let settings = Settings {
+    ///     mode: Mode::Fixed,
+    ///     fixed_drum_speed: DrumSpeed::new(2000).expect("20.00 r/min is in range"),
+    ///     ..Settings::default()
+    /// };
+    /// let mut sup = Supervisor::new(Hardware::BOARD, settings).expect("default settings");
+    /// sup.command(Command::Start);
+    /// // First period, drum at rest as the drum model expects: no error, so
+    /// // the output is the feed-forward alone, eq. 10 with TIM1's ARR 3599:
+    /// // 20 / 44.7 × 3600 = 1610.74 → compare value 1611.
+    /// let act = sup.control_step(Ticks(0), 0);
+    /// assert!(act.driver_enabled);
+    /// assert_eq!(act.ccr, 1611);
+    /// // The encoder never moves: after more than 200 ms (21 periods of
+    /// // 10 ms) without a count the drum is stalled: PWM 0, latched alarm.
+    /// for period in 2..=21 {
+    ///     let act = sup.control_step(Ticks(period * 10_000), 0);
+    ///     assert_eq!(act.ccr == 0, period == 21, "period {period}");
+    /// }
+    /// assert_eq!(sup.alarm(), Some(Alarm::DrumStall));
+    /// ```
     #[inline(never)]
     pub fn control_step(&mut self, now: Ticks, drum_encoder: u16) -> Actuation {
         self.snapshot.steps = self.snapshot.steps.wrapping_add(1);

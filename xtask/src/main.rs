@@ -195,6 +195,17 @@ fn ensure_tools() -> Result {
             Command::new("cargo").args(["install", "defmt-print", "--locked"]),
         )?;
     }
+    ensure_linker()
+}
+
+/// `flip-link`, the linker of every thumbv7m build (`.cargo/config.toml`).
+fn ensure_linker() -> Result {
+    if !have("flip-link") {
+        run(
+            "cargo install flip-link (once, about 15 s)",
+            Command::new("cargo").args(["install", "flip-link", "--locked"]),
+        )?;
+    }
     Ok(())
 }
 
@@ -574,6 +585,7 @@ fn footprint(elf: &Path) -> Result<(u64, u64)> {
 
 /// `cargo xtask size`.
 fn size() -> Result {
+    ensure_linker()?;
     let mut over = Vec::new();
     println!("| board | flash | flash budget | static RAM | RAM budget |");
     println!("|---|---|---|---|---|");
@@ -606,6 +618,7 @@ fn size() -> Result {
 
 /// `cargo xtask flash`: a real board on a debug probe.
 fn flash() -> Result {
+    ensure_linker()?;
     let probe_rs = Command::new("probe-rs").arg("--version").output();
     if probe_rs.is_err() {
         return Err(

@@ -129,6 +129,15 @@ impl Board {
             .join("firmware")
     }
 
+    /// The linker override of this board's builds: the QEMU board links with
+    /// plain `rust-lld` instead of flip-link (docs/firmware.md, "flip-link").
+    fn linker_env(self) -> Vec<(&'static str, &'static str)> {
+        match self {
+            Board::Stm32f103 => Vec::new(),
+            Board::Qemu => vec![(qemu_tests::LINKER_ENV, qemu_tests::QEMU_LINKER)],
+        }
+    }
+
     fn build(self) -> Result<PathBuf> {
         run(
             &format!("build firmware, board {}", self.name()),
@@ -136,7 +145,8 @@ impl Board {
                 .args(["build", "-p", "firmware", "--release", "--target", TARGET])
                 .args(self.features())
                 .arg("--target-dir")
-                .arg(self.target_dir()),
+                .arg(self.target_dir())
+                .envs(self.linker_env()),
         )?;
         Ok(self.elf())
     }
@@ -149,6 +159,7 @@ impl Board {
                 .args(self.features())
                 .arg("--target-dir")
                 .arg(self.target_dir())
+                .envs(self.linker_env())
                 .args(["--", "-D", "warnings"]),
         )
     }

@@ -68,9 +68,9 @@ pub const LINKER_ENV: &str = "CARGO_TARGET_THUMBV7M_NONE_EABI_LINKER";
 /// flip-link: the QEMU board's 4.8 KB of stack (8 KB of RAM less 3.3 KB of
 /// statics) is exceeded while `init` loads a saved record (frames of
 /// `__rtic_init_resources` 808 B, `load_settings` 1872 B, the store's scan
-/// 816 B, `decode` 504 B, `Calibration::from_bytes` 592 B) and, once, at run
-/// time; flip-link turns that into a lockup, the default layout lets it
-/// spill into resources `init` has not written yet. The real board (20 KB of
+/// 816 B, `decode` 504 B, `Calibration::from_bytes` 592 B); flip-link turns
+/// that into a lockup, the default layout lets it spill into resources
+/// `init` has not written yet. The real board (20 KB of
 /// RAM, 16.7 KB of stack) links with flip-link. docs/firmware.md.
 pub const QEMU_LINKER: &str = "rust-lld";
 

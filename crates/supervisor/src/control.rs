@@ -281,6 +281,8 @@ pub struct Supervisor {
     /// Drum encoder counts since boot.
     drum_counts_total: u64,
     last_encoder: Option<u16>,
+    /// The Hall timer's time at the last control step.
+    last_step_at: Option<Ticks>,
     stall_us: u32,
     /// The reported (smoothed) drum speed, r/min.
     reported: I16F16,
@@ -441,6 +443,7 @@ impl Supervisor {
             calibration_kind: CalibrationKind::SlipK2,
             drum_counts_total: 0,
             last_encoder: None,
+            last_step_at: None,
             stall_us: 0,
             reported: I16F16::ZERO,
             edges: 0,
@@ -842,14 +845,35 @@ impl Supervisor {
         Ok(())
     }
 
-    /// Measured drum speed of one period from the encoder delta.
-    fn drum_speed_of(&self, counts: u16) -> I16F16 {
+    /// The time since the last control step, µs, from the Hall timer: the
+    /// encoder delta is divided by the time it really took, so a control
+    /// step released late (a busy CPU, an emulator's host) does not read as
+    /// a speed change. The nominal period when there is no previous step, or
+    /// when the timer disagrees with the schedule by more than ×4 either way
+    /// (a timer fault must not scale the measurement).
+    fn elapsed_us(&self, now: Ticks) -> u32 {
+        let nominal = self.hw.control_period_us;
+        match self.last_step_at {
+            Some(prev) => {
+                let e = now.0.wrapping_sub(prev.0);
+                if e >= nominal / 4 && e <= nominal.saturating_mul(4) {
+                    e
+                } else {
+                    nominal
+                }
+            }
+            None => nominal,
+        }
+    }
+
+    /// Measured drum speed from the encoder delta over `elapsed_us`.
+    fn drum_speed_of(&self, counts: u16, elapsed_us: u32) -> I16F16 {
         // r/min = counts · 60 / (counts_per_rev · period): I16F16 bits.
         let num = i64::from(counts)
             .saturating_mul(60 * 65_536)
             .saturating_mul(1_000_000);
-        let den = i64::from(self.hw.encoder_counts_per_drum_rev)
-            .saturating_mul(i64::from(self.hw.control_period_us));
+        let den =
+            i64::from(self.hw.encoder_counts_per_drum_rev).saturating_mul(i64::from(elapsed_us));
         let bits = num.checked_div(den).unwrap_or(0);
         I16F16::from_bits(i32::try_from(bits).unwrap_or(i32::MAX))
     }
@@ -879,9 +903,10 @@ impl Supervisor {
     /// assert!(act.driver_enabled);
     /// assert_eq!(act.ccr, 1611);
     /// // The encoder never moves: after more than 200 ms (21 periods of
-    /// // 10 ms) without a count the drum is stalled: PWM 0, latched alarm.
+    /// // 10 ms on the Hall timer's clock) without a count the drum is
+    /// // stalled: PWM 0, latched alarm.
     /// for period in 2..=21 {
-    ///     let act = sup.control_step(Ticks(period * 10_000), 0);
+    ///     let act = sup.control_step(Ticks((period - 1) * 10_000), 0);
     ///     assert_eq!(act.ccr == 0, period == 21, "period {period}");
     /// }
     /// assert_eq!(sup.alarm(), Some(Alarm::DrumStall));
@@ -902,7 +927,9 @@ impl Supervisor {
             None => 0,
         };
         self.last_encoder = Some(drum_encoder);
-        let measured = self.drum_speed_of(delta);
+        let elapsed_us = self.elapsed_us(now);
+        self.last_step_at = Some(now);
+        let measured = self.drum_speed_of(delta, elapsed_us);
         self.reported = self.reported.saturating_add(
             measured
                 .saturating_sub(self.reported)
@@ -959,7 +986,7 @@ impl Supervisor {
         if self.run == RunState::Running {
             // Fault: drum commanded but not turning.
             if target >= STALL_MIN_COMMAND && delta == 0 {
-                self.stall_us = self.stall_us.saturating_add(self.hw.control_period_us);
+                self.stall_us = self.stall_us.saturating_add(elapsed_us);
             } else {
                 self.stall_us = 0;
             }
@@ -1018,8 +1045,7 @@ impl Supervisor {
         if self.run == RunState::Running {
             // ∫ V1 dt: (m/h)·µs / 3600 = µm.
             self.distance_um = self.distance_um.saturating_add(
-                u64::from(travel_kmh_x1000).saturating_mul(u64::from(self.hw.control_period_us))
-                    / 3600,
+                u64::from(travel_kmh_x1000).saturating_mul(u64::from(elapsed_us)) / 3600,
             );
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);

@@ -41,18 +41,23 @@ impl Rig {
     /// One control period: the machine runs 10 ms under the last output,
     /// then the supervisor reads it, exactly as the firmware's control task.
     fn period(&mut self) {
+        self.period_of(10_000);
+    }
+
+    /// A control period released `us` after the previous one (the task's
+    /// release jitters; the machine runs on regardless).
+    fn period_of(&mut self, us: u32) {
         let inputs = Inputs {
             drum_duty: f32::from(self.act.ccr) / f32::from(HW.pwm_arr + 1),
             driver_enabled: self.act.driver_enabled,
             ..Inputs::default()
         };
         let sup = &mut self.sup;
-        self.m
-            .step(10_000, &inputs, &mut |t| sup.hall_edge(Ticks(t)));
+        self.m.step(us, &inputs, &mut |t| sup.hall_edge(Ticks(t)));
         self.act = self
             .sup
             .control_step(Ticks(self.m.capture_ticks()), self.m.drum_encoder_count());
-        self.t_ms += 10;
+        self.t_ms += us / 1000;
     }
 
     fn run_ms(&mut self, ms: u32) {
@@ -198,6 +203,37 @@ fn fixed_mode_settles_on_a_drive_twice_as_fast_as_the_model() {
         "10 ms means {lowest:.2} … {highest:.2} r/min"
     );
     assert!((sum / 200.0 - 20.0).abs() <= 0.1, "mean {}", sum / 200.0);
+}
+
+/// Control periods released late and early by a millisecond or two (a busy
+/// CPU; QEMU's SysTick under a loaded host, where this was found as an
+/// intermittent 2–4 % drum-speed kick in the Speed-Adaptive QEMU test): the
+/// drum must not see the jitter. Each period lasts 8, 11, 9 or 12 ms in
+/// turn (mean 10 ms). Expected: as on the exact schedule, the true drum
+/// speed within 1 % of eq. 7 (f64) on the simulator's true ground speed;
+/// dividing the encoder counts by the nominal 10 ms instead reads ±20 %
+/// speed swings and fails this.
+#[test]
+fn a_jittered_control_schedule_does_not_disturb_the_drum() {
+    let mut rig = Rig::new(chassis(low2(Config::noiseless()), 2.5), adaptive(70));
+    rig.run_ms(10_000);
+    rig.sup.command(Command::Start);
+    let start = rig.t_ms;
+    let mut worst: f64 = 0.0;
+    for k in 0u32.. {
+        let us = [8_000, 11_000, 9_000, 12_000][(k % 4) as usize];
+        rig.period_of(us);
+        let t = rig.t_ms - start;
+        if t >= 10_000 {
+            break;
+        }
+        if t >= 500 {
+            let target = eq7_drum_speed(f64::from(rig.m.travel_speed_m_s()), 0.07);
+            let err = (f64::from(rig.m.drum_speed_rpm()) - target).abs() / target;
+            worst = worst.max(err);
+        }
+    }
+    assert!(worst <= 0.01, "worst {:.3} %", worst * 100.0);
 }
 
 #[test]

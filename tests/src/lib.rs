@@ -61,6 +61,10 @@ pub fn qemu_firmware_elf() -> io::Result<PathBuf> {
         .map_err(io::Error::other)
 }
 
+/// The QEMU board's cargo features: the board and both machines (the real
+/// board takes one image per machine).
+pub const QEMU_FEATURES: &str = "board-qemu,profile-a,profile-b";
+
 /// Cargo's linker override for the firmware's target.
 pub const LINKER_ENV: &str = "CARGO_TARGET_THUMBV7M_NONE_EABI_LINKER";
 
@@ -89,7 +93,7 @@ pub fn build_qemu_firmware() -> io::Result<PathBuf> {
             "thumbv7m-none-eabi",
             "--no-default-features",
             "--features",
-            "board-qemu",
+            QEMU_FEATURES,
             "--target-dir",
         ])
         .arg(qemu_target_dir())
@@ -556,7 +560,7 @@ pub fn sim_samples(logs: &[String]) -> Vec<SimSample> {
         .filter_map(|l| {
             Some(SimSample {
                 t_ms: log_time_ms(l)?,
-                ground_m_s: number_after(l, "sim: ground ")? / 1000.0,
+                ground_m_s: number_after(l, "sim: ground ")? / 1e6,
                 drum_rpm: number_after(l, "drum ")? / 1000.0,
                 target_rpm: number_after(l, "target ")? / 1000.0,
                 ccr: number_after(l, "ccr ")? as u32,

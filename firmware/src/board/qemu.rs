@@ -409,11 +409,13 @@ impl Sensors {
         )
     }
 
-    /// The model's own view, for the log: ground travel speed (mm/s), drum
-    /// speed (r/min × 1000), plants dropped, ground position (mm).
+    /// The model's own view, for the log: ground travel speed (µm/s: the
+    /// tests compare the drum with eq. 7 to 0.1 %, finer than 1 mm/s of
+    /// 140 mm/s), drum speed (r/min × 1000), plants dropped, ground
+    /// position (mm).
     pub fn truth(&self) -> (u32, u32, u32, u32) {
         (
-            (self.machine.travel_speed_m_s() * 1000.0) as u32,
+            (self.machine.travel_speed_m_s() * 1e6) as u32,
             (self.machine.drum_speed_rpm() * 1000.0) as u32,
             self.machine.plants_dropped(),
             (self.machine.ground_position_m() * 1000.0) as u32,

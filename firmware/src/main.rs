@@ -21,6 +21,9 @@
 #![no_std]
 #![no_main]
 
+#[cfg(not(any(feature = "profile-a", feature = "profile-b")))]
+compile_error!("enable at least one machine: feature `profile-a` or `profile-b`");
+
 mod board;
 mod stats;
 
@@ -57,6 +60,8 @@ mod app {
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
+    use hmi_proto::screen::{Command, MachineProfile};
+    #[cfg(feature = "profile-a")]
     use kinematics::units::Ticks;
     use rtic::Mutex as _;
     use rtic_monotonics::systick::prelude::*;
@@ -64,12 +69,18 @@ mod app {
         channel::{Receiver, Sender},
         make_channel,
     };
+    #[cfg(feature = "profile-a")]
+    use supervisor::control::{Alarm, RunState, Supervisor};
     use supervisor::{
-        control::{Alarm, Effect, RunState, Supervisor},
-        machine::{BeltMachine, Machine},
-        profile_b::{PlanterAlarm, PlanterState, ProfileBHardware},
-        settings::Settings,
+        control::Effect,
+        machine::Machine,
+        settings::{Profile, Settings},
         store::{Loaded, SettingsStore},
+    };
+    #[cfg(feature = "profile-b")]
+    use supervisor::{
+        machine::BeltMachine,
+        profile_b::{PlanterAlarm, PlanterState, ProfileBHardware},
     };
 
     type Store = SettingsStore<board::SettingsFlash>;
@@ -77,14 +88,18 @@ mod app {
     /// The motor outputs of the profile in force.
     pub enum Actuators {
         /// Profile A: the drum motor's PWM and enable.
+        #[cfg(feature = "profile-a")]
         Drum(board::DrumDrive),
         /// Profile B: the two step-pulse outputs.
+        #[cfg(feature = "profile-b")]
         Steppers(board::Steppers),
     }
 
     /// What a control step decided, per profile.
     enum Step {
+        #[cfg(feature = "profile-a")]
         Drum(supervisor::control::Actuation, Option<Alarm>, RunState),
+        #[cfg(feature = "profile-b")]
         Belt(
             supervisor::profile_b::StepperCommand,
             Option<PlanterAlarm>,
@@ -142,13 +157,16 @@ mod app {
             board.run_limit_ms
         );
 
-        let (store, settings, boot_notice) = load_settings(board.settings_flash);
-        let machine = build_machine(cx.local.machine_slot, settings);
+        let (store, settings, load_notice) = load_settings(board.settings_flash);
+        let (machine, machine_notice) = build_machine(cx.local.machine_slot, settings);
+        let boot_notice = machine_notice.or(load_notice);
         let hmi = build_hmi(cx.local.hmi_slot, machine);
         let mut drum = board.drum;
         drum.set_enabled(false);
         let actuators = match machine {
+            #[cfg(feature = "profile-a")]
             Machine::DrumBelt(_) => Actuators::Drum(drum),
+            #[cfg(feature = "profile-b")]
             Machine::SeedlingBelt(_) => {
                 Actuators::Steppers(board::Steppers::new(drum, board.feed_step))
             }
@@ -211,12 +229,31 @@ mod app {
         (store, settings, notice)
     }
 
-    /// Builds the machine of the saved profile in its static slot.
+    /// Whether this image carries the machine of `profile` (the real board
+    /// takes one image per machine; the QEMU board carries both).
+    const fn built_in(profile: Profile) -> bool {
+        match profile {
+            Profile::DrumBelt => cfg!(feature = "profile-a"),
+            Profile::SeedlingBelt => cfg!(feature = "profile-b"),
+        }
+    }
+
+    /// The screen's message when the operator picks, or the saved settings
+    /// name, a machine this image does not carry.
+    const NOT_BUILT_IN: &str = if cfg!(feature = "profile-a") {
+        "This firmware runs profile A only"
+    } else {
+        "This firmware runs profile B only"
+    };
+
+    /// Builds the machine of the saved profile in its static slot; the
+    /// notice says why it is not the saved one.
     #[inline(never)]
     fn build_machine(
         slot: &'static mut MaybeUninit<Machine>,
         settings: Settings,
-    ) -> &'static mut Machine {
+    ) -> (&'static mut Machine, Option<&'static str>) {
+        #[cfg(feature = "profile-a")]
         let settings = match Supervisor::check(board::HARDWARE, &settings) {
             Ok(()) => settings,
             Err(e) => {
@@ -224,46 +261,87 @@ mod app {
                 Settings::default()
             }
         };
-        let built = match settings.profile {
-            supervisor::settings::Profile::DrumBelt => {
+        let mut settings = settings;
+        let mut notice = None;
+        if !built_in(settings.profile) {
+            // A saved record from the other machine's image: run this
+            // image's machine, stopped, and say so; the record is kept
+            // until the operator saves.
+            defmt::warn!("settings: saved profile not in this image");
+            settings.profile = if cfg!(feature = "profile-a") {
+                Profile::DrumBelt
+            } else {
+                Profile::SeedlingBelt
+            };
+            notice = Some(NOT_BUILT_IN);
+        }
+        let profile = settings.profile;
+        let slot = match build_profile(slot, settings) {
+            Ok(machine) => return (machine, notice),
+            Err(slot) => slot,
+        };
+        // Only a saved record can be rejected here (the store validates what
+        // it loads, so this is a last line of defence): the defaults are
+        // valid by construction, a failure with them is a build-time bug,
+        // caught on the first boot of any board.
+        defmt::error!("machine settings rejected, defaults in use");
+        let defaults = Settings {
+            profile,
+            ..Settings::default()
+        };
+        match build_profile(slot, defaults) {
+            Ok(machine) => (machine, Some("Saved settings rejected: defaults")),
+            Err(_) => board::fatal(),
+        }
+    }
+
+    /// Builds the machine of `settings.profile`; gives the slot back when
+    /// the settings are rejected.
+    fn build_profile(
+        slot: &'static mut MaybeUninit<Machine>,
+        settings: Settings,
+    ) -> Result<&'static mut Machine, &'static mut MaybeUninit<Machine>> {
+        #[allow(unreachable_patterns)]
+        match settings.profile {
+            #[cfg(feature = "profile-a")]
+            Profile::DrumBelt => {
                 defmt::info!("machine: profile A, drum-belt transplanter");
                 build_drum_belt(slot, settings)
             }
-            supervisor::settings::Profile::SeedlingBelt => {
+            #[cfg(feature = "profile-b")]
+            Profile::SeedlingBelt => {
                 defmt::info!("machine: profile B, seedling-belt planter");
                 build_seedling_belt(slot, settings)
             }
-        };
-        match built {
-            Some(m) => m,
-            None => {
-                // The defaults are valid by construction: a build-time bug,
-                // caught on the first boot of any board.
-                defmt::error!("machine settings rejected");
-                board::fatal()
-            }
+            _ => Err(slot),
         }
     }
 
     /// Profile A, in its own stack frame (the two profiles' temporaries
     /// must not add up on the QEMU board's 8 KB).
+    #[cfg(feature = "profile-a")]
     #[inline(never)]
     fn build_drum_belt(
         slot: &'static mut MaybeUninit<Machine>,
         settings: Settings,
-    ) -> Option<&'static mut Machine> {
-        let sup = Supervisor::new(board::HARDWARE, settings).ok()?;
-        Some(slot.write(Machine::DrumBelt(sup)))
+    ) -> Result<&'static mut Machine, &'static mut MaybeUninit<Machine>> {
+        match Supervisor::new(board::HARDWARE, settings) {
+            Ok(sup) => Ok(slot.write(Machine::DrumBelt(sup))),
+            Err(_) => Err(slot),
+        }
     }
 
     /// Profile B, in its own stack frame.
+    #[cfg(feature = "profile-b")]
     #[inline(never)]
     fn build_seedling_belt(
         slot: &'static mut MaybeUninit<Machine>,
         settings: Settings,
-    ) -> Option<&'static mut Machine> {
-        let belt = BeltMachine::new(settings, ProfileBHardware::BOARD).ok()?;
-        Some(slot.write(Machine::SeedlingBelt(belt)))
+    ) -> Result<&'static mut Machine, &'static mut MaybeUninit<Machine>> {
+        match BeltMachine::new(settings, ProfileBHardware::BOARD) {
+            Ok(belt) => Ok(slot.write(Machine::SeedlingBelt(belt))),
+            Err(_) => Err(slot),
+        }
     }
 
     /// Builds the screen link in its static slot.
@@ -334,15 +412,18 @@ mod app {
     #[task(priority = 2, local = [sensors, actuators, watchdog, edges_out], shared = [machine, hmi, hall])]
     async fn control(mut cx: control::Context) {
         let mut next = Mono::now();
-        let mut last_alarm: Option<Alarm> = None;
-        let mut last_run = RunState::Stopped;
-        let mut last_belt_alarm: Option<PlanterAlarm> = None;
-        let mut last_belt_state = PlanterState::Stopped;
+        #[cfg(feature = "profile-a")]
+        let (mut last_alarm, mut last_run) = (None::<Alarm>, RunState::Stopped);
+        #[cfg(feature = "profile-b")]
+        let (mut last_belt_alarm, mut last_belt_state) =
+            (None::<PlanterAlarm>, PlanterState::Stopped);
         loop {
             let sample = cx.local.sensors.sample(uptime_ms());
+            #[cfg(feature = "profile-a")]
             let now = Ticks(cx.shared.hall.lock(|h| h.now()));
             let edges_out = &mut cx.local.edges_out;
             let step = cx.shared.machine.lock(|m| match m {
+                #[cfg(feature = "profile-a")]
                 Machine::DrumBelt(sup) => {
                     while let Some(edge) = edges_out.dequeue() {
                         sup.hall_edge(Ticks(edge));
@@ -353,6 +434,7 @@ mod app {
                     let a = sup.control_step(now, sample.drum_encoder);
                     Step::Drum(a, sup.alarm(), sup.run_state())
                 }
+                #[cfg(feature = "profile-b")]
                 Machine::SeedlingBelt(belt) => {
                     // Profile B wiring: TIM3 counts the ground-wheel encoder,
                     // TIM2 captures one index pulse per feeding-roller turn.
@@ -367,11 +449,14 @@ mod app {
             });
             stats::HALL_EDGES.add(sample.hall_edges.len() as u32);
 
+            #[allow(unreachable_patterns)]
             match (&step, &mut *cx.local.actuators) {
+                #[cfg(feature = "profile-a")]
                 (Step::Drum(a, ..), Actuators::Drum(drum)) => {
                     drum.set_enabled(a.driver_enabled);
                     drum.set_compare(a.ccr);
                 }
+                #[cfg(feature = "profile-b")]
                 (Step::Belt(c, ..), Actuators::Steppers(steppers)) => {
                     steppers.set(c.feed_step_hz, c.plant_step_hz, c.enabled);
                 }
@@ -380,6 +465,7 @@ mod app {
             }
 
             match step {
+                #[cfg(feature = "profile-a")]
                 Step::Drum(actuation, alarm, run) => {
                     if alarm != last_alarm {
                         match alarm {
@@ -407,12 +493,13 @@ mod app {
                     #[cfg(feature = "board-qemu")]
                     if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
                         let (v, n, plants, pos) = cx.local.sensors.truth();
+                        #[allow(unreachable_patterns)]
                         let target = cx.shared.machine.lock(|m| match m {
                             Machine::DrumBelt(sup) => sup.snapshot().target_drum_rpm_x1000,
-                            Machine::SeedlingBelt(_) => 0,
+                            _ => 0,
                         });
                         defmt::info!(
-                            "sim: ground {=u32} mm/s, drum {=u32} mr/min, target {=u32} mr/min, ccr {=u16}, plants {=u32}, ground position {=u32} mm",
+                            "sim: ground {=u32} um/s, drum {=u32} mr/min, target {=u32} mr/min, ccr {=u16}, plants {=u32}, ground position {=u32} mm",
                             v,
                             n,
                             target,
@@ -424,6 +511,7 @@ mod app {
                     #[cfg(not(feature = "board-qemu"))]
                     let _ = actuation;
                 }
+                #[cfg(feature = "profile-b")]
                 Step::Belt(command, alarm, state) => {
                     if alarm != last_belt_alarm {
                         if let Some(a) = alarm {
@@ -528,7 +616,17 @@ mod app {
         match event {
             Event::Command(cmd) => {
                 defmt::info!("screen: {}", cmd);
-                let effect = cx.shared.machine.lock(|m| m.command(cmd));
+                let effect = match cmd {
+                    Command::SelectProfile(p) if !built_in(profile_of(p)) => {
+                        // Put the screen's selector back as well.
+                        let screen = cx.shared.machine.lock(|m| m.screen_settings());
+                        cx.shared.hmi.lock(|hmi| {
+                            let _ = hmi.set_settings(screen);
+                        });
+                        Effect::Message(NOT_BUILT_IN)
+                    }
+                    _ => cx.shared.machine.lock(|m| m.command(cmd)),
+                };
                 match effect {
                     Effect::None => {}
                     Effect::SettingsChanged => {
@@ -573,6 +671,11 @@ mod app {
         }
     }
 
+    /// The settings' profile for the screen's.
+    const fn profile_of(p: MachineProfile) -> Profile {
+        supervisor::machine::profile_from_screen(p)
+    }
+
     /// Live status on the screen and a 1 Hz summary in the log; ends a QEMU
     /// run at its time limit.
     ///
@@ -610,6 +713,7 @@ mod app {
     /// The 1 Hz summary line of the log.
     fn log_status(machine: &Machine, uptime: u32) {
         match machine {
+            #[cfg(feature = "profile-a")]
             Machine::DrumBelt(sup) => {
                 let snapshot = sup.snapshot();
                 defmt::info!(
@@ -630,6 +734,7 @@ mod app {
                     stats::HMI_RX_BYTES.get()
                 );
             }
+            #[cfg(feature = "profile-b")]
             Machine::SeedlingBelt(belt) => {
                 let s = belt.planter().snapshot();
                 defmt::info!(

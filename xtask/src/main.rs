@@ -89,19 +89,22 @@ fn run(what: &str, cmd: &mut Command) -> Result {
     }
 }
 
-/// The two boards.
+/// The firmware images: the real board takes one image per machine
+/// (profile A is the default), the QEMU board carries both machines.
 #[derive(Clone, Copy, Debug)]
 enum Board {
     Stm32f103,
+    Stm32f103ProfileB,
     Qemu,
 }
 
 impl Board {
-    const ALL: [Board; 2] = [Board::Stm32f103, Board::Qemu];
+    const ALL: [Board; 3] = [Board::Stm32f103, Board::Stm32f103ProfileB, Board::Qemu];
 
     fn name(self) -> &'static str {
         match self {
             Board::Stm32f103 => "stm32f103",
+            Board::Stm32f103ProfileB => "stm32f103-b",
             Board::Qemu => "qemu",
         }
     }
@@ -109,15 +112,25 @@ impl Board {
     fn features(self) -> &'static [&'static str] {
         match self {
             Board::Stm32f103 => &[],
-            Board::Qemu => &["--no-default-features", "--features", "board-qemu"],
+            Board::Stm32f103ProfileB => &[
+                "--no-default-features",
+                "--features",
+                "board-stm32f103,profile-b",
+            ],
+            Board::Qemu => &[
+                "--no-default-features",
+                "--features",
+                qemu_tests::QEMU_FEATURES,
+            ],
         }
     }
 
-    /// Each board has its own target directory, so switching boards never
-    /// rebuilds the other.
+    /// Each image has its own target directory, so switching never
+    /// rebuilds the others.
     fn target_dir(self) -> PathBuf {
         match self {
             Board::Stm32f103 => root().join("target").join("stm32f103"),
+            Board::Stm32f103ProfileB => root().join("target").join("stm32f103-b"),
             Board::Qemu => qemu_tests::qemu_target_dir(),
         }
     }
@@ -133,7 +146,7 @@ impl Board {
     /// plain `rust-lld` instead of flip-link (docs/firmware.md, "flip-link").
     fn linker_env(self) -> Vec<(&'static str, &'static str)> {
         match self {
-            Board::Stm32f103 => Vec::new(),
+            Board::Stm32f103 | Board::Stm32f103ProfileB => Vec::new(),
             Board::Qemu => vec![(qemu_tests::LINKER_ENV, qemu_tests::QEMU_LINKER)],
         }
     }
@@ -604,7 +617,9 @@ fn size() -> Result {
         let elf = board.build()?;
         let (flash, ram) = footprint(&elf)?;
         let (flash_budget, ram_budget) = match board {
-            Board::Stm32f103 => (STM32F103_FLASH_BUDGET, STM32F103_RAM_BUDGET),
+            Board::Stm32f103 | Board::Stm32f103ProfileB => {
+                (STM32F103_FLASH_BUDGET, STM32F103_RAM_BUDGET)
+            }
             Board::Qemu => (120 * 1024, QEMU_RAM_SIZE - QEMU_STACK_RESERVE),
         };
         println!(
@@ -624,7 +639,8 @@ fn size() -> Result {
     if !over.is_empty() {
         return Err(format!("over budget: {}", over.join("; ")));
     }
-    check_forbidden_symbols(&Board::Stm32f103.elf())
+    check_forbidden_symbols(&Board::Stm32f103.elf())?;
+    check_forbidden_symbols(&Board::Stm32f103ProfileB.elf())
 }
 
 /// `cargo xtask flash`: a real board on a debug probe.

@@ -32,9 +32,11 @@ pub const DRUM_PWM_HZ: u32 = 20_000;
 /// Drum encoder counts per drum revolution: a 100-line encoder on the motor
 /// shaft read in ×4 quadrature (400 counts per motor turn) behind the 118:1
 /// gearbox.
+#[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
 pub const DRUM_ENCODER_COUNTS_PER_REV: u32 = 400 * 118;
 
 /// The board facts the supervisor needs.
+#[cfg(feature = "profile-a")]
 pub const HARDWARE: supervisor::control::Hardware = supervisor::control::Hardware {
     encoder_counts_per_drum_rev: DRUM_ENCODER_COUNTS_PER_REV,
     control_period_us: 10_000,

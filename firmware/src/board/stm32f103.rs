@@ -17,7 +17,7 @@ use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use kinematics::speed::CaptureExtender;
 use stm32f1xx_hal::{
     flash::{self, FlashSize, SectorSize},
-    gpio::{self, Output, PushPull, PA1, PB12, PB13, PC13},
+    gpio::{Output, PushPull, PA1, PB12, PB13, PC13},
     pac::{self, IWDG, TIM1, TIM2, TIM3, USART1, USART2},
     prelude::*,
     rcc,
@@ -65,7 +65,9 @@ pub struct Board {
     pub led: StatusLed,
     /// The independent watchdog (running).
     pub watchdog: Watchdog,
-    /// Profile B's feeding-motor step output (TIM4 CH1 on PB6), idle.
+    /// Profile B's feeding-motor step output (TIM4 CH1 on PB6), idle. The
+    /// profile A image leaves TIM4 and its pins in their reset state.
+    #[cfg(feature = "profile-b")]
     pub feed_step: FeedStep,
     /// The settings pages of the MCU's flash.
     pub settings_flash: Option<SettingsFlash>,
@@ -138,11 +140,14 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let drum = DrumDrive::new(tim1, enable, direction);
 
     // Profile B: feeding STEP on PB6 (TIM4 CH1), directions on PB14/PB15.
-    let _feed_pin = gpiob.pb6.into_alternate_push_pull(&mut gpiob.crl);
-    let feed_dir = gpiob.pb14.into_push_pull_output(&mut gpiob.crh);
-    let plant_dir = gpiob.pb15.into_push_pull_output(&mut gpiob.crh);
-    let tim4 = Timer::new(dp.TIM4, &mut rcc).release();
-    let feed_step = FeedStep::new(tim4, feed_dir, plant_dir);
+    #[cfg(feature = "profile-b")]
+    let feed_step = {
+        let _feed_pin = gpiob.pb6.into_alternate_push_pull(&mut gpiob.crl);
+        let feed_dir = gpiob.pb14.into_push_pull_output(&mut gpiob.crh);
+        let plant_dir = gpiob.pb15.into_push_pull_output(&mut gpiob.crh);
+        let tim4 = Timer::new(dp.TIM4, &mut rcc).release();
+        FeedStep::new(tim4, feed_dir, plant_dir)
+    };
 
     // Hall input capture, TIM2 CH1 on PA0 (NPN switch: pull-up, falling edge).
     let _hall_pin = gpioa.pa0.into_pull_up_input(&mut gpioa.crl);
@@ -167,6 +172,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         rs485: Rs485 { tx, rx, de },
         led,
         watchdog,
+        #[cfg(feature = "profile-b")]
         feed_step,
         settings_flash: Some(SettingsFlash { flash }),
         run_limit_ms: None,
@@ -239,6 +245,7 @@ impl DrumDrive {
 /// Timer settings for a square wave of `rate` (U16F16 Hz) from 72 MHz:
 /// `(PSC, ARR)`, the finest prescaler that keeps ARR within 16 bits; `None`
 /// for 0 Hz (or a rate below 0.14 Hz).
+#[cfg(feature = "profile-b")]
 fn step_timing(rate_bits: u32) -> Option<(u16, u16)> {
     if rate_bits == 0 {
         return None;
@@ -254,6 +261,7 @@ fn step_timing(rate_bits: u32) -> Option<(u16, u16)> {
 }
 
 /// Programs a timer's CH1 for step pulses at `rate` (50 % duty), or off.
+#[cfg(feature = "profile-b")]
 macro_rules! set_step_rate {
     ($tim:expr, $rate_bits:expr) => {
         match step_timing($rate_bits) {
@@ -271,17 +279,19 @@ macro_rules! set_step_rate {
 
 /// Profile B's feeding-motor step output, TIM4 CH1 on PB6, with both
 /// motors' direction pins (forward = low).
+#[cfg(feature = "profile-b")]
 pub struct FeedStep {
     tim: pac::TIM4,
-    _feed_dir: gpio::PB14<Output<PushPull>>,
-    _plant_dir: gpio::PB15<Output<PushPull>>,
+    _feed_dir: stm32f1xx_hal::gpio::PB14<Output<PushPull>>,
+    _plant_dir: stm32f1xx_hal::gpio::PB15<Output<PushPull>>,
 }
 
+#[cfg(feature = "profile-b")]
 impl FeedStep {
     fn new(
         tim: pac::TIM4,
-        mut feed_dir: gpio::PB14<Output<PushPull>>,
-        mut plant_dir: gpio::PB15<Output<PushPull>>,
+        mut feed_dir: stm32f1xx_hal::gpio::PB14<Output<PushPull>>,
+        mut plant_dir: stm32f1xx_hal::gpio::PB15<Output<PushPull>>,
     ) -> Self {
         feed_dir.set_low();
         plant_dir.set_low();
@@ -304,11 +314,13 @@ impl FeedStep {
 /// Profile B's two step outputs: the planting motor on TIM1 CH1 (PA8, the
 /// drum PWM pin of profile A) and the feeding motor on TIM4 CH1 (PB6); the
 /// drivers share the enable on PB12.
+#[cfg(feature = "profile-b")]
 pub struct Steppers {
     drum: DrumDrive,
     feed: FeedStep,
 }
 
+#[cfg(feature = "profile-b")]
 impl Steppers {
     /// Takes over the drum PWM's timer for step pulses (profile B).
     pub fn new(drum: DrumDrive, feed: FeedStep) -> Self {

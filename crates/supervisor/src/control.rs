@@ -116,30 +116,30 @@ impl Alarm {
             Self::HallLost => w.write_str("Hall speed signal lost"),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
-                // `core::fmt`'s number formatting (~2 KB of flash).
+                // `core::fmt`'s number formatting (~2 KB of flash), and
+                // `str::from_utf8` on a digit buffer 300 B more.
+                const DIGITS: [&str; 10] = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9"];
                 let v = *max_kmh_x100;
-                let mut digits = [b'0'; 6];
-                let mut at = digits.len();
-                let mut n = v;
-                loop {
-                    at = at.saturating_sub(1);
-                    if let Some(d) = digits.get_mut(at) {
-                        *d = b'0'.saturating_add((n % 10) as u8);
+                w.write_str("Too fast: max ")?;
+                // km/h × 100 ≤ 655.35: up to three integer digits, no
+                // leading zeros, then always two decimals.
+                let mut started = false;
+                for (place, point) in [
+                    (10_000, false),
+                    (1000, false),
+                    (100, true),
+                    (10, false),
+                    (1, false),
+                ] {
+                    let d = usize::from(v.checked_div(place).unwrap_or(0) % 10);
+                    if d > 0 || started || place <= 100 {
+                        w.write_str(DIGITS.get(d).copied().unwrap_or("?"))?;
+                        started = true;
                     }
-                    n /= 10;
-                    if n == 0 && at <= digits.len().saturating_sub(3) {
-                        break;
+                    if point {
+                        w.write_str(".")?;
                     }
                 }
-                let int_end = digits.len().saturating_sub(2);
-                let int =
-                    core::str::from_utf8(digits.get(at..int_end).unwrap_or(b"0")).unwrap_or("0");
-                let frac =
-                    core::str::from_utf8(digits.get(int_end..).unwrap_or(b"00")).unwrap_or("00");
-                w.write_str("Too fast: max ")?;
-                w.write_str(int)?;
-                w.write_str(".")?;
-                w.write_str(frac)?;
                 w.write_str(" km/h")
             }
         }

@@ -430,6 +430,14 @@ fn the_too_fast_alarm_text_shows_the_allowed_maximum() {
         .write_text(&mut text)
         .unwrap();
     assert_eq!(text.as_str(), "Too fast: max 0.05 km/h");
+    // Hand-written: three integer digits, a zero inside, zero itself.
+    for (v, shown) in [(65_535, "655.35"), (1_000, "10.00"), (0, "0.00")] {
+        text.clear();
+        Alarm::TooFast { max_kmh_x100: v }
+            .write_text(&mut text)
+            .unwrap();
+        assert_eq!(text.as_str(), format!("Too fast: max {shown} km/h"));
+    }
 }
 
 #[test]

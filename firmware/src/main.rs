@@ -171,6 +171,10 @@ mod app {
                 Actuators::Steppers(board::Steppers::new(drum, board.feed_step))
             }
         };
+        // The deepest part of the run on the 8 KB QEMU board: checked by the
+        // QEMU tests.
+        #[cfg(feature = "board-qemu")]
+        board::log_stack();
         // Spawning at init cannot fail: each task is spawned once.
         control::spawn().ok();
         status::spawn().ok();
@@ -251,17 +255,8 @@ mod app {
     #[inline(never)]
     fn build_machine(
         slot: &'static mut MaybeUninit<Machine>,
-        settings: Settings,
+        mut settings: Settings,
     ) -> (&'static mut Machine, Option<&'static str>) {
-        #[cfg(feature = "profile-a")]
-        let settings = match Supervisor::check(board::HARDWARE, &settings) {
-            Ok(()) => settings,
-            Err(e) => {
-                defmt::error!("settings rejected ({}), defaults in use", e);
-                Settings::default()
-            }
-        };
-        let mut settings = settings;
         let mut notice = None;
         if !built_in(settings.profile) {
             // A saved record from the other machine's image: run this
@@ -276,14 +271,23 @@ mod app {
             notice = Some(NOT_BUILT_IN);
         }
         let profile = settings.profile;
-        let slot = match build_profile(slot, settings) {
-            Ok(machine) => return (machine, notice),
-            Err(slot) => slot,
-        };
-        // Only a saved record can be rejected here (the store validates what
-        // it loads, so this is a last line of defence): the defaults are
-        // valid by construction, a failure with them is a build-time bug,
-        // caught on the first boot of any board.
+        match build_profile(slot, settings) {
+            Ok(machine) => (machine, notice),
+            Err(slot) => build_defaults(slot, profile),
+        }
+    }
+
+    /// The machine with default settings, when the saved ones were
+    /// rejected. Only a saved record can be (the store validates what it
+    /// loads, so this is a last line of defence); the defaults are valid by
+    /// construction, a failure with them is a build-time bug, caught on the
+    /// first boot of any board. In its own stack frame: the defaults'
+    /// temporaries must not add to `build_machine`'s on the QEMU board.
+    #[inline(never)]
+    fn build_defaults(
+        slot: &'static mut MaybeUninit<Machine>,
+        profile: Profile,
+    ) -> (&'static mut Machine, Option<&'static str>) {
         defmt::error!("machine settings rejected, defaults in use");
         let defaults = Settings {
             profile,

@@ -416,8 +416,30 @@ impl Firmware {
         let _ = self.printer.wait();
         while self.drain_logs(Duration::from_millis(200)).is_some() {}
         let logs = self.logs.lock().map(|l| l.clone()).unwrap_or_default();
+        check_stack(&logs)?;
         Ok((status, logs))
     }
+}
+
+/// The QEMU board reports how deep its stack went (it paints the stack at
+/// reset) after `init` and when a run ends by itself; a run whose stack
+/// reached the statics fails here, whatever else it showed (every
+/// [`Firmware::wait_exit`]; tests that stop QEMU themselves call it). The QEMU board's 8 KB of RAM leave
+/// the least stack of any board, so this is the tight case.
+pub fn check_stack(logs: &[String]) -> io::Result<()> {
+    for line in logs.iter().filter(|l| l.contains(" stack: ")) {
+        let used = number_after(line, "stack: ");
+        let size = number_after(line, "B used of ");
+        match (used, size) {
+            (Some(used), Some(size)) if used < size => {}
+            _ => {
+                return Err(io::Error::other(format!(
+                    "the firmware's stack overflowed into its statics: {line}"
+                )))
+            }
+        }
+    }
+    Ok(())
 }
 
 impl Drop for Firmware {

@@ -181,6 +181,8 @@ fn an_out_of_range_spacing_is_rejected_and_the_saved_spacing_survives_a_reboot()
         .wait_log(Duration::from_secs(2), |l| l
             .contains("settings: loaded record"))
         .is_some());
+    // Loading a saved record is init's deepest path: the stack held.
+    qemu_tests::check_stack(&bench.fw.logs()).unwrap();
     drop(bench);
     let _ = std::fs::remove_file(&flash);
 }

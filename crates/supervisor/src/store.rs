@@ -410,19 +410,30 @@ impl<F: NorFlash> SettingsStore<F> {
     /// Reads both slots and returns the newest valid settings, or the
     /// defaults with the reason. Never writes.
     pub fn load(&mut self) -> Loaded {
-        let slots = [self.scan(0), self.scan(1)];
-        if let Some((_, seq, settings)) = newest_valid(&slots) {
-            return Loaded::Saved {
-                settings: settings.clone(),
-                sequence: seq,
-            };
+        // Statuses first, then the newest valid slot once more for its
+        // settings: one decoded record on the stack at a time instead of
+        // both slots' plus a copy (this runs in `init`, on the QEMU board's
+        // 4.8 KB stack). Nothing writes the flash in between.
+        let slots = [self.scan(0).status(), self.scan(1).status()];
+        let newest = slots
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| match s {
+                SlotStatus::Valid { sequence } => Some((i, *sequence)),
+                _ => None,
+            })
+            .reduce(|a, b| if is_newer(b.1, a.1) { b } else { a });
+        if let Some((slot, _)) = newest {
+            if let Slot::Valid(sequence, settings) = self.scan(slot) {
+                return Loaded::Saved { settings, sequence };
+            }
         }
-        let any = |f: fn(&Slot<F::Error>) -> bool| slots.iter().any(f);
-        let reason = if any(|s| matches!(s, Slot::Unsupported(_))) {
+        let any = |f: fn(&SlotStatus) -> bool| slots.iter().any(f);
+        let reason = if any(|s| matches!(s, SlotStatus::UnsupportedVersion { .. })) {
             DefaultsReason::UnsupportedVersion
-        } else if any(|s| matches!(s, Slot::Unreadable(_))) {
+        } else if any(|s| matches!(s, SlotStatus::FlashError)) {
             DefaultsReason::FlashError
-        } else if any(|s| matches!(s, Slot::Corrupt)) {
+        } else if any(|s| matches!(s, SlotStatus::Corrupt)) {
             DefaultsReason::Corrupt
         } else {
             DefaultsReason::Blank

@@ -463,9 +463,45 @@ pub fn safe_state() {
     DRIVER_ENABLE.store(false, Relaxed);
 }
 
+/// How deep the stack has gone since reset, and its size, bytes.
+///
+/// cortex-m-rt paints the whole stack region (`_stack_end` up to
+/// `_stack_start`, everything above the statics) with
+/// `STACK_PAINT_VALUE` before `main` (feature `paint-stack`); the lowest
+/// word that no longer holds the paint is the deepest the stack reached. A
+/// result equal to the size means the stack ran into the statics.
+pub fn stack_high_water() -> (u32, u32) {
+    extern "C" {
+        static _stack_start: u32;
+        static _stack_end: u32;
+    }
+    let bottom = core::ptr::addr_of!(_stack_end) as usize;
+    let top = core::ptr::addr_of!(_stack_start) as usize;
+    let mut at = bottom;
+    while at < top {
+        // SAFETY: `at` is a word-aligned address inside the stack region
+        // the linker reserved (RAM, always readable); a volatile read so
+        // that the compiler cannot assume the paint is still there.
+        let word = unsafe { core::ptr::read_volatile(at as *const u32) };
+        if word != cortex_m_rt::STACK_PAINT_VALUE {
+            break;
+        }
+        at += 4;
+    }
+    ((top - at) as u32, (top - bottom) as u32)
+}
+
+/// Logs [`stack_high_water`] (the QEMU tests check it after `init` and at
+/// every exit).
+pub fn log_stack() {
+    let (used, size) = stack_high_water();
+    defmt::info!("stack: {=u32} B used of {=u32} B", used, size);
+}
+
 /// Ends the emulation with a failure exit code after a fatal error.
 pub fn fatal() -> ! {
     safe_state();
+    log_stack();
     cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
     loop {
         cortex_m::asm::wfi();
@@ -475,6 +511,7 @@ pub fn fatal() -> ! {
 /// Ends the emulation successfully (the run reached its time limit).
 pub fn exit_success() -> ! {
     safe_state();
+    log_stack();
     cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_SUCCESS);
     loop {
         cortex_m::asm::wfi();

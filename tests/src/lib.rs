@@ -65,25 +65,11 @@ pub fn qemu_firmware_elf() -> io::Result<PathBuf> {
 /// board takes one image per machine).
 pub const QEMU_FEATURES: &str = "board-qemu,profile-a,profile-b";
 
-/// Cargo's linker override for the firmware's target.
-pub const LINKER_ENV: &str = "CARGO_TARGET_THUMBV7M_NONE_EABI_LINKER";
-
-/// The QEMU board's linker: plain `rust-lld`, not flip-link. Measured with
-/// flip-link: the QEMU board's 4.8 KB of stack (8 KB of RAM less 3.3 KB of
-/// statics) is exceeded while `init` loads a saved record (frames of
-/// `__rtic_init_resources` 808 B, `load_settings` 1872 B, the store's scan
-/// 816 B, `decode` 504 B, `Calibration::from_bytes` 592 B); flip-link turns
-/// that into a lockup, the default layout lets it spill into resources
-/// `init` has not written yet. The real board (20 KB of
-/// RAM, 16.7 KB of stack) links with flip-link. docs/firmware.md.
-pub const QEMU_LINKER: &str = "rust-lld";
-
 /// Runs `cargo build` for the QEMU board and returns the ELF path.
 pub fn build_qemu_firmware() -> io::Result<PathBuf> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(workspace_root())
-        .env(LINKER_ENV, QEMU_LINKER)
         .args([
             "build",
             "--package",
@@ -431,7 +417,7 @@ pub fn check_stack(logs: &[String]) -> io::Result<()> {
         let used = number_after(line, "stack: ");
         let size = number_after(line, "B used of ");
         match (used, size) {
-            (Some(used), Some(size)) if used < size => {}
+            (Some(used), Some(size)) if used < size => eprintln!("firmware {line}"),
             _ => {
                 return Err(io::Error::other(format!(
                     "the firmware's stack overflowed into its statics: {line}"

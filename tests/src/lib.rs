@@ -43,56 +43,102 @@ pub fn workspace_root() -> PathBuf {
 /// Where the QEMU board's release build is kept (its own target directory,
 /// so that it never fights a host build for cargo's lock).
 pub fn qemu_target_dir() -> PathBuf {
-    workspace_root().join("target").join("qemu")
-}
-
-/// Builds the QEMU board (release) once per process and returns the ELF path.
-///
-/// `FIRMWARE_QEMU_ELF` overrides the build (used by `cargo xtask test`,
-/// which has just built it).
-pub fn qemu_firmware_elf() -> io::Result<PathBuf> {
-    static BUILT: OnceLock<Result<PathBuf, String>> = OnceLock::new();
-    if let Some(elf) = std::env::var_os("FIRMWARE_QEMU_ELF") {
-        return Ok(PathBuf::from(elf));
-    }
-    BUILT
-        .get_or_init(|| build_qemu_firmware().map_err(|e| e.to_string()))
-        .clone()
-        .map_err(io::Error::other)
+    Image::BothMachines.target_dir()
 }
 
 /// The QEMU board's cargo features: the board and both machines (the real
 /// board takes one image per machine).
 pub const QEMU_FEATURES: &str = "board-qemu,profile-a,profile-b";
 
-/// Runs `cargo build` for the QEMU board and returns the ELF path.
-pub fn build_qemu_firmware() -> io::Result<PathBuf> {
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(workspace_root())
-        .args([
-            "build",
-            "--package",
-            "firmware",
-            "--release",
-            "--target",
-            "thumbv7m-none-eabi",
-            "--no-default-features",
-            "--features",
-            QEMU_FEATURES,
-            "--target-dir",
-        ])
-        .arg(qemu_target_dir())
-        .status()?;
-    if !status.success() {
-        return Err(io::Error::other(format!(
-            "building the QEMU firmware failed: {status}"
-        )));
+/// A QEMU board image: which machines it carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Image {
+    /// Both machines: the image every QEMU test runs unless it says
+    /// otherwise.
+    BothMachines,
+    /// Profile A only, like the real board's default image.
+    ProfileAOnly,
+    /// Profile B only, like the real board's profile B image.
+    ProfileBOnly,
+}
+
+impl Image {
+    /// The firmware's cargo features for this image.
+    pub fn features(self) -> &'static str {
+        match self {
+            Image::BothMachines => QEMU_FEATURES,
+            Image::ProfileAOnly => "board-qemu,profile-a",
+            Image::ProfileBOnly => "board-qemu,profile-b",
+        }
     }
-    Ok(qemu_target_dir()
-        .join("thumbv7m-none-eabi")
-        .join("release")
-        .join("firmware"))
+
+    /// Its own target directory: switching images never rebuilds another.
+    pub fn target_dir(self) -> PathBuf {
+        let name = match self {
+            Image::BothMachines => "qemu",
+            Image::ProfileAOnly => "qemu-a",
+            Image::ProfileBOnly => "qemu-b",
+        };
+        workspace_root().join("target").join(name)
+    }
+
+    /// Builds this image (release) once per process and returns the ELF
+    /// path. `FIRMWARE_QEMU_ELF` overrides the build of
+    /// [`Image::BothMachines`] (used by `cargo xtask test`, which has just
+    /// built it).
+    pub fn elf(self) -> io::Result<PathBuf> {
+        static BUILT: [OnceLock<Result<PathBuf, String>>; 3] =
+            [OnceLock::new(), OnceLock::new(), OnceLock::new()];
+        let (slot, override_var) = match self {
+            Image::BothMachines => (&BUILT[0], std::env::var_os("FIRMWARE_QEMU_ELF")),
+            Image::ProfileAOnly => (&BUILT[1], None),
+            Image::ProfileBOnly => (&BUILT[2], None),
+        };
+        if let Some(elf) = override_var {
+            return Ok(PathBuf::from(elf));
+        }
+        slot.get_or_init(|| self.build().map_err(|e| e.to_string()))
+            .clone()
+            .map_err(io::Error::other)
+    }
+
+    /// Runs `cargo build` for this image and returns the ELF path.
+    pub fn build(self) -> io::Result<PathBuf> {
+        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+        let status = Command::new(cargo)
+            .current_dir(workspace_root())
+            .args([
+                "build",
+                "--package",
+                "firmware",
+                "--release",
+                "--target",
+                "thumbv7m-none-eabi",
+                "--no-default-features",
+                "--features",
+                self.features(),
+                "--target-dir",
+            ])
+            .arg(self.target_dir())
+            .status()?;
+        if !status.success() {
+            return Err(io::Error::other(format!(
+                "building the QEMU firmware ({}) failed: {status}",
+                self.features()
+            )));
+        }
+        Ok(self
+            .target_dir()
+            .join("thumbv7m-none-eabi")
+            .join("release")
+            .join("firmware"))
+    }
+}
+
+/// Builds the QEMU board with both machines (release) once per process and
+/// returns the ELF path ([`Image::elf`] of [`Image::BothMachines`]).
+pub fn qemu_firmware_elf() -> io::Result<PathBuf> {
+    Image::BothMachines.elf()
 }
 
 /// How to start the emulation.
@@ -449,7 +495,12 @@ impl Bench {
     /// Boots the firmware and powers up the screen (it sends its start-up
     /// and ready frames, as a real Nextion does).
     pub fn boot(options: &BootOptions) -> io::Result<Self> {
-        let elf = qemu_firmware_elf()?;
+        Self::boot_image(Image::BothMachines, options)
+    }
+
+    /// [`Bench::boot`] with another image.
+    pub fn boot_image(image: Image, options: &BootOptions) -> io::Result<Self> {
+        let elf = image.elf()?;
         let fw = Firmware::boot(&elf, options)?;
         let mut screen = hmi_proto::virtual_screen::VirtualScreen::with_contract();
         screen.boot();

@@ -387,6 +387,23 @@ fn test() -> Result<Totals> {
         ]),
         &mut totals,
     )?;
+    // The real board's images carry one machine each: the supervisor's
+    // tests run in those configurations too (a profile B build once started
+    // on profile A's defaults; the workspace run enables both).
+    for machine in ["profile-a", "profile-b"] {
+        run_tests(
+            &format!("supervisor tests, {machine} only"),
+            cargo().args([
+                "test",
+                "-p",
+                "supervisor",
+                "--no-default-features",
+                "--features",
+                machine,
+            ]),
+            &mut totals,
+        )?;
+    }
     let elf = Board::Qemu.build()?;
     run_tests(
         "QEMU tests (tests/)",

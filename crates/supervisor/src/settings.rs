@@ -67,14 +67,26 @@ pub const SETTINGS_V1_BYTES: usize = HEAD_BYTES + CALIBRATION_BYTES;
 pub const SETTINGS_BYTES: usize = SETTINGS_V1_BYTES + 1 + CONFIG_BYTES;
 
 /// Which machine the firmware runs (SPEC §1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Profile {
     /// Profile A: the tracked drum-belt transplanter (paper A).
-    #[default]
     DrumBelt,
     /// Profile B: the seedling-belt feeder/planter (paper B).
     SeedlingBelt,
+}
+
+impl Default for Profile {
+    /// The machine of a first boot (or of defaults after a corrupt store):
+    /// profile A, unless this build carries profile B only — a profile B
+    /// image must not start on the machine it cannot run.
+    fn default() -> Self {
+        if cfg!(feature = "profile-a") {
+            Self::DrumBelt
+        } else {
+            Self::SeedlingBelt
+        }
+    }
 }
 
 /// Everything the firmware persists: the operator's choices and the
@@ -97,7 +109,8 @@ pub struct Settings {
     pub brightness: Brightness,
     /// The k1/k2/k3 tables. Default: [`Calibration::paper_defaults`].
     pub calibration: Calibration,
-    /// Which machine this is. Default: profile A.
+    /// Which machine this is. Default: [`Profile::default`] (profile A,
+    /// or B in a build with profile B only).
     pub profile: Profile,
     /// Profile B's parameters. Default: `ProfileBSettings::default()`.
     pub belt: ProfileBConfig,
@@ -113,7 +126,7 @@ impl Default for Settings {
             gear: gear_from_screen(screen::Gear::default()),
             brightness: Brightness::DEFAULT,
             calibration: Calibration::paper_defaults(),
-            profile: Profile::DrumBelt,
+            profile: Profile::default(),
             belt: ProfileBConfig::default(),
         }
     }
@@ -376,7 +389,13 @@ mod tests {
         let s = decode(&v1).unwrap();
         assert_eq!(s.profile, Profile::DrumBelt);
         assert_eq!(s.belt, ProfileBConfig::default());
-        assert_eq!(s, Settings::default());
+        assert_eq!(
+            s,
+            Settings {
+                profile: Profile::DrumBelt,
+                ..Settings::default()
+            }
+        );
         // And the default profile B parameters are the validated defaults.
         assert_eq!(
             ProfileBConfig::new(kinematics::profile_b::ProfileBSettings::default()),

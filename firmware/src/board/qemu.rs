@@ -76,6 +76,7 @@ pub struct Board {
     /// The watchdog stand-in.
     pub watchdog: Watchdog,
     /// Profile B's feeding step output stand-in.
+    #[cfg(feature = "profile-b")]
     pub feed_step: FeedStep,
     /// The settings flash stand-in, if the command line named a file.
     pub settings_flash: Option<SettingsFlash>,
@@ -197,6 +198,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         hall: HallCapture,
         led: StatusLed,
         watchdog: Watchdog,
+        #[cfg(feature = "profile-b")]
         feed_step: FeedStep,
         settings_flash,
         run_limit_ms: cmd.run_ms,
@@ -242,14 +244,17 @@ impl DrumDrive {
 
 /// Profile B's two step-pulse outputs (stand-ins for TIM1 CH1 and TIM4 CH1)
 /// and the drivers' enable.
+#[cfg(feature = "profile-b")]
 pub struct Steppers {
     _drum: DrumDrive,
     _feed: FeedStep,
 }
 
 /// Profile B's feeding step output stand-in (TIM4 is not emulated).
+#[cfg(feature = "profile-b")]
 pub struct FeedStep;
 
+#[cfg(feature = "profile-b")]
 impl Steppers {
     /// Takes over the drum PWM's timer for step pulses (profile B).
     pub fn new(drum: DrumDrive, feed: FeedStep) -> Self {

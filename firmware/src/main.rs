@@ -496,20 +496,21 @@ mod app {
                     // log (the real board has no such truth).
                     #[cfg(feature = "board-qemu")]
                     if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
-                        let (v, n, plants, pos) = cx.local.sensors.truth();
+                        let (v, n, plants, pos, edges) = cx.local.sensors.truth();
                         #[allow(unreachable_patterns)]
                         let target = cx.shared.machine.lock(|m| match m {
                             Machine::DrumBelt(sup) => sup.snapshot().target_drum_rpm_x1000,
                             _ => 0,
                         });
                         defmt::info!(
-                            "sim: ground {=u32} um/s, drum {=u32} mr/min, target {=u32} mr/min, ccr {=u16}, plants {=u32}, ground position {=u32} mm",
+                            "sim: ground {=u32} um/s, drum {=u32} mr/min, target {=u32} mr/min, ccr {=u16}, plants {=u32}, ground position {=u32} mm, hall edges {=u32}",
                             v,
                             n,
                             target,
                             actuation.ccr,
                             plants,
-                            pos
+                            pos,
+                            edges
                         );
                     }
                     #[cfg(not(feature = "board-qemu"))]

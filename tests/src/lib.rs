@@ -592,6 +592,8 @@ pub struct SimSample {
     pub plants: u32,
     /// Ground position, m.
     pub ground_m: f64,
+    /// Hall edges the simulated gear sensor delivered since boot.
+    pub hall_edges: u32,
 }
 
 /// The firmware time (ms) at the start of a decoded defmt line
@@ -625,6 +627,7 @@ pub fn sim_samples(logs: &[String]) -> Vec<SimSample> {
                 ccr: number_after(l, "ccr ")? as u32,
                 plants: number_after(l, "plants ")? as u32,
                 ground_m: number_after(l, "ground position ")? / 1000.0,
+                hall_edges: number_after(l, "hall edges ")? as u32,
             })
         })
         .collect()

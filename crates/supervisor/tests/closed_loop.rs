@@ -533,3 +533,71 @@ fn the_k3_calibration_measures_the_belt_slip_of_table_13() {
         supervisor::control::Effect::SettingsChanged
     );
 }
+
+#[test]
+fn k2_then_k1_make_the_shown_travel_speed_true_on_a_machine_that_slips_twice_the_paper() {
+    // High 1 on a machine whose tracks slip twice Table 12's: the paper's
+    // tables then over-read the ground speed. The operator runs k2, then
+    // k1 (docs/hmi.md page 4); afterwards the shown travel speed must be
+    // the simulator's true ground speed. Expected values from the
+    // simulator's truth: k2 = ground / (Hall edges · π·0.20 m / 25), and k1
+    // takes what k2 leaves (≈ 1 for the same steady speed).
+    use hmi_proto::screen::CalibrationKind;
+    let mut rig = Rig::new(
+        Config {
+            initial_gear: Some(Gear::High1),
+            track_slip_scale: 2.0,
+            ..Config::noiseless()
+        },
+        Settings {
+            gear: Gear::High1,
+            ..adaptive(200)
+        },
+    );
+    rig.run_ms(5_000);
+    let truth = f64::from(rig.m.travel_speed_m_s()) * 3600.0;
+    let before = f64::from(rig.sup.snapshot().travel_speed_kmh_x1000);
+    assert!(
+        (before - truth) / truth > 0.03,
+        "before {before} m/h, truth {truth:.1}"
+    );
+    let edge_m = std::f64::consts::PI * 0.20 / 25.0;
+    let mut k2 = 0.0;
+    for kind in [CalibrationKind::SlipK2, CalibrationKind::SpeedK1] {
+        rig.sup.command(Command::SelectCalibration(kind));
+        rig.sup.command(Command::CalibrationStart);
+        let (g0, e0) = (rig.m.ground_position_m(), rig.m.hall_edges());
+        rig.run_ms(25_000);
+        rig.sup.command(Command::CalibrationStop);
+        let ground = rig.m.ground_position_m() - g0;
+        let edges = f64::from(rig.m.hall_edges() - e0);
+        let d =
+            hmi_proto::screen::CalibrationDistance::new((ground * 100.0).round() as i32).unwrap();
+        rig.sup.command(Command::CalibrationActualDistance(d));
+        let k = f64::from(rig.sup.screen_status().calibration_result_x1000) / 1000.0;
+        let expected = match kind {
+            CalibrationKind::SlipK2 => ground / (edges * edge_m),
+            _ => ground / (edges * edge_m * k2),
+        };
+        // Whole edges at each end of the run, three decimals on the screen.
+        let tolerance = expected * 2.0 / edges + 0.0015;
+        assert!(
+            (k - expected).abs() <= tolerance,
+            "{kind:?}: {k} vs {expected:.4} ± {tolerance:.4}"
+        );
+        if kind == CalibrationKind::SlipK2 {
+            k2 = k;
+        }
+        assert_eq!(
+            rig.sup.command(Command::CalibrationAccept),
+            supervisor::control::Effect::SettingsChanged
+        );
+    }
+    rig.run_ms(5_000);
+    let truth = f64::from(rig.m.travel_speed_m_s()) * 3600.0;
+    let shown = f64::from(rig.sup.snapshot().travel_speed_kmh_x1000);
+    assert!(
+        (shown - truth).abs() / truth <= 0.005,
+        "shown {shown} m/h, truth {truth:.1} (before {before})"
+    );
+}

@@ -101,7 +101,8 @@ struct CmdLine {
 /// speed time constant;
 /// `stop=T` stops the tractor at T ms; `stall=T`, `hall_loss=T`,
 /// `enc_loss=T` inject faults at T ms; `noise=0` makes the model noiseless;
-/// `seed=N` seeds it.
+/// `seed=N` seeds it; `slip=P` scales the track slip of paper A's Table 12
+/// to P % (a machine whose calibration is not the paper's).
 #[derive(Default, Clone, Copy)]
 struct Scenario {
     gear: Option<u8>,
@@ -119,6 +120,8 @@ struct Scenario {
     speed_mm_s: Option<u32>,
     /// Restart the field metrics at this time (`metrics_from=T`).
     metrics_from: Option<u32>,
+    /// Track slip, % of Table 12's (`slip=P`).
+    slip_pct: Option<u32>,
 }
 
 /// Brings up the emulated peripherals. Called once from `init`.
@@ -160,6 +163,9 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }
     if let Some(tau) = scenario.tau_ms {
         config.track_tau_s = tau as f32 / 1000.0;
+    }
+    if let Some(pct) = scenario.slip_pct {
+        config.track_slip_scale = pct as f32 / 100.0;
     }
     if scenario.profile_b {
         config.profile = machine_sim::Profile::B;
@@ -417,13 +423,14 @@ impl Sensors {
     /// The model's own view, for the log: ground travel speed (µm/s: the
     /// tests compare the drum with eq. 7 to 0.1 %, finer than 1 mm/s of
     /// 140 mm/s), drum speed (r/min × 1000), plants dropped, ground
-    /// position (mm).
-    pub fn truth(&self) -> (u32, u32, u32, u32) {
+    /// position (mm), Hall edges delivered.
+    pub fn truth(&self) -> (u32, u32, u32, u32, u32) {
         (
             (self.machine.travel_speed_m_s() * 1e6) as u32,
             (self.machine.drum_speed_rpm() * 1000.0) as u32,
             self.machine.plants_dropped(),
             (self.machine.ground_position_m() * 1000.0) as u32,
+            self.machine.hall_edges(),
         )
     }
 }
@@ -579,6 +586,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"enc_loss" => s.enc_loss = parse_u32(value),
             b"noise" => s.noiseless = value == b"0",
             b"seed" => s.seed = parse_u32(value),
+            b"slip" => s.slip_pct = parse_u32(value),
             _ => {}
         }
     }

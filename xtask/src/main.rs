@@ -212,8 +212,34 @@ fn ensure_tools() -> Result {
     ensure_linker()
 }
 
-/// `flip-link`, the linker of every thumbv7m build (`.cargo/config.toml`).
+/// The thumbv7m target and llvm-tools of rust-toolchain.toml. rustup adds
+/// them only when it installs the toolchain itself; a machine that already
+/// had the pinned release without them gets them here.
+fn ensure_target() -> Result {
+    let libdir = Command::new("rustc")
+        .current_dir(root())
+        .args(["--print", "target-libdir", "--target", TARGET])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()));
+    if libdir.is_some_and(|dir| dir.is_dir()) {
+        return Ok(());
+    }
+    run(
+        "rustup toolchain install (the target and components of rust-toolchain.toml)",
+        Command::new("rustup")
+            .current_dir(root())
+            // cargo sets it for xtask; without it rustup reads the file.
+            .env_remove("RUSTUP_TOOLCHAIN")
+            .args(["toolchain", "install"]),
+    )
+}
+
+/// `flip-link`, the linker of every thumbv7m build (`.cargo/config.toml`),
+/// and the target itself.
 fn ensure_linker() -> Result {
+    ensure_target()?;
     if !have("flip-link") {
         run(
             "cargo install flip-link (once, about 15 s)",
@@ -446,6 +472,7 @@ fn packages(names: &[&str]) -> Vec<String> {
 /// `cargo xtask ci`: everything a submission must pass.
 fn ci() -> Result {
     let started = Instant::now();
+    ensure_linker()?;
     run("rustfmt check", cargo().args(["fmt", "--all", "--check"]))?;
     run(
         "clippy host (all targets)",

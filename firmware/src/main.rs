@@ -475,13 +475,7 @@ mod app {
                         match alarm {
                             Some(a) => {
                                 defmt::warn!("alarm: {}", a);
-                                let mut text: heapless::String<40> = heapless::String::new();
-                                let _ = a.write_text(&mut text);
-                                cx.shared.hmi.lock(|hmi| {
-                                    if hmi.show_alarm(&text).is_err() {
-                                        stats::HMI_TX_DROPPED.inc();
-                                    }
-                                });
+                                cx.shared.hmi.lock(|hmi| show_alarm(hmi, a));
                             }
                             None => defmt::info!("alarm cleared"),
                         }
@@ -572,7 +566,8 @@ mod app {
     /// - Budget: 3 ms, most of it writing instructions at 115200 baud.
     #[task(priority = 1, local = [bytes_out, hmi_tx, saves_in, boot_notice], shared = [machine, hmi])]
     async fn hmi(mut cx: hmi::Context) {
-        let mut connected = false;
+        // Whether the screen has answered, or its silence was logged, since boot.
+        let mut link_reported = false;
         loop {
             let first = Mono::timeout_after(HMI_TICK_MS.millis(), cx.local.bytes_out.recv()).await;
             let bytes_out = &mut cx.local.bytes_out;
@@ -586,21 +581,12 @@ mod app {
                 hmi.tick(uptime_ms());
             });
             while let Some(event) = cx.shared.hmi.lock(|hmi| hmi.poll_event()) {
+                link_reported |= matches!(event, Event::Connected);
                 handle_event(&mut cx, event);
             }
-            let now_connected = cx.shared.hmi.lock(|hmi| hmi.is_connected());
-            if now_connected != connected {
-                if now_connected {
-                    defmt::info!("touchscreen connected");
-                    if let Some(notice) = cx.local.boot_notice.take() {
-                        cx.shared.hmi.lock(|hmi| {
-                            let _ = hmi.show_message(notice);
-                        });
-                    }
-                } else {
-                    defmt::warn!("touchscreen silent: running on the last settings");
-                }
-                connected = now_connected;
+            if !link_reported && uptime_ms() >= hmi_proto::hmi::LINK_TIMEOUT_MS {
+                defmt::warn!("touchscreen silent since boot: running on the saved settings");
+                link_reported = true;
             }
             // Drain the transmit queue (blocking writes at priority 1).
             let mut buf = [0u8; 32];
@@ -666,13 +652,48 @@ mod app {
                 );
             }
             Event::Connected => {
+                defmt::info!("touchscreen connected");
                 let screen = cx.shared.machine.lock(|m| m.screen_settings());
                 cx.shared.hmi.lock(|hmi| {
                     let _ = hmi.set_settings(screen);
                 });
+                // An alarm latched while the screen was away, or before it
+                // restarted, goes back on it.
+                #[cfg(feature = "profile-a")]
+                if let Some(alarm) = cx.shared.machine.lock(|m| latched_alarm(m)) {
+                    cx.shared.hmi.lock(|hmi| show_alarm(hmi, alarm));
+                }
+                if let Some(notice) = cx.local.boot_notice.take() {
+                    cx.shared.hmi.lock(|hmi| {
+                        let _ = hmi.show_message(notice);
+                    });
+                }
+            }
+            Event::Disconnected => {
+                defmt::warn!("touchscreen silent: running on the last settings");
             }
             Event::ScreenError(code) => defmt::warn!("screen error: {}", code),
             Event::ReplyTimeout(field) => defmt::warn!("screen reply timeout: {}", field),
+        }
+    }
+
+    /// Profile A's alarm on the screen's alarm page.
+    #[cfg(feature = "profile-a")]
+    fn show_alarm(hmi: &mut Hmi, alarm: Alarm) {
+        let mut text: heapless::String<40> = heapless::String::new();
+        let _ = alarm.write_text(&mut text);
+        if hmi.show_alarm(&text).is_err() {
+            stats::HMI_TX_DROPPED.inc();
+        }
+    }
+
+    /// Profile A's latched alarm, if that is the machine running.
+    #[cfg(feature = "profile-a")]
+    fn latched_alarm(machine: &Machine) -> Option<Alarm> {
+        #[allow(unreachable_patterns)]
+        match machine {
+            Machine::DrumBelt(sup) => sup.alarm(),
+            _ => None,
         }
     }
 

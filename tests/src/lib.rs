@@ -530,6 +530,21 @@ impl Bench {
         }
     }
 
+    /// The screen's cable is cut for `dur`: what the firmware sends is lost
+    /// and the screen sends nothing (its own state is kept, as a screen
+    /// that stays powered keeps it).
+    pub fn unplug(&mut self, dur: Duration) -> io::Result<()> {
+        let deadline = Instant::now() + dur;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(());
+            }
+            self.fw
+                .read_serial_new(left.min(Duration::from_millis(5)))?;
+        }
+    }
+
     /// Pumps until `pred` holds for the screen, or `timeout`.
     pub fn pump_until(
         &mut self,

@@ -252,6 +252,74 @@ fn a_lost_hall_signal_gives_the_alarm_page_and_pwm_0() {
 }
 
 #[test]
+fn a_screen_cut_off_mid_run_is_logged_the_drum_runs_on_and_the_screen_comes_back_with_the_alarm() {
+    // Speed-Adaptive at Low 2; the screen's cable is cut at ≈ 3 s of
+    // firmware time for 6 s of host time (QEMU runs in real time here);
+    // the drum stalls at 7 s, while the screen is away.
+    let stall_at = 7_000;
+    let mut bench = boot(
+        &["gear=2", "noise=0", &format!("stall={stall_at}")],
+        14_000,
+        None,
+    );
+    bench.tap("badapt").unwrap();
+    bench.tap("bstart").unwrap();
+    pump_until_firmware_ms(&mut bench, 3_000);
+    let cut_at = firmware_now(&bench);
+    bench.unplug(Duration::from_secs(6)).unwrap();
+    // The firmware asks every second and gives up after 2.5 s of silence;
+    // the screen still shows the adaptive page it was left on.
+    assert_eq!(bench.screen.page(), 3);
+    // Mended: the next handshake reaches the screen, which is set up again
+    // and shows the alarm that was latched while it was away.
+    assert!(
+        bench
+            .pump_until(Duration::from_secs(3), |s| s.page() == 5
+                && s.text("talarm") == Some("Drum stalled or encoder lost"))
+            .unwrap(),
+        "the screen came back without the alarm (page {}, {:?})",
+        bench.screen.page(),
+        bench.screen.text("talarm")
+    );
+    let logs = run_to_end(bench, 30);
+    let silent = time_of(&logs, "touchscreen silent: running on the last settings");
+    // The last frame from the screen came at or before the cut (its answer
+    // to the heartbeat at most one second earlier), so silence is declared
+    // between 1.5 s and 2.5 s (+ one 20 ms HMI tick) after the cut.
+    assert!(
+        silent >= cut_at + 1_500 && silent <= cut_at + 2_500 + 20 + 100,
+        "silence logged at {silent} ms, cable cut at {cut_at} ms"
+    );
+    // The machine ran on without the screen: the drum followed its target
+    // within 1 % from the cut until the stall.
+    let running: Vec<SimSample> = sim_samples(&logs)
+        .into_iter()
+        .filter(|s| s.t_ms >= cut_at && s.t_ms < stall_at)
+        .collect();
+    assert!(running.len() > 30, "{} samples", running.len());
+    for s in &running {
+        assert!(
+            s.ccr > 0 && (s.drum_rpm - s.target_rpm).abs() <= 0.01 * s.target_rpm,
+            "at {} ms: drum {} r/min, target {} r/min, ccr {}",
+            s.t_ms,
+            s.drum_rpm,
+            s.target_rpm,
+            s.ccr
+        );
+    }
+    let alarm = time_of(&logs, "alarm: DrumStall");
+    let connected: Vec<u32> = logs
+        .iter()
+        .filter(|l| l.contains("touchscreen connected"))
+        .filter_map(|l| log_time_ms(l))
+        .collect();
+    assert!(
+        connected.len() == 2 && connected[1] > alarm,
+        "connections at {connected:?} ms, alarm at {alarm} ms"
+    );
+}
+
+#[test]
 fn a_70_m_row_at_7_cm_gets_its_1000_plants_within_half_a_percent() {
     // 70 m at Low 2 is 8 minutes of travel: this run uses QEMU's
     // instruction-counting mode with idle time skipped, which needs no

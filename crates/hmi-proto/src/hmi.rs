@@ -18,6 +18,13 @@
 //! page 7 `belt` for profile B) and reports [`Event::Connected`]. A later
 //! `0x88`/startup frame (screen reset) repeats this.
 //!
+//! Link supervision: once connected, a screen that has sent nothing for
+//! [`HEARTBEAT_MS`] is asked `sendme` (it answers with its page, `0x66`),
+//! again every [`HEARTBEAT_MS`]; one that has sent nothing for
+//! [`LINK_TIMEOUT_MS`] (a cut cable, a screen without power) is reported as
+//! [`Event::Disconnected`] and the handshake starts over. Nothing about the
+//! machine changes: the firmware keeps running on the settings in force.
+//!
 //! Machine profile: the profile running is the one in the settings given to
 //! [`Hmi::new`] ([`Hmi::active_profile`]); it decides the home page, and
 //! *Back* on page 6 goes there. The profile button on page 6 only changes the
@@ -70,6 +77,12 @@ pub const EVENT_QUEUE: usize = 8;
 pub const GET_TIMEOUT_MS: u32 = 200;
 /// Handshake retry period while the screen is silent.
 pub const HANDSHAKE_RETRY_MS: u32 = 500;
+/// A connected screen that has sent nothing for this long is asked
+/// `sendme`, and again every this long while it stays quiet.
+pub const HEARTBEAT_MS: u32 = 1_000;
+/// A connected screen that has sent nothing for this long is lost
+/// ([`Event::Disconnected`]): two heartbeats went unanswered.
+pub const LINK_TIMEOUT_MS: u32 = 2_500;
 
 /// What the application layer reports to the firmware.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -83,6 +96,9 @@ pub enum Event {
     /// The screen answered the handshake (or restarted and was set up again);
     /// the firmware may write its settings with [`Hmi::set_settings`].
     Connected,
+    /// The connected screen sent nothing for [`LINK_TIMEOUT_MS`]; the
+    /// handshake starts over ([`Event::Connected`] when it answers).
+    Disconnected,
     /// The screen reported an error (typed; `0x1A`, `0x24`, …).
     ScreenError(ErrorCode),
     /// A `get` for this field got no reply in [`GET_TIMEOUT_MS`].
@@ -118,6 +134,8 @@ pub struct HmiStats {
     pub timeouts: u32,
     /// Frames the decoder dropped (see [`Hmi::decoder_stats`] for bytes).
     pub decode_errors: u32,
+    /// Times a connected screen went silent for [`LINK_TIMEOUT_MS`].
+    pub link_losses: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -128,8 +146,15 @@ struct Pending {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Link {
-    Connecting { last_try_ms: Option<u32> },
-    Connected,
+    Connecting {
+        last_try_ms: Option<u32>,
+    },
+    /// `heard_ms`: the last frame from the screen; `probe_ms`: the last
+    /// heartbeat `sendme` (or the connection).
+    Connected {
+        heard_ms: u32,
+        probe_ms: u32,
+    },
 }
 
 /// The screen link: feed it received bytes and the time; drain events and bytes.
@@ -176,9 +201,10 @@ impl Hmi {
         }
     }
 
-    /// `true` once the screen has answered.
+    /// `true` once the screen has answered, until it is silent for
+    /// [`LINK_TIMEOUT_MS`].
     pub fn is_connected(&self) -> bool {
-        self.link == Link::Connected
+        matches!(self.link, Link::Connected { .. })
     }
 
     /// The page the MCU believes is shown.
@@ -240,10 +266,23 @@ impl Hmi {
         }
     }
 
-    /// Advances time (milliseconds, wrapping): handshake retries and `get` timeouts.
-    /// Call it every 10–50 ms: a `get` is timed from the last `tick`.
+    /// Advances time (milliseconds, wrapping): handshake retries, link
+    /// supervision and `get` timeouts. Call it every 10–50 ms: a `get` is
+    /// timed from the last `tick`.
     pub fn tick(&mut self, now_ms: u32) {
         self.now_ms = now_ms;
+        if let Link::Connected { heard_ms, probe_ms } = self.link {
+            let quiet = now_ms.wrapping_sub(heard_ms);
+            if quiet >= LINK_TIMEOUT_MS {
+                self.lose_link();
+            } else if quiet >= HEARTBEAT_MS && now_ms.wrapping_sub(probe_ms) >= HEARTBEAT_MS {
+                self.link = Link::Connected {
+                    heard_ms,
+                    probe_ms: now_ms,
+                };
+                let _ = self.send(&Instruction::SendMe);
+            }
+        }
         if let Link::Connecting { last_try_ms } = self.link {
             let due = match last_try_ms {
                 None => true,
@@ -387,8 +426,22 @@ impl Hmi {
         }
     }
 
+    /// The screen went silent: forget what was in flight (queued bytes,
+    /// an awaited reply, queued touches) and start the handshake over.
+    fn lose_link(&mut self) {
+        self.link = Link::Connecting { last_try_ms: None };
+        self.pending = None;
+        self.touches.clear();
+        self.tx.clear();
+        self.stats.link_losses = self.stats.link_losses.wrapping_add(1);
+        self.event(Event::Disconnected);
+    }
+
     fn connect(&mut self) {
-        self.link = Link::Connected;
+        self.link = Link::Connected {
+            heard_ms: self.now_ms,
+            probe_ms: self.now_ms,
+        };
         self.pending = None;
         self.touches.clear();
         let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
@@ -398,10 +451,17 @@ impl Hmi {
     }
 
     fn on_frame(&mut self, frame: Frame) {
+        // Any whole frame shows the screen is there.
+        if let Link::Connected { probe_ms, .. } = self.link {
+            self.link = Link::Connected {
+                heard_ms: self.now_ms,
+                probe_ms,
+            };
+        }
         match frame {
             Frame::CurrentPage(p) => match self.link {
                 Link::Connecting { .. } => self.connect(),
-                Link::Connected => {
+                Link::Connected { .. } => {
                     // The screen shows page 0 `boot` only at power-on, before
                     // the handshake (a restart announces itself with the
                     // startup frame first): a reply naming it now is a late

@@ -6,7 +6,9 @@
     clippy::arithmetic_side_effects
 )]
 
-use hmi_proto::hmi::{Event, Hmi, GET_TIMEOUT_MS, HANDSHAKE_RETRY_MS};
+use hmi_proto::hmi::{
+    Event, Hmi, GET_TIMEOUT_MS, HANDSHAKE_RETRY_MS, HEARTBEAT_MS, LINK_TIMEOUT_MS,
+};
 use hmi_proto::screen::*;
 use hmi_proto::virtual_screen::VirtualScreen;
 use hmi_proto::{ErrorCode, Frame};
@@ -730,7 +732,7 @@ fn stop_on_the_belt_page_is_never_delayed() {
     let (mut hmi, mut screen) = connected_b();
     screen.release("bpar").unwrap();
     pump(&mut hmi, &mut screen);
-    hmi.tick(1000);
+    hmi.tick(500);
     screen.set_value("nspacing", 400).unwrap();
     screen.release("bspacing").unwrap();
     hmi.push_slice(&screen.take_output());
@@ -768,7 +770,7 @@ fn stop_on_the_belt_page_is_never_delayed() {
     });
     hmi.push_slice(&screen.take_output());
     assert_eq!(hmi.poll_event(), Some(cmd(Command::Stop)));
-    hmi.tick(1000 + GET_TIMEOUT_MS);
+    hmi.tick(500 + GET_TIMEOUT_MS);
     assert_eq!(
         hmi.poll_event(),
         Some(Event::ReplyTimeout(Field::SpeedThreshold))
@@ -835,5 +837,117 @@ proptest! {
         let reference = run(&[usize::MAX / 2]);
         prop_assert_eq!(reference.len(), 7);
         prop_assert_eq!(run(&chunks), reference);
+    }
+}
+
+/// The `sendme` instructions the screen has received.
+fn sendmes(screen: &VirtualScreen) -> usize {
+    screen
+        .instructions()
+        .iter()
+        .filter(|i| *i == "sendme")
+        .count()
+}
+
+#[test]
+fn a_screen_that_goes_silent_is_asked_then_lost_then_set_up_again() {
+    let (mut hmi, mut screen) = connected(); // at 0 ms
+    let mut buf = [0u8; 256];
+    // Quiet for less than a heartbeat: nothing is sent.
+    hmi.tick(HEARTBEAT_MS - 1);
+    assert_eq!(hmi.poll_transmit(&mut buf), 0);
+    // The cable is cut now: what the MCU sends is lost, nothing comes back.
+    hmi.tick(HEARTBEAT_MS);
+    let n = hmi.poll_transmit(&mut buf);
+    assert_eq!(&buf[..n], b"sendme\xff\xff\xff");
+    hmi.tick(2 * HEARTBEAT_MS);
+    let n = hmi.poll_transmit(&mut buf);
+    assert_eq!(&buf[..n], b"sendme\xff\xff\xff");
+    hmi.tick(LINK_TIMEOUT_MS - 1);
+    assert!(hmi.is_connected());
+    assert_eq!(hmi.poll_event(), None);
+    // Silent for LINK_TIMEOUT_MS since the connection: lost, and the
+    // handshake starts over at once.
+    hmi.tick(LINK_TIMEOUT_MS);
+    assert!(!hmi.is_connected());
+    assert_eq!(hmi.poll_event(), Some(Event::Disconnected));
+    assert_eq!(hmi.stats().link_losses, 1);
+    let n = hmi.poll_transmit(&mut buf);
+    assert_eq!(&buf[..n], b"\xff\xff\xffsendme\xff\xff\xff");
+    // Live status is not queued for a screen that is not there.
+    hmi.write_status(&Status::default()).unwrap();
+    assert_eq!(hmi.tx_pending(), 0);
+    // Meanwhile the screen shows another page (as after a power cycle of
+    // its own); the cable is mended and the next handshake is answered:
+    // set up again, on the home page.
+    screen.feed(b"page 2\xff\xff\xff");
+    let _ = screen.take_output();
+    assert_eq!(screen.page(), Page::Fixed.id());
+    hmi.tick(LINK_TIMEOUT_MS + HANDSHAKE_RETRY_MS);
+    assert_eq!(pump(&mut hmi, &mut screen), vec![Event::Connected]);
+    assert!(hmi.is_connected());
+    assert_eq!(screen.page(), Page::Mode.id());
+}
+
+#[test]
+fn an_answering_screen_is_asked_once_a_heartbeat_and_never_lost() {
+    let (mut hmi, mut screen) = connected();
+    let before = sendmes(&screen);
+    // One minute of 20 ms ticks with nothing touched; the screen answers
+    // every `sendme` at once. Expected (by hand): a heartbeat at 1 s,
+    // 2 s, … 59 s after the connection at 0 ms, each answered, so 59.
+    let mut events = Vec::new();
+    for t in (0..60_000u32).step_by(20) {
+        hmi.tick(t);
+        events.extend(pump(&mut hmi, &mut screen));
+    }
+    assert!(events.is_empty(), "{events:?}");
+    assert_eq!(sendmes(&screen) - before, 59);
+    assert_eq!(hmi.stats().link_losses, 0);
+}
+
+proptest! {
+    /// Whatever the tick schedule (10–50 ms, as the firmware's HMI task
+    /// runs), a screen that answers is never declared lost, and one that
+    /// stops answering is lost at the first tick at least LINK_TIMEOUT_MS
+    /// after the last frame it sent.
+    #[test]
+    fn link_supervision_follows_the_screen(
+        gaps in prop::collection::vec(10u32..=50, 1..400),
+        cut_at in 0usize..400,
+    ) {
+        let (mut hmi, mut screen) = connected();
+        let mut now = 0u32;
+        let mut heard = 0u32; // the connection counts as heard at 0 ms
+        let mut lost_at = None;
+        for (i, gap) in gaps.iter().enumerate() {
+            now += gap;
+            hmi.tick(now);
+            if i < cut_at {
+                let mut buf = [0u8; 512];
+                let n = hmi.poll_transmit(&mut buf);
+                screen.feed(&buf[..n]);
+                let back = screen.take_output();
+                if !back.is_empty() {
+                    heard = now;
+                }
+                hmi.push_slice(&back);
+            } else {
+                let mut buf = [0u8; 512];
+                hmi.poll_transmit(&mut buf);
+            }
+            while let Some(e) = hmi.poll_event() {
+                prop_assert_eq!(e, Event::Disconnected);
+                prop_assert!(lost_at.is_none());
+                lost_at = Some(now);
+            }
+            if lost_at.is_none() {
+                prop_assert!(now - heard < LINK_TIMEOUT_MS, "not lost at {} (heard {})", now, heard);
+            }
+        }
+        if let Some(t) = lost_at {
+            prop_assert!(t - heard >= LINK_TIMEOUT_MS);
+            prop_assert!(t - heard < LINK_TIMEOUT_MS + 50);
+        }
     }
 }

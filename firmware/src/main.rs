@@ -562,7 +562,7 @@ mod app {
     ///
     /// - Priority 1.
     /// - Released by received bytes, and at least every 20 ms to time the
-    ///   link (handshake retries, `get` timeouts).
+    ///   link (handshake retries, heartbeats, `get` timeouts).
     /// - Budget: 3 ms, most of it writing instructions at 115200 baud.
     #[task(priority = 1, local = [bytes_out, hmi_tx, saves_in, boot_notice], shared = [machine, hmi])]
     async fn hmi(mut cx: hmi::Context) {

@@ -1,0 +1,301 @@
+//! The real board's release images on the twin: both boot to the idle loop,
+//! and the registers after `init` are what RM0008 says they must be for the
+//! board's clock tree, pins and task priorities.
+//!
+//! Every expected value is computed here from RM0008 / PM0056 formulas and
+//! the board's documented requirements (README pin map, docs/firmware.md),
+//! not read from the firmware's constants.
+
+use twin::image::Image;
+use twin::{CoreState, Options, Twin};
+
+/// The crystal on the board (README: 8 MHz HSE) and the clocks the board
+/// runs at (docs/firmware.md: SYSCLK 72 MHz, APB1 36 MHz, APB2 72 MHz).
+const HSE: f64 = 8e6;
+const SYSCLK: f64 = 72e6;
+const PCLK1: f64 = 36e6;
+const PCLK2: f64 = 72e6;
+
+fn boot(image: Image) -> Twin {
+    let elf = image.elf().expect("build the real-board image");
+    let mut twin = Twin::new(
+        &elf,
+        Options {
+            decode_logs: false,
+            ..Options::default()
+        },
+    )
+    .expect("load the ELF");
+    // init runs with interrupts off, then the idle loop sleeps: 50 ms is
+    // ample (init is ~1 ms of work plus the 2 ms HSE start-up).
+    let slept = twin
+        .run_until(50, |t| t.core == CoreState::Sleeping)
+        .expect("run");
+    assert!(slept, "{image:?} never reached the idle loop's wfi");
+    twin
+}
+
+fn field(v: u32, shift: u32, bits: u32) -> u32 {
+    (v >> shift) & ((1 << bits) - 1)
+}
+
+/// RM0008 §27.3.4: baud = fCK / (16 × USARTDIV); BRR holds USARTDIV × 16
+/// as mantissa (12 bits) and fraction (4 bits), rounded to the nearest.
+fn brr_for(fck: f64, baud: f64) -> u32 {
+    let usartdiv_x16 = (fck / baud).round() as u32;
+    ((usartdiv_x16 / 16) << 4) | (usartdiv_x16 % 16)
+}
+
+/// RTIC on a 4-priority-bit Cortex-M3 (PM0056 §4.2.7: the upper nibble is
+/// implemented): logical priority p maps to (16 − p) << 4.
+fn nvic_prio(p: u32) -> u32 {
+    (16 - p) << 4
+}
+
+fn ipr(twin: &Twin, irq: u32) -> u32 {
+    let word = twin.peek(0xE000_E400 + (irq & !3));
+    field(word, 8 * (irq % 4), 8)
+}
+
+fn check_common(twin: &mut Twin, image: Image) {
+    // Booted without a reset or fault.
+    assert_eq!(twin.resets.len(), 1, "{image:?}: resets {:?}", twin.resets);
+    assert_eq!(twin.peek(0xE000_ED2C), 0, "{image:?}: HFSR after boot");
+    // --- RCC (RM0008 §7.3.2): PLL from HSE, ×(72/8), SYSCLK = PLL.
+    let cfgr = twin.peek(0x4002_1004);
+    assert_eq!(field(cfgr, 0, 2), 0b10, "SW = PLL");
+    assert_eq!(field(cfgr, 2, 2), 0b10, "SWS = PLL (switch done)");
+    assert_eq!(field(cfgr, 16, 1), 1, "PLLSRC = HSE");
+    assert_eq!(field(cfgr, 17, 1), 0, "PLLXTPRE = HSE not divided");
+    // PLLMUL encodes ×(n + 2).
+    assert_eq!(field(cfgr, 18, 4), (SYSCLK / HSE) as u32 - 2, "PLLMUL");
+    // HPRE 0xxx = /1 (HCLK = SYSCLK).
+    assert_eq!(field(cfgr, 7, 1), 0, "HPRE = /1");
+    // PPRE: 0xx = /1, 100 = /2, 101 = /4 … (compare the bits that matter).
+    let ppre_ok = |bits: u32, div: f64| {
+        if div == 1.0 {
+            bits & 0b100 == 0
+        } else {
+            bits == 0b100 + (div.log2() as u32 - 1)
+        }
+    };
+    assert!(
+        ppre_ok(field(cfgr, 8, 3), SYSCLK / PCLK1),
+        "PPRE1 {cfgr:#x}"
+    );
+    assert!(
+        ppre_ok(field(cfgr, 11, 3), SYSCLK / PCLK2),
+        "PPRE2 {cfgr:#x}"
+    );
+    // ADCPRE (00 /2, 01 /4, 10 /6, 11 /8): the ADC clock within the
+    // datasheet's 14 MHz maximum (the board does not use the ADC).
+    let adc_div = [2.0, 4.0, 6.0, 8.0][field(cfgr, 14, 2) as usize];
+    assert!(PCLK2 / adc_div <= 14e6, "ADCPRE /{adc_div}");
+    let cr = twin.peek(0x4002_1000);
+    assert_eq!(cr & (1 << 17), 1 << 17, "HSERDY");
+    assert_eq!(cr & (1 << 25), 1 << 25, "PLLRDY");
+    let clocks = twin.state().bus.clocks();
+    assert_eq!(clocks.sysclk as f64, SYSCLK);
+    assert_eq!(clocks.pclk1 as f64, PCLK1);
+    assert_eq!(clocks.pclk2 as f64, PCLK2);
+
+    // --- FLASH ACR (RM0008 §3.3.3): two wait states for 48 < SYSCLK ≤ 72 MHz;
+    // the prefetch buffer on (its reset state, required with wait states).
+    let acr = twin.peek(0x4002_2000);
+    let latency = if SYSCLK <= 24e6 {
+        0
+    } else if SYSCLK <= 48e6 {
+        1
+    } else {
+        2
+    };
+    assert_eq!(field(acr, 0, 3), latency, "FLASH_ACR LATENCY");
+    assert_eq!(field(acr, 4, 2), 0b11, "PRFTBE and PRFTBS");
+
+    // --- USART BRR (RM0008 §27.3.4): USART1 on PCLK2 at 115200 (the
+    // touchscreen), USART2 on PCLK1 at 9600 (RS-485), README pin map.
+    assert_eq!(
+        twin.peek(0x4001_3808),
+        brr_for(PCLK2, 115_200.0),
+        "USART1 BRR"
+    );
+    assert_eq!(
+        twin.peek(0x4000_4408),
+        brr_for(PCLK1, 9_600.0),
+        "USART2 BRR"
+    );
+    // 8N1, transmitter and receiver on, RXNE interrupt for the touchscreen.
+    let cr1 = twin.peek(0x4001_380C);
+    assert_eq!(
+        cr1 & ((1 << 13) | (1 << 12) | (1 << 3) | (1 << 2)),
+        (1 << 13) | (1 << 3) | (1 << 2)
+    );
+    assert_ne!(cr1 & (1 << 5), 0, "USART1 RXNEIE");
+
+    // --- TIM2: Hall capture at 1 MHz (docs: 1 µs ticks). TIM2 runs from
+    // 2 × PCLK1 because the APB1 prescaler is not 1 (RM0008 §7.2).
+    let tim2_clk = if SYSCLK / PCLK1 == 1.0 {
+        PCLK1
+    } else {
+        2.0 * PCLK1
+    };
+    assert_eq!(
+        twin.peek(0x4000_0028),
+        (tim2_clk / 1e6) as u32 - 1,
+        "TIM2 PSC"
+    );
+    assert_eq!(
+        twin.peek(0x4000_002C),
+        0xFFFF,
+        "TIM2 ARR: free-running 16 bits"
+    );
+    let ccmr1 = twin.peek(0x4000_0018);
+    assert_eq!(field(ccmr1, 0, 2), 0b01, "TIM2 CC1S = TI1");
+    // IC1F (RM0008 §15.4.7): N samples at fSAMPLING. The debounce must be
+    // longer than 1 µs (contact bounce of an NPN switch's edge) and far
+    // below the shortest Hall period (1 kHz rated: 1 ms).
+    let tim2 = &twin.state().bus.tim[1];
+    let filter_s = tim2.ic1_filter_clocks() as f64 / tim2_clk;
+    assert!(
+        (1e-6..=0.05e-3).contains(&filter_s),
+        "TIM2 IC1 filter {filter_s:e} s"
+    );
+    let ccer = twin.peek(0x4000_0020);
+    assert_eq!(
+        ccer & 0b11,
+        0b11,
+        "TIM2 CC1E, CC1P (falling edge: NPN pulls PA0 low)"
+    );
+    assert_eq!(twin.peek(0x4000_000C) & 0b11, 0b11, "TIM2 DIER CC1IE, UIE");
+    assert_eq!(twin.peek(0x4000_0000) & 1, 1, "TIM2 CEN");
+
+    // --- TIM3: encoder mode 3 (RM0008 §15.3.12), both inputs mapped on
+    // TI1/TI2, counting modulo 2^16.
+    assert_eq!(
+        twin.peek(0x4000_0408) & 7,
+        0b011,
+        "TIM3 SMS = encoder mode 3"
+    );
+    let ccmr1 = twin.peek(0x4000_0418);
+    assert_eq!(field(ccmr1, 0, 2), 0b01, "TIM3 CC1S");
+    assert_eq!(field(ccmr1, 8, 2), 0b01, "TIM3 CC2S");
+    assert_eq!(twin.peek(0x4000_042C), 0xFFFF, "TIM3 ARR");
+    assert_eq!(twin.peek(0x4000_0400) & 1, 1, "TIM3 CEN");
+
+    // --- IWDG (RM0008 §19.3): timeout = 4·2^PR·(RLR + 1) / f_LSI. It must
+    // outlast a page erase (tERASE ≤ 40 ms, datasheet) plus a control
+    // period (10 ms) at the fastest LSI (60 kHz), and reset the board well
+    // within half a second at the slowest (30 kHz).
+    let pr = twin.peek(0x4000_3004);
+    let rlr = twin.peek(0x4000_3008);
+    let timeout = |f_lsi: f64| 4.0 * f64::from(1u32 << pr) * f64::from(rlr + 1) / f_lsi;
+    assert!(twin.state().bus.iwdg.running, "IWDG started");
+    assert!(
+        timeout(60e3) > 0.050,
+        "IWDG {:.1} ms at 60 kHz",
+        timeout(60e3) * 1e3
+    );
+    assert!(
+        timeout(30e3) < 0.5,
+        "IWDG {:.1} ms at 30 kHz",
+        timeout(30e3) * 1e3
+    );
+
+    // --- NVIC (PM0056 §4.2.7): the task map of firmware/src/main.rs:
+    // USART1 (IRQ 37) at 4, TIM2 (IRQ 28) at 3; the software tasks at 2
+    // and 1 run on the dispatchers CAN_RX1 (21), CAN_SCE (22), ADC1_2 (18).
+    assert_eq!(ipr(twin, 37), nvic_prio(4), "USART1 priority");
+    assert_eq!(ipr(twin, 28), nvic_prio(3), "TIM2 priority");
+    let enabled = |irq: u32| twin.peek(0xE000_E100 + 4 * (irq / 32)) & (1 << (irq % 32)) != 0;
+    for irq in [37, 28] {
+        assert!(enabled(irq), "IRQ {irq} enabled");
+    }
+    let mut dispatch: Vec<u32> = [21, 22, 18]
+        .into_iter()
+        .filter(|&i| enabled(i))
+        .map(|i| ipr(twin, i))
+        .collect();
+    dispatch.sort();
+    assert!(
+        dispatch.contains(&nvic_prio(2)) && dispatch.contains(&nvic_prio(1)),
+        "dispatcher priorities {dispatch:x?}"
+    );
+    // SysTick: 1 kHz monotonic from the core clock (PM0056 §4.5).
+    assert_eq!(
+        twin.peek(0xE000_E014) + 1,
+        (SYSCLK / 1e3) as u32,
+        "SysTick reload"
+    );
+    assert_eq!(
+        twin.peek(0xE000_E010) & 0b111,
+        0b111,
+        "SysTick on, TICKINT, core clock"
+    );
+}
+
+/// TIM1 CH1 on PA8 (README): profile A's 20 kHz drum PWM, PWM mode 1 with
+/// preload, main output enabled.
+fn check_tim1_pwm(twin: &Twin, carrier_hz: f64) {
+    assert_eq!(twin.peek(0x4001_2C28), 0, "TIM1 PSC");
+    assert_eq!(
+        twin.peek(0x4001_2C2C),
+        (PCLK2 / carrier_hz).round() as u32 - 1,
+        "TIM1 ARR for {carrier_hz} Hz"
+    );
+    let ccmr1 = twin.peek(0x4001_2C18);
+    assert_eq!(field(ccmr1, 0, 2), 0, "TIM1 CC1S = output");
+    assert_eq!(field(ccmr1, 4, 3), 0b110, "TIM1 OC1M = PWM mode 1");
+    assert_eq!(field(ccmr1, 3, 1), 1, "TIM1 OC1PE");
+    assert_eq!(
+        twin.peek(0x4001_2C20) & 0b11,
+        0b01,
+        "TIM1 CC1E, active high"
+    );
+    assert_ne!(twin.peek(0x4001_2C44) & (1 << 15), 0, "TIM1 BDTR MOE");
+    assert_eq!(twin.peek(0x4001_2C00) & 0x81, 0x81, "TIM1 ARPE, CEN");
+}
+
+#[test]
+fn profile_a_boots_to_idle_with_rm0008_registers() {
+    let mut twin = boot(Image::ProfileA);
+    check_common(&mut twin, Image::ProfileA);
+    // Drum PWM carrier 20 kHz (docs/firmware.md: above hearing).
+    check_tim1_pwm(&twin, 20e3);
+    // TIM4 is not used by profile A: reset state (RM0008 §15.4).
+    assert_eq!(twin.peek(0x4000_0800), 0, "TIM4 CR1");
+    // Outputs after init: drum stopped, PWM pin driven low, enable low.
+    assert_eq!(twin.pin('A', 8), twin::Level::Low);
+    assert_eq!(twin.pin('B', 12), twin::Level::Low);
+}
+
+#[test]
+fn profile_b_boots_to_idle_with_rm0008_registers() {
+    let mut twin = boot(Image::ProfileB);
+    check_common(&mut twin, Image::ProfileB);
+    // TIM4 CH1 on PB6: PWM mode 1 with preload, output enabled (RM0008
+    // §15.4.7, §15.4.9), counter enabled with ARR preload.
+    let ccmr1 = twin.peek(0x4000_0818);
+    assert_eq!(field(ccmr1, 4, 3), 0b110, "TIM4 OC1M = PWM mode 1");
+    assert_eq!(field(ccmr1, 3, 1), 1, "TIM4 OC1PE");
+    assert_eq!(twin.peek(0x4000_0820) & 0b11, 0b01, "TIM4 CC1E");
+    assert_eq!(twin.peek(0x4000_0800) & 0x81, 0x81, "TIM4 ARPE, CEN");
+    // Idle steppers: the step pins low, drivers disabled.
+    assert_eq!(twin.pin('A', 8), twin::Level::Low);
+    assert_eq!(twin.pin('B', 6), twin::Level::Low);
+    assert_eq!(twin.pin('B', 12), twin::Level::Low);
+}
+
+/// RM0008 §15.4.12: "the counter is blocked while the auto-reload value is
+/// null". A step timer left with ARR = 0 in force never produces the update
+/// event that would load the rates written later (issue 15, item 1).
+#[test]
+fn profile_b_step_timers_are_not_blocked_after_init() {
+    let twin = boot(Image::ProfileB);
+    for (name, i) in [("TIM1", 0), ("TIM4", 3)] {
+        let t = &twin.state().bus.tim[i];
+        assert_ne!(
+            t.arr_act, 0,
+            "{name}: ARR in force is 0 after init: the counter is blocked and preloaded rates never load"
+        );
+    }
+}

@@ -1,0 +1,97 @@
+//! The real board's release images, built for the twin in their own target
+//! directories (so that they never fight a host build for cargo's lock).
+
+use std::io;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// A real-board image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Image {
+    /// `cargo build -p firmware --release --target thumbv7m-none-eabi`.
+    ProfileA,
+    /// `… --no-default-features --features board-stm32f103,profile-b`.
+    ProfileB,
+}
+
+/// The workspace root (this crate lives in `<root>/twin`).
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+impl Image {
+    /// The firmware's cargo features.
+    pub fn features(self) -> &'static str {
+        match self {
+            Image::ProfileA => "board-stm32f103,profile-a",
+            Image::ProfileB => "board-stm32f103,profile-b",
+        }
+    }
+
+    /// Environment variable that names a prebuilt ELF instead (another
+    /// branch's image, or `cargo xtask`'s).
+    pub fn env_var(self) -> &'static str {
+        match self {
+            Image::ProfileA => "TWIN_ELF_A",
+            Image::ProfileB => "TWIN_ELF_B",
+        }
+    }
+
+    /// Its own target directory.
+    pub fn target_dir(self) -> PathBuf {
+        let name = match self {
+            Image::ProfileA => "twin-a",
+            Image::ProfileB => "twin-b",
+        };
+        workspace_root().join("target").join(name)
+    }
+
+    /// Builds the image once per process (or takes `TWIN_ELF_A`/`_B`) and
+    /// returns the ELF path.
+    pub fn elf(self) -> io::Result<PathBuf> {
+        static BUILT: [OnceLock<Result<PathBuf, String>>; 2] = [OnceLock::new(), OnceLock::new()];
+        if let Some(p) = std::env::var_os(self.env_var()) {
+            return Ok(PathBuf::from(p));
+        }
+        let slot = &BUILT[self as usize];
+        slot.get_or_init(|| self.build().map_err(|e| e.to_string()))
+            .clone()
+            .map_err(io::Error::other)
+    }
+
+    /// Runs the release build.
+    pub fn build(self) -> io::Result<PathBuf> {
+        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+        let status = Command::new(cargo)
+            .current_dir(workspace_root())
+            .args([
+                "build",
+                "--package",
+                "firmware",
+                "--release",
+                "--target",
+                "thumbv7m-none-eabi",
+                "--no-default-features",
+                "--features",
+                self.features(),
+                "--target-dir",
+            ])
+            .arg(self.target_dir())
+            .status()?;
+        if !status.success() {
+            return Err(io::Error::other(format!(
+                "building the real-board image ({}) failed: {status}",
+                self.features()
+            )));
+        }
+        Ok(self
+            .target_dir()
+            .join("thumbv7m-none-eabi")
+            .join("release")
+            .join("firmware"))
+    }
+}

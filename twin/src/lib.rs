@@ -1,0 +1,1423 @@
+//! The twin: a register-level emulation of the real board (STM32F103RB at
+//! 72 MHz) that runs the unmodified release ELF of a real-board image.
+//!
+//! - The Cortex-M3 instruction set comes from unicorn (QEMU's TCG).
+//!   Exception entry and return, the NVIC, SysTick and faults are modelled
+//!   here ([`core`]); the peripherals the images touch are modelled from
+//!   RM0008 ([`periph`]).
+//! - Time: one executed instruction is one cycle of the core clock (flash
+//!   wait states and pipeline effects are ignored, see docs/twin.md); `wfi`
+//!   skips to the next event.
+//! - The machine (`machine-sim`) is wired to the pins and timers
+//!   ([`plant`]); the virtual touchscreen talks to USART1; the defmt log is
+//!   read from the image's RTT buffer in RAM and decoded by `defmt-print`.
+//!
+//! Licence: this crate links unicorn (GPL-2.0) and is therefore GPL-2.0; it
+//! is a development tool that the firmware never links.
+
+pub mod core;
+pub mod image;
+pub mod periph;
+pub mod plant;
+
+use std::cell::RefCell;
+use std::io::{self, BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::rc::Rc;
+use std::sync::mpsc::{self, Receiver};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use object::{Object, ObjectSection, ObjectSymbol};
+use unicorn_engine::{
+    unicorn_const::{Arch, HookType, MemType, Mode, Prot},
+    ArmCpuModel, RegisterARM, Unicorn,
+};
+
+use crate::core::{exc, Nvic};
+use crate::periph::{Bus, FlashOp, FLASH_BASE, FLASH_SIZE, NEVER};
+pub use crate::periph::{External, Level, Ticks, TICKS_PER_S};
+
+/// Start of SRAM.
+pub const RAM_BASE: u32 = 0x2000_0000;
+/// 20 KB (STM32F103RB).
+pub const RAM_SIZE: u32 = 20 * 1024;
+
+/// Errors of the twin.
+#[derive(Debug)]
+pub enum Error {
+    /// The ELF could not be read or lacks what the twin needs.
+    Elf(String),
+    /// Unicorn refused an operation.
+    Engine(String),
+    /// A host tool (defmt-print) failed.
+    Io(io::Error),
+}
+
+impl std::fmt::Display for Error {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Error::Elf(s) => write!(f, "ELF: {s}"),
+            Error::Engine(s) => write!(f, "unicorn: {s}"),
+            Error::Io(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+impl From<io::Error> for Error {
+    fn from(e: io::Error) -> Self {
+        Error::Io(e)
+    }
+}
+
+fn uc_err(e: unicorn_engine::unicorn_const::uc_error) -> Error {
+    Error::Engine(format!("{e:?}"))
+}
+
+/// Why the MCU was reset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ResetCause {
+    /// Power applied (the twin was built or [`Twin::power_cycle`]).
+    PowerOn,
+    /// The independent watchdog counted down to 0.
+    Watchdog,
+    /// SYSRESETREQ in AIRCR.
+    Software,
+}
+
+/// What the core is doing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CoreState {
+    /// Executing instructions.
+    Running,
+    /// Asleep in `wfi`.
+    Sleeping,
+    /// Locked up (a fault in HardFault or NMI): executes nothing until reset.
+    Lockup,
+    /// Halted by the (virtual) debugger.
+    DebugHalt,
+}
+
+/// Options of a twin.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// The crystal never starts.
+    pub hse_dead: bool,
+    /// LSI frequency (IWDG clock), Hz: 40 kHz nominal, 30..60 kHz.
+    pub lsi_hz: u64,
+    /// Print decoded log lines to stderr as they come.
+    pub echo_logs: bool,
+    /// Flash contents to start from (a previous twin's [`Twin::flash`]);
+    /// `None` = the ELF programmed onto an erased chip.
+    pub flash: Option<Vec<u8>>,
+    /// Decode the defmt log with `defmt-print` (off: no host process).
+    pub decode_logs: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            hse_dead: false,
+            lsi_hz: 40_000,
+            echo_logs: false,
+            flash: None,
+            decode_logs: true,
+        }
+    }
+}
+
+/// A stop reason recorded by a hook for the run loop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Stop {
+    /// Re-plan (a register write changed the next event).
+    Replan,
+    /// The core executed an instruction that faults (intr hook number).
+    Fault(u32),
+}
+
+/// Everything the hooks share with the run loop.
+pub struct State {
+    /// Firmware time.
+    pub now: Ticks,
+    /// Ticks per instruction (72 MHz / core clock).
+    cost: Ticks,
+    /// The peripherals.
+    pub bus: Bus,
+    /// The NVIC and SCB.
+    pub nvic: Nvic,
+    stop: Option<Stop>,
+    /// Something is pending but masked: the code hook watches the masks.
+    watch_masks: bool,
+    /// Instructions executed since power-on.
+    pub instructions: u64,
+    /// Flash stall to serve (ticks) before the next instruction.
+    stall: Ticks,
+    /// A flash write to put right (address, value the array must hold).
+    fixups: Vec<(u32, u16)>,
+    /// Memory errors the CPU made (address) in this chunk.
+    pub bus_error: Option<u32>,
+    /// A peripheral register write happened (for the waker).
+    touched: bool,
+}
+
+impl State {
+    fn ppb_read(&mut self, a: u32) -> u32 {
+        match a {
+            0xE000_E010 => {
+                self.bus.advance(self.now);
+                let st = &mut self.bus.systick;
+                st.ctrl | if st.countflag_take() { 1 << 16 } else { 0 }
+            }
+            0xE000_E014 => self.bus.systick.load,
+            0xE000_E018 => {
+                self.bus.advance(self.now);
+                self.bus.systick.val()
+            }
+            0xE000_E01C => 0x4000_2328, // CALIB: NOREF, 9000 (1 ms at HCLK/8)
+            0xE004_2000 => 0x2003_6410, // DBGMCU_IDCODE: medium density, rev X
+            0xE004_2004 => self.bus.dbgmcu_cr,
+            0xE000_1004 => self.instructions as u32, // DWT_CYCCNT
+            _ => self.nvic.read(a),
+        }
+    }
+
+    fn ppb_write(&mut self, a: u32, v: u32, size: usize) {
+        match a {
+            0xE000_E010 => {
+                self.bus.advance(self.now);
+                self.bus.systick.ctrl = v & 7;
+                self.bus.systick.restart(self.now);
+            }
+            0xE000_E014 => self.bus.systick.load = v & 0x00FF_FFFF,
+            0xE000_E018 => {
+                self.bus.advance(self.now);
+                self.bus.systick.clear(self.now);
+            }
+            0xE004_2004 => self.bus.dbgmcu_cr = v,
+            _ => self.nvic.write(a, v, size),
+        }
+        self.stop.get_or_insert(Stop::Replan);
+    }
+}
+
+/// Where the defmt frames go.
+struct LogSink {
+    stdin: Option<ChildStdin>,
+    child: Option<Child>,
+    rx: Option<Receiver<String>>,
+    lines: Vec<String>,
+    last_write: Instant,
+}
+
+/// The twin of the real board running one image.
+pub struct Twin {
+    uc: Unicorn<'static, State>,
+    elf_path: PathBuf,
+    /// The ELF's loadable flash contents (programmed at "production").
+    vector_sp: u32,
+    rtt: Option<u32>,
+    symbols: Vec<(String, u32, u64)>,
+    log: LogSink,
+    /// The raw defmt bytes read from RTT.
+    pub rtt_bytes: Vec<u8>,
+    /// Resets so far: (time, cause).
+    pub resets: Vec<(Ticks, ResetCause)>,
+    /// The core's state.
+    pub core: CoreState,
+    /// When the core locked up.
+    pub lockup_at: Option<Ticks>,
+    /// The machine wired to the pins, if any.
+    pub plant: Option<plant::Plant>,
+    /// The touchscreen on USART1, if any.
+    pub screen: Option<hmi_proto::virtual_screen::VirtualScreen>,
+    /// Called after every scheduling step (a probe on the pins).
+    watchers: Vec<Box<dyn FnMut(&State) -> bool>>,
+    /// Host time spent in [`Twin::run_for`].
+    pub host_time: Duration,
+    screen_next: Ticks,
+}
+
+/// Reads a little-endian u32 from unicorn memory.
+fn rd32(uc: &Unicorn<'static, State>, a: u32) -> Option<u32> {
+    let mut b = [0u8; 4];
+    uc.mem_read(u64::from(a), &mut b).ok()?;
+    Some(u32::from_le_bytes(b))
+}
+
+impl Twin {
+    /// Loads `elf` onto a fresh twin (flash programmed, RAM random-free
+    /// zeros, power-on reset) without running it.
+    pub fn new(elf: &Path, options: Options) -> Result<Self, Error> {
+        let data = std::fs::read(elf).map_err(|e| Error::Elf(format!("{}: {e}", elf.display())))?;
+        let file = object::File::parse(&*data).map_err(|e| Error::Elf(e.to_string()))?;
+        let mut flash = options
+            .flash
+            .clone()
+            .unwrap_or_else(|| vec![0xFF; FLASH_SIZE as usize]);
+        if options.flash.is_none() {
+            // Program the image's loadable sections (by load address).
+            for seg in file.segments() {
+                use object::ObjectSegment;
+                let (addr, _) = seg.file_range();
+                let _ = addr;
+                let paddr = seg.address();
+                let bytes = seg.data().map_err(|e| Error::Elf(e.to_string()))?;
+                let _ = (paddr, bytes);
+            }
+            for sec in file.sections() {
+                let _ = sec;
+            }
+            load_flash(&data, &mut flash)?;
+        }
+        let mut symbols = Vec::new();
+        let mut rtt = None;
+        for s in file.symbols() {
+            if let Ok(name) = s.name() {
+                if name == "_SEGGER_RTT" {
+                    rtt = Some(s.address() as u32);
+                }
+                symbols.push((name.to_string(), s.address() as u32, s.size()));
+            }
+        }
+        let state = State {
+            now: 0,
+            cost: 9,
+            bus: Bus::new(options.hse_dead, options.lsi_hz),
+            nvic: Nvic::default(),
+            stop: None,
+            watch_masks: false,
+            instructions: 0,
+            stall: 0,
+            fixups: Vec::new(),
+            bus_error: None,
+            touched: false,
+        };
+        let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::MCLASS | Mode::LITTLE_ENDIAN, state)
+            .map_err(uc_err)?;
+        uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M3 as i32)
+            .map_err(uc_err)?;
+        uc.mem_map(
+            u64::from(FLASH_BASE),
+            u64::from(FLASH_SIZE),
+            Prot::READ | Prot::EXEC | Prot::WRITE,
+        )
+        .map_err(uc_err)?;
+        uc.mem_write(u64::from(FLASH_BASE), &flash)
+            .map_err(uc_err)?;
+        uc.mem_map(u64::from(RAM_BASE), u64::from(RAM_SIZE), Prot::ALL)
+            .map_err(uc_err)?;
+        map_peripherals(&mut uc)?;
+        add_hooks(&mut uc)?;
+        let vector_sp = u32::from_le_bytes(flash[0..4].try_into().unwrap_or([0; 4]));
+        let log = LogSink::start(elf, options.decode_logs, options.echo_logs)?;
+        let mut twin = Self {
+            uc,
+            elf_path: elf.to_path_buf(),
+            vector_sp,
+            rtt,
+            symbols,
+            log,
+            rtt_bytes: Vec::new(),
+            resets: Vec::new(),
+            core: CoreState::Running,
+            lockup_at: None,
+            plant: None,
+            screen: None,
+            watchers: Vec::new(),
+            host_time: Duration::ZERO,
+            screen_next: 0,
+        };
+        twin.reset(ResetCause::PowerOn)?;
+        Ok(twin)
+    }
+
+    /// The ELF this twin runs.
+    pub fn elf(&self) -> &Path {
+        &self.elf_path
+    }
+
+    /// The shared state (peripherals, NVIC, time).
+    pub fn state(&self) -> &State {
+        self.uc.get_data()
+    }
+
+    /// The shared state, mutable (inject inputs, set external pins).
+    pub fn state_mut(&mut self) -> &mut State {
+        self.uc.get_data_mut()
+    }
+
+    /// Firmware time, seconds.
+    pub fn now_s(&self) -> f64 {
+        self.state().now as f64 / TICKS_PER_S as f64
+    }
+
+    /// Firmware time, ticks.
+    pub fn now(&self) -> Ticks {
+        self.state().now
+    }
+
+    /// The level of a pin now (`port` 'A'..'E').
+    pub fn pin(&mut self, port: char, pin: u32) -> Level {
+        let now = self.now();
+        let st = self.uc.get_data_mut();
+        st.bus.advance(now);
+        st.bus.pin_level(port_index(port), pin)
+    }
+
+    /// Drives an input pin from outside.
+    pub fn set_external(&mut self, port: char, pin: u32, e: External) {
+        let now = self.now();
+        let st = self.uc.get_data_mut();
+        st.bus.external[port_index(port)][pin as usize] = e;
+        st.bus.advance(now);
+    }
+
+    /// Address and size of an ELF symbol.
+    pub fn symbol(&self, name: &str) -> Option<(u32, u64)> {
+        self.symbols
+            .iter()
+            .find(|(n, _, _)| n == name)
+            .map(|(_, a, s)| (*a, *s))
+    }
+
+    /// Address of the first symbol whose (mangled) name contains all of
+    /// `parts`.
+    pub fn symbol_like(&self, parts: &[&str]) -> Option<(u32, u64)> {
+        self.symbols
+            .iter()
+            .find(|(n, _, _)| parts.iter().all(|p| n.contains(p)))
+            .map(|(_, a, s)| (*a, *s))
+    }
+
+    /// Reads a word of memory (RAM or flash).
+    pub fn read_u32(&self, a: u32) -> Option<u32> {
+        rd32(&self.uc, a)
+    }
+
+    /// Writes memory (as a debugger would).
+    pub fn write_mem(&mut self, a: u32, bytes: &[u8]) -> Result<(), Error> {
+        self.uc.mem_write(u64::from(a), bytes).map_err(uc_err)
+    }
+
+    /// A core register.
+    pub fn reg(&self, r: RegisterARM) -> u32 {
+        self.uc.reg_read(r).unwrap_or(0) as u32
+    }
+
+    /// Writes a core register (as a debugger would).
+    pub fn set_reg(&mut self, r: RegisterARM, v: u32) -> Result<(), Error> {
+        self.uc.reg_write(r, u64::from(v)).map_err(uc_err)
+    }
+
+    /// The whole flash array (persists across resets; hand it to a new
+    /// twin in [`Options::flash`]).
+    pub fn flash(&self) -> Vec<u8> {
+        self.uc
+            .mem_read_as_vec(u64::from(FLASH_BASE), FLASH_SIZE as usize)
+            .unwrap_or_default()
+    }
+
+    /// The flash operations the FPEC carried out so far.
+    pub fn flash_ops(&self) -> &[FlashOp] {
+        &self.state().bus.flash.log
+    }
+
+    /// Arms a power cut at flash operation `n` (counted from 0 since the
+    /// twin was built): before it takes effect, or right after.
+    pub fn cut_power_at_flash_op(&mut self, n: u64, after: bool) {
+        self.state_mut().bus.flash.cut_at = Some((n, after));
+    }
+
+    /// Reads a peripheral or system register without side effects on the
+    /// twin (a debugger's view).
+    pub fn peek(&self, a: u32) -> u32 {
+        let st = self.state();
+        if (0xE000_0000..0xE010_0000).contains(&a) {
+            match a {
+                0xE000_E010 => st.bus.systick.ctrl,
+                0xE000_E014 => st.bus.systick.load,
+                0xE004_2004 => st.bus.dbgmcu_cr,
+                _ => st.nvic.read(a),
+            }
+        } else {
+            let mut bus = st.bus.clone();
+            bus.read(a, st.now)
+        }
+    }
+
+    /// Bytes the firmware sent on USART1 (or 2) not yet taken.
+    pub fn take_serial(&mut self, n: usize) -> Vec<u8> {
+        std::mem::take(&mut self.state_mut().bus.usart[n].tx_out)
+    }
+
+    /// Bytes put on USART `n`'s RX line (they arrive at the line rate).
+    pub fn send_serial(&mut self, n: usize, bytes: &[u8]) {
+        self.state_mut().bus.usart[n]
+            .rx_line
+            .extend(bytes.iter().copied());
+        self.state_mut().stop = Some(Stop::Replan);
+    }
+
+    /// Connects the virtual touchscreen to USART1 (it boots and sends its
+    /// start-up frames, as a real Nextion does).
+    pub fn connect_screen(&mut self) {
+        let mut s = hmi_proto::virtual_screen::VirtualScreen::with_contract();
+        s.boot();
+        self.screen = Some(s);
+    }
+
+    /// Adds a watcher called after each scheduling step with the state;
+    /// returning `true` stops [`Twin::run_until`].
+    pub fn watch(&mut self, f: impl FnMut(&State) -> bool + 'static) {
+        self.watchers.push(Box::new(f));
+    }
+
+    /// Resets the MCU (the flash keeps its contents; RAM is kept as it is,
+    /// like a real system reset; a power-on also keeps it here, zeroed by
+    /// the firmware's start-up code anyway).
+    pub fn reset(&mut self, cause: ResetCause) -> Result<(), Error> {
+        let now = self.now();
+        self.resets.push((now, cause));
+        let flag = match cause {
+            ResetCause::PowerOn => 0x0C00_0000,
+            ResetCause::Watchdog => 0x2400_0000,
+            ResetCause::Software => 0x1400_0000,
+        };
+        {
+            let st = self.uc.get_data_mut();
+            if cause == ResetCause::PowerOn && now > 0 {
+                let hse = st.bus.rcc.hse_dead;
+                let lsi = st.bus.iwdg.lsi_hz;
+                let flash = st.bus.flash.clone();
+                st.bus = Bus::new(hse, lsi);
+                st.bus.flash = flash;
+                st.bus.flash.cut_fired = false;
+                st.bus.system_reset(now, flag);
+            } else {
+                st.bus.system_reset(now, flag);
+            }
+            st.nvic = Nvic::default();
+            st.stop = None;
+            st.stall = 0;
+            st.fixups.clear();
+            st.watch_masks = false;
+            st.bus_error = None;
+        }
+        // Clear the RTT control block so that a stale one is never read.
+        if let Some(a) = self.rtt {
+            let _ = self.uc.mem_write(u64::from(a), &[0u8; 16]);
+        }
+        let sp = rd32(&self.uc, FLASH_BASE).unwrap_or(self.vector_sp);
+        let pc = rd32(&self.uc, FLASH_BASE + 4).unwrap_or(0);
+        let uc = &mut self.uc;
+        for (r, v) in [
+            (RegisterARM::PRIMASK, 0),
+            (RegisterARM::BASEPRI, 0),
+            (RegisterARM::FAULTMASK, 0),
+            (RegisterARM::CONTROL, 0),
+            (RegisterARM::IPSR, 0),
+            (RegisterARM::MSP, u64::from(sp)),
+            (RegisterARM::SP, u64::from(sp)),
+            (RegisterARM::LR, 0xFFFF_FFFF),
+            (RegisterARM::PC, u64::from(pc | 1)),
+        ] {
+            uc.reg_write(r, v).map_err(uc_err)?;
+        }
+        self.core = CoreState::Running;
+        self.lockup_at = None;
+        if let Some(p) = &mut self.plant {
+            p.mcu_reset();
+        }
+        Ok(())
+    }
+
+    /// Cuts the power and applies it again (flash kept).
+    pub fn power_cycle(&mut self) -> Result<(), Error> {
+        // RAM loses its contents.
+        let _ = self
+            .uc
+            .mem_write(u64::from(RAM_BASE), &vec![0u8; RAM_SIZE as usize]);
+        self.reset(ResetCause::PowerOn)
+    }
+
+    /// Runs for `ms` milliseconds of firmware time.
+    pub fn run_ms(&mut self, ms: u64) -> Result<(), Error> {
+        let until = self.now() + ms * TICKS_PER_S / 1000;
+        self.run_until_time(until, &mut |_| false)
+    }
+
+    /// Runs until `pred` holds (checked after every scheduling step) or
+    /// `ms` of firmware time passed; `Ok(true)` when `pred` held.
+    pub fn run_until(
+        &mut self,
+        ms: u64,
+        mut pred: impl FnMut(&mut Twin) -> bool,
+    ) -> Result<bool, Error> {
+        let until = self.now() + ms * TICKS_PER_S / 1000;
+        let step = TICKS_PER_S / 1000;
+        while self.now() < until {
+            if pred(self) {
+                return Ok(true);
+            }
+            let t = (self.now() + step).min(until);
+            self.run_until_time(t, &mut |_| false)?;
+        }
+        Ok(pred(self))
+    }
+
+    fn run_until_time(
+        &mut self,
+        until: Ticks,
+        stop: &mut dyn FnMut(&State) -> bool,
+    ) -> Result<(), Error> {
+        let started = Instant::now();
+        let r = self.run_inner(until, stop);
+        self.host_time += started.elapsed();
+        r
+    }
+
+    fn run_inner(
+        &mut self,
+        until: Ticks,
+        stop: &mut dyn FnMut(&State) -> bool,
+    ) -> Result<(), Error> {
+        while self.now() < until {
+            // Peripheral time, interrupts, machine, screen.
+            self.service()?;
+            if stop(self.state()) {
+                return Ok(());
+            }
+            let now = self.now();
+            if now >= until {
+                break;
+            }
+            let next = self.next_event().min(until).max(now + 1);
+            match self.core {
+                CoreState::Running => {
+                    self.execute(next)?;
+                }
+                CoreState::Sleeping => {
+                    if self.wake_pending() {
+                        self.core = CoreState::Running;
+                    } else {
+                        self.state_mut().now = next;
+                    }
+                }
+                CoreState::Lockup | CoreState::DebugHalt => {
+                    self.state_mut().now = next;
+                }
+            }
+        }
+        self.service()?;
+        Ok(())
+    }
+
+    /// The next time something outside the core happens.
+    fn next_event(&self) -> Ticks {
+        let st = self.state();
+        let mut t = st.bus.next_event();
+        if let Some(p) = &self.plant {
+            t = t.min(p.next_event());
+        }
+        if self.screen.is_some() {
+            t = t.min(self.screen_next);
+        }
+        // Drain RTT at least every 10 ms of firmware time.
+        t.min((st.now / 720_000 + 1) * 720_000)
+    }
+
+    /// Brings everything up to the current time and takes exceptions.
+    fn service(&mut self) -> Result<(), Error> {
+        let now = self.now();
+        // The machine first: its events (Hall edges) are in the past or now.
+        if let Some(mut p) = self.plant.take() {
+            p.service(now, &mut self.uc.get_data_mut().bus);
+            self.plant = Some(p);
+        }
+        if let Some(mut s) = self.screen.take() {
+            if now >= self.screen_next {
+                let st = self.uc.get_data_mut();
+                let out = std::mem::take(&mut st.bus.usart[0].tx_out);
+                if !out.is_empty() {
+                    s.feed(&out);
+                }
+                let inp = s.take_output();
+                st.bus.usart[0].rx_line.extend(inp);
+                self.screen_next = now + TICKS_PER_S / 1000;
+            }
+            self.screen = Some(s);
+        }
+        {
+            let st = self.uc.get_data_mut();
+            st.bus.advance(now);
+            if std::mem::take(&mut st.bus.systick.fired) {
+                st.nvic.set_pending(exc::SYSTICK);
+            }
+            for l in st.bus.irq_lines() {
+                st.nvic.line(l);
+            }
+        }
+        let (wd, sw, cut) = {
+            let st = self.state();
+            (
+                st.bus.iwdg.expires_at() <= now,
+                st.nvic.reset_requested,
+                st.bus.flash.cut_fired,
+            )
+        };
+        if wd {
+            self.drain_rtt();
+            return self.reset(ResetCause::Watchdog);
+        }
+        if sw {
+            self.drain_rtt();
+            return self.reset(ResetCause::Software);
+        }
+        if cut {
+            self.drain_rtt();
+            return self.power_cycle();
+        }
+        self.drain_rtt();
+        if self.core == CoreState::Running || self.core == CoreState::Sleeping {
+            self.take_exceptions()?;
+        }
+        Ok(())
+    }
+
+    fn masks(&self) -> (bool, bool, u8) {
+        (
+            self.reg(RegisterARM::PRIMASK) & 1 != 0,
+            self.reg(RegisterARM::FAULTMASK) & 1 != 0,
+            self.reg(RegisterARM::BASEPRI) as u8,
+        )
+    }
+
+    fn wake_pending(&self) -> bool {
+        // WFI wakes on a pending exception that would preempt with PRIMASK
+        // ignored (ARMv7-M B1.5.19).
+        let (_, fm, bp) = self.masks();
+        let st = self.state();
+        let exec = st.nvic.execution_priority(false, fm, bp);
+        st.nvic.top_pending().is_some_and(|(_, p)| p < exec)
+    }
+
+    fn take_exceptions(&mut self) -> Result<(), Error> {
+        loop {
+            let (pm, fm, bp) = self.masks();
+            let st = self.uc.get_data_mut();
+            let exec = st.nvic.execution_priority(pm, fm, bp);
+            match st.nvic.top_pending() {
+                Some((n, p)) if p < exec => {
+                    if self.core == CoreState::Sleeping {
+                        self.core = CoreState::Running;
+                    }
+                    self.enter_exception(n)?;
+                }
+                Some(_) => {
+                    st.watch_masks = true;
+                    return Ok(());
+                }
+                None => {
+                    st.watch_masks = false;
+                    return Ok(());
+                }
+            }
+        }
+    }
+
+    /// Exception entry (ARMv7-M B1.5.6): the frame pushed on the main
+    /// stack, LR = EXC_RETURN, PC from the vector table. Stacking errors
+    /// are ignored (the handler runs; a fault in HardFault locks up later).
+    fn enter_exception(&mut self, n: u32) -> Result<(), Error> {
+        let pc = self.reg(RegisterARM::PC);
+        self.enter_exception_at(n, pc)
+    }
+
+    fn enter_exception_at(&mut self, n: u32, return_pc: u32) -> Result<(), Error> {
+        let regs = [
+            RegisterARM::R0,
+            RegisterARM::R1,
+            RegisterARM::R2,
+            RegisterARM::R3,
+            RegisterARM::R12,
+            RegisterARM::LR,
+        ];
+        let mut frame = [0u32; 8];
+        for (i, r) in regs.iter().enumerate() {
+            frame[i] = self.reg(*r);
+        }
+        frame[6] = return_pc & !1;
+        let xpsr = self.reg(RegisterARM::XPSR);
+        let current = self.state().nvic.active.last().copied().unwrap_or(0);
+        let mut sp = self.reg(RegisterARM::SP);
+        let align = sp & 4 != 0;
+        if align {
+            sp -= 4;
+        }
+        sp = sp.wrapping_sub(32);
+        frame[7] =
+            (xpsr & !0x1FF & !(1 << 9)) | current | (1 << 24) | if align { 1 << 9 } else { 0 };
+        let mut stack_fault = false;
+        for (i, w) in frame.iter().enumerate() {
+            if self
+                .uc
+                .mem_write(u64::from(sp + 4 * i as u32), &w.to_le_bytes())
+                .is_err()
+            {
+                stack_fault = true;
+            }
+        }
+        let nested = !self.state().nvic.active.is_empty();
+        let vtor = self.state().nvic.vtor;
+        let vec_addr = if vtor == 0 { FLASH_BASE } else { vtor } + 4 * n;
+        let handler = rd32(&self.uc, vec_addr).unwrap_or(0);
+        {
+            let st = self.uc.get_data_mut();
+            st.nvic.pending &= !(1u128 << n);
+            st.nvic.active.push(n);
+            // Entry latency: 12 cycles on the Cortex-M3.
+            st.now += 12 * st.cost;
+            if stack_fault {
+                // A derived BusFault on stacking (BSTKERR) escalates to
+                // HardFault; for HardFault/NMI entries it is ignored here
+                // and the handler runs on the broken stack.
+                st.nvic.cfsr |= 1 << 12;
+                if n != exc::HARD_FAULT && n != exc::NMI {
+                    st.nvic.hfsr |= 1 << 30;
+                    st.nvic.set_pending(exc::HARD_FAULT);
+                }
+            }
+        }
+        let lr = if nested { 0xFFFF_FFF1u32 } else { 0xFFFF_FFF9 };
+        let uc = &mut self.uc;
+        uc.reg_write(RegisterARM::SP, u64::from(sp))
+            .map_err(uc_err)?;
+        uc.reg_write(RegisterARM::LR, u64::from(lr))
+            .map_err(uc_err)?;
+        uc.reg_write(RegisterARM::XPSR, u64::from(1u32 << 24))
+            .map_err(uc_err)?;
+        uc.reg_write(RegisterARM::PC, u64::from(handler | 1))
+            .map_err(uc_err)?;
+        Ok(())
+    }
+
+    /// Exception return (ARMv7-M B1.5.8) to `exc_return`.
+    fn exception_return(&mut self, exc_return: u32) -> Result<(), Error> {
+        let active = self.uc.get_data_mut().nvic.active.pop();
+        if active.is_none() || exc_return & 0xF == 0xD {
+            // A return with nothing active, or to the process stack (the
+            // images never use it): a UsageFault (INVPC) → HardFault.
+            self.uc.get_data_mut().nvic.cfsr |= 1 << 18;
+            return self.fault(0xFFFF_FFFF, false);
+        }
+        let sp = self.reg(RegisterARM::SP);
+        let mut frame = [0u32; 8];
+        for (i, w) in frame.iter_mut().enumerate() {
+            match rd32(&self.uc, sp + 4 * i as u32) {
+                Some(v) => *w = v,
+                None => return self.fault(sp, false),
+            }
+        }
+        let mut new_sp = sp + 32;
+        if frame[7] & (1 << 9) != 0 {
+            new_sp += 4;
+        }
+        let regs = [
+            RegisterARM::R0,
+            RegisterARM::R1,
+            RegisterARM::R2,
+            RegisterARM::R3,
+            RegisterARM::R12,
+            RegisterARM::LR,
+        ];
+        let uc = &mut self.uc;
+        for (i, r) in regs.iter().enumerate() {
+            uc.reg_write(*r, u64::from(frame[i])).map_err(uc_err)?;
+        }
+        uc.reg_write(RegisterARM::SP, u64::from(new_sp))
+            .map_err(uc_err)?;
+        uc.reg_write(RegisterARM::XPSR, u64::from(frame[7] & !0x1FF & !(1 << 9)))
+            .map_err(uc_err)?;
+        uc.reg_write(RegisterARM::PC, u64::from(frame[6] | 1))
+            .map_err(uc_err)?;
+        let st = uc.get_data_mut();
+        st.now += 10 * st.cost;
+        // A level line still asserted pends its interrupt again.
+        for l in st.bus.irq_lines() {
+            st.nvic.line(l);
+        }
+        Ok(())
+    }
+
+    /// A synchronous fault at `pc` (escalated to HardFault; lockup when
+    /// HardFault or NMI is already active, ARMv7-M B1.5.15).
+    fn fault(&mut self, addr: u32, _write: bool) -> Result<(), Error> {
+        let pc = self.reg(RegisterARM::PC);
+        let st = self.uc.get_data_mut();
+        st.nvic.bfar = addr;
+        st.nvic.hfsr |= 1 << 30;
+        if st.nvic.active_priority() < 0 {
+            self.core = CoreState::Lockup;
+            self.lockup_at = Some(st.now);
+            return Ok(());
+        }
+        self.enter_exception_at(exc::HARD_FAULT, pc)
+    }
+
+    /// Executes instructions until `until` (or an earlier stop).
+    fn execute(&mut self, until: Ticks) -> Result<(), Error> {
+        let pc = self.reg(RegisterARM::PC);
+        let (cost, now) = {
+            let st = self.uc.get_data_mut();
+            let c = st.bus.clocks();
+            st.cost = (TICKS_PER_S / c.hclk.max(1)).max(1);
+            st.stop = None;
+            (st.cost, st.now)
+        };
+        let count = ((until.saturating_sub(now)) / cost).max(1) as usize;
+        let r = self.uc.emu_start(u64::from(pc | 1), 0, 0, count);
+        // Flash fix-ups and stalls.
+        self.apply_fixups();
+        let stop = self.uc.get_data_mut().stop.take();
+        let pc_now = self.reg(RegisterARM::PC);
+        if std::env::var_os("TWIN_TRACE").is_some() {
+            eprintln!(
+                "exec pc {pc:#x} -> {pc_now:#x} count {count} ran {} r {r:?} stop {stop:?} core {:?}",
+                (self.now() - now) / cost,
+                self.core
+            );
+        }
+        match r {
+            Ok(()) => {}
+            Err(e) => {
+                use unicorn_engine::unicorn_const::uc_error as E;
+                let addr = self.state().bus_error.unwrap_or(pc_now);
+                match e {
+                    E::FETCH_UNMAPPED | E::FETCH_PROT if pc_now >= 0xFFFF_FF00 => {
+                        return self.exception_return(pc_now | 1);
+                    }
+                    E::READ_UNMAPPED
+                    | E::WRITE_UNMAPPED
+                    | E::FETCH_UNMAPPED
+                    | E::READ_PROT
+                    | E::WRITE_PROT
+                    | E::FETCH_PROT
+                    | E::READ_UNALIGNED
+                    | E::WRITE_UNALIGNED
+                    | E::FETCH_UNALIGNED
+                    | E::EXCEPTION
+                    | E::INSN_INVALID => {
+                        self.uc.get_data_mut().bus_error = None;
+                        self.uc.get_data_mut().nvic.cfsr |= 1 << 9; // PRECISERR
+                        return self.fault(addr, false);
+                    }
+                    other => return Err(uc_err(other)),
+                }
+            }
+        }
+        if let Some(Stop::Fault(intno)) = stop {
+            if pc_now >= 0xFFFF_FF00 {
+                return self.exception_return(pc_now | 1);
+            }
+            if intno == 8 {
+                // EXCP_EXCEPTION_EXIT (unicorn saw handler mode).
+                return self.exception_return(pc_now | 1);
+            }
+            self.uc.get_data_mut().nvic.cfsr |= 1 << 16; // UNDEFINSTR
+            return self.fault(pc_now, false);
+        }
+        if pc_now >= 0xFFFF_FF00 {
+            return self.exception_return(pc_now | 1);
+        }
+        // Stopped early without a reason: `wfi` (unicorn halts the CPU with
+        // the PC on the WFI or just after it).
+        let st = self.state();
+        if st.now < until && stop.is_none() {
+            for at in [pc_now, pc_now.wrapping_sub(2)] {
+                let mut b = [0u8; 2];
+                if self.uc.mem_read(u64::from(at), &mut b).is_ok()
+                    && u16::from_le_bytes(b) == 0xBF30
+                {
+                    self.core = CoreState::Sleeping;
+                    self.set_reg(RegisterARM::PC, (at + 2) | 1)?;
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn apply_fixups(&mut self) {
+        let (fixups, stall) = {
+            let st = self.uc.get_data_mut();
+            (
+                std::mem::take(&mut st.fixups),
+                std::mem::take(&mut st.stall),
+            )
+        };
+        for (a, v) in fixups {
+            let _ = self.uc.mem_write(u64::from(a), &v.to_le_bytes());
+        }
+        if stall > 0 {
+            // The CPU waits for the flash (it fetches from it): time goes on
+            // for the peripherals, in order, while nothing executes.
+            let end = self.now() + stall;
+            while self.now() < end {
+                let _ = self.service();
+                let next = self.next_event().min(end).max(self.now() + 1);
+                self.state_mut().now = next;
+            }
+        }
+    }
+
+    /// Moves the RTT up-channel 0 bytes to the decoder.
+    fn drain_rtt(&mut self) {
+        let Some(cb) = self.rtt else { return };
+        let mut id = [0u8; 10];
+        if self.uc.mem_read(u64::from(cb), &mut id).is_err() || &id != b"SEGGER RTT" {
+            return;
+        }
+        let desc = cb + 24;
+        let (Some(buf), Some(size), Some(wr), Some(rd)) = (
+            rd32(&self.uc, desc + 4),
+            rd32(&self.uc, desc + 8),
+            rd32(&self.uc, desc + 12),
+            rd32(&self.uc, desc + 16),
+        ) else {
+            return;
+        };
+        if size == 0 || wr == rd || wr >= size || rd >= size {
+            return;
+        }
+        let mut out = Vec::new();
+        let mut r = rd;
+        while r != wr {
+            let end = if wr > r { wr } else { size };
+            if let Ok(v) = self
+                .uc
+                .mem_read_as_vec(u64::from(buf + r), (end - r) as usize)
+            {
+                out.extend(v);
+            }
+            r = if end == size { 0 } else { end };
+        }
+        let _ = self.uc.mem_write(u64::from(desc + 16), &r.to_le_bytes());
+        self.log.write(&out);
+        self.rtt_bytes.extend(out);
+    }
+
+    /// Every decoded log line so far (waits briefly for the decoder to
+    /// catch up with the bytes already read).
+    pub fn logs(&mut self) -> Vec<String> {
+        self.drain_rtt();
+        self.log.settle();
+        self.log.lines.clone()
+    }
+
+    /// Log lines that contain `text`.
+    pub fn log_lines(&mut self, text: &str) -> Vec<String> {
+        self.logs()
+            .into_iter()
+            .filter(|l| l.contains(text))
+            .collect()
+    }
+
+    /// Halts the core as a debug probe would (DBGMCU stop bits apply).
+    pub fn debug_halt(&mut self, halt: bool) {
+        let now = self.now();
+        self.core = if halt {
+            CoreState::DebugHalt
+        } else {
+            CoreState::Running
+        };
+        let st = self.uc.get_data_mut();
+        st.bus.advance(now);
+        st.bus.debug_halt = halt;
+        let cr = st.bus.dbgmcu_cr;
+        // DBG_TIM1_STOP (10), TIM2 (11), TIM3 (12), TIM4 (13).
+        for (i, bit) in [(0usize, 10u32), (1, 11), (2, 12), (3, 13)] {
+            st.bus.tim[i].halted = halt && cr & (1 << bit) != 0;
+        }
+    }
+
+    /// Ticks of the pending stop, for tests.
+    pub fn lockup(&self) -> bool {
+        self.core == CoreState::Lockup
+    }
+
+    /// Pends an external interrupt as a debugger writing NVIC_ISPR would.
+    pub fn pend_irq(&mut self, irq: u32) {
+        self.state_mut().nvic.pend_irq(irq);
+    }
+}
+
+fn port_index(port: char) -> usize {
+    (port as u8).wrapping_sub(b'A').min(4) as usize
+}
+
+/// Writes the ELF's loadable contents (by load address) into the flash image.
+fn load_flash(data: &[u8], flash: &mut [u8]) -> Result<(), Error> {
+    use object::read::elf::{ElfFile32, ProgramHeader};
+    let elf =
+        ElfFile32::<object::Endianness>::parse(data).map_err(|e| Error::Elf(e.to_string()))?;
+    let endian = elf.endian();
+    for ph in elf.elf_program_headers() {
+        if ph.p_type(endian) != object::elf::PT_LOAD {
+            continue;
+        }
+        let paddr = ph.p_paddr(endian);
+        let filesz = ph.p_filesz(endian) as usize;
+        if filesz == 0 {
+            continue;
+        }
+        let bytes = ph
+            .data(endian, data)
+            .map_err(|_| Error::Elf("segment data".into()))?;
+        if paddr < FLASH_BASE || paddr + filesz as u32 > FLASH_BASE + FLASH_SIZE {
+            continue;
+        }
+        let off = (paddr - FLASH_BASE) as usize;
+        flash[off..off + filesz].copy_from_slice(&bytes[..filesz]);
+    }
+    let _ = elf.sections().count();
+    let _ = elf.section_by_name(".vector_table").map(|s| s.address());
+    Ok(())
+}
+
+fn map_peripherals(uc: &mut Unicorn<'static, State>) -> Result<(), Error> {
+    // APB1, APB2, AHB peripherals.
+    uc.mmio_map(
+        0x4000_0000,
+        0x24000,
+        Some(|uc: &mut Unicorn<'_, State>, off: u64, size: usize| {
+            let st = uc.get_data_mut();
+            let a = 0x4000_0000 + off as u32;
+            let word = st.bus.read(a & !3, st.now);
+            u64::from(narrow(word, a, size))
+        }),
+        Some(
+            |uc: &mut Unicorn<'_, State>, off: u64, size: usize, v: u64| {
+                let st = uc.get_data_mut();
+                let a = 0x4000_0000 + off as u32;
+                let v = widen(v as u32, a, size);
+                st.bus.write(a & !3, v, st.now);
+                st.touched = true;
+                if let Some(cmd) = st.bus.flash_cmd.take() {
+                    do_flash_cmd(uc, cmd);
+                }
+                let st = uc.get_data_mut();
+                st.stop.get_or_insert(Stop::Replan);
+            },
+        ),
+    )
+    .map_err(uc_err)?;
+    // Peripheral bit-band alias (ARMv7-M A3.7; the HAL sets RCC enable bits
+    // this way).
+    uc.mmio_map(
+        0x4200_0000,
+        0x48_0000,
+        Some(|uc: &mut Unicorn<'_, State>, off: u64, _size: usize| {
+            let st = uc.get_data_mut();
+            let byte = (off / 32) as u32;
+            let bit = ((off % 32) / 4) as u32 + 8 * (byte & 3);
+            let word = st.bus.read(0x4000_0000 + (byte & !3), st.now);
+            u64::from((word >> bit) & 1)
+        }),
+        Some(
+            |uc: &mut Unicorn<'_, State>, off: u64, _size: usize, v: u64| {
+                let st = uc.get_data_mut();
+                let byte = (off / 32) as u32;
+                let bit = ((off % 32) / 4) as u32 + 8 * (byte & 3);
+                let a = 0x4000_0000 + (byte & !3);
+                let word = st.bus.read(a, st.now);
+                let word = if v & 1 != 0 {
+                    word | (1 << bit)
+                } else {
+                    word & !(1 << bit)
+                };
+                st.bus.write(a, word, st.now);
+                st.stop.get_or_insert(Stop::Replan);
+            },
+        ),
+    )
+    .map_err(uc_err)?;
+    // Private peripheral bus: SysTick, NVIC, SCB, DWT, DBGMCU.
+    uc.mmio_map(
+        0xE000_0000,
+        0x10_0000,
+        Some(|uc: &mut Unicorn<'_, State>, off: u64, size: usize| {
+            let st = uc.get_data_mut();
+            let a = 0xE000_0000 + off as u32;
+            let word = st.ppb_read(a & !3);
+            u64::from(narrow(word, a, size))
+        }),
+        Some(
+            |uc: &mut Unicorn<'_, State>, off: u64, size: usize, v: u64| {
+                let st = uc.get_data_mut();
+                let a = 0xE000_0000 + off as u32;
+                if size == 4 {
+                    st.ppb_write(a, v as u32, 4);
+                } else if (0xE000_E400..0xE000_E500).contains(&a)
+                    || (0xE000_ED18..0xE000_ED24).contains(&a)
+                {
+                    // Byte-accessible priority registers.
+                    st.ppb_write(a, v as u32, size);
+                } else {
+                    let w = widen(v as u32, a, size);
+                    st.ppb_write(a & !3, w, 4);
+                }
+            },
+        ),
+    )
+    .map_err(uc_err)?;
+    Ok(())
+}
+
+fn narrow(word: u32, a: u32, size: usize) -> u32 {
+    let shift = 8 * (a & 3);
+    let v = word >> shift;
+    match size {
+        1 => v & 0xFF,
+        2 => v & 0xFFFF,
+        _ => v,
+    }
+}
+
+fn widen(v: u32, a: u32, size: usize) -> u32 {
+    match size {
+        1 | 2 => v << (8 * (a & 3)),
+        _ => v,
+    }
+}
+
+/// A page erase by the FPEC: the page reads 0xFF, the CPU stalls tERASE.
+fn do_flash_cmd(uc: &mut Unicorn<'_, State>, cmd: periph::FlashCmd) {
+    let periph::FlashCmd::ErasePage(page) = cmd;
+    let st = uc.get_data_mut();
+    if !(FLASH_BASE..FLASH_BASE + FLASH_SIZE).contains(&page) {
+        st.bus.flash.sr |= 0x10; // WRPRTERR-like: address outside flash
+        return;
+    }
+    let n = st.bus.flash.ops;
+    st.bus.flash.ops += 1;
+    let cut = st.bus.flash.cut_at;
+    if cut == Some((n, false)) {
+        // Power lost while erasing: half the page erased (an interrupted
+        // erase leaves it neither old nor blank).
+        st.bus.flash.cut_fired = true;
+        let _ = uc.mem_write(u64::from(page), &[0xFF; (periph::FLASH_PAGE / 2) as usize]);
+        return;
+    }
+    let _ = uc.mem_write(u64::from(page), &[0xFF; periph::FLASH_PAGE as usize]);
+    let st = uc.get_data_mut();
+    st.bus.flash.log.push(FlashOp::Erase(page));
+    st.bus.flash.sr |= 0x20; // EOP
+    st.stall += periph::T_ERASE;
+    if cut == Some((n, true)) {
+        st.bus.flash.cut_fired = true;
+    }
+}
+
+fn add_hooks(uc: &mut Unicorn<'static, State>) -> Result<(), Error> {
+    // Every instruction: time, and the masks while an exception waits.
+    uc.add_code_hook(
+        1,
+        0,
+        |uc: &mut Unicorn<'_, State>, _addr: u64, _size: u32| {
+            let st = uc.get_data_mut();
+            if st.stop.is_some() {
+                // A register write asked for a re-plan: stop before this
+                // instruction (unicorn checks for a stop right after the hook).
+                let _ = uc.emu_stop();
+                return;
+            }
+            st.now += st.cost;
+            st.instructions += 1;
+            if st.watch_masks {
+                let pm = uc.reg_read(RegisterARM::PRIMASK).unwrap_or(0) & 1 != 0;
+                let fm = uc.reg_read(RegisterARM::FAULTMASK).unwrap_or(0) & 1 != 0;
+                let bp = uc.reg_read(RegisterARM::BASEPRI).unwrap_or(0) as u8;
+                let st = uc.get_data_mut();
+                let exec = st.nvic.execution_priority(pm, fm, bp);
+                if st.nvic.top_pending().is_some_and(|(_, p)| p < exec) {
+                    st.watch_masks = false;
+                    st.now -= st.cost;
+                    st.instructions -= 1;
+                    st.stop.get_or_insert(Stop::Replan);
+                    let _ = uc.emu_stop();
+                }
+            }
+        },
+    )
+    .map_err(uc_err)?;
+    // Exceptions raised by the instruction set (UDF, BKPT, SVC, aborts).
+    uc.add_intr_hook(|uc: &mut Unicorn<'_, State>, intno: u32| {
+        let st = uc.get_data_mut();
+        st.stop = Some(Stop::Fault(intno));
+        let _ = uc.emu_stop();
+    })
+    .map_err(uc_err)?;
+    // Writes into the flash array: the FPEC programs half-words only when
+    // PG is set and the half-word is erased (RM0008 §3.3.3, PM0075 §2.3.3).
+    uc.add_mem_hook(
+        HookType::MEM_WRITE,
+        u64::from(FLASH_BASE),
+        u64::from(FLASH_BASE + FLASH_SIZE - 1),
+        |uc: &mut Unicorn<'_, State>, _t: MemType, addr: u64, size: usize, value: i64| {
+            let a = addr as u32 & !1;
+            let mut old = [0u8; 2];
+            let _ = uc.mem_read(u64::from(a), &mut old);
+            let old = u16::from_le_bytes(old);
+            let st = uc.get_data_mut();
+            let fc = &mut st.bus.flash;
+            let pg = fc.cr & 1 != 0 && fc.cr & 0x80 == 0;
+            let new = value as u16;
+            if !pg || size != 2 {
+                // Not programming: the array does not change.
+                st.fixups.push((a, old));
+                return true;
+            }
+            let n = fc.ops;
+            fc.ops += 1;
+            if fc.cut_at == Some((n, false)) {
+                fc.cut_fired = true;
+                st.fixups.push((a, old));
+                st.stop.get_or_insert(Stop::Replan);
+                return true;
+            }
+            if old != 0xFFFF && new != 0 {
+                // PGERR: not erased; nothing written.
+                fc.sr |= 0x04;
+                st.fixups.push((a, old));
+            } else {
+                fc.sr |= 0x20; // EOP
+                fc.log.push(FlashOp::Program(a, new));
+                st.stall += periph::T_PROG;
+            }
+            if fc.cut_at == Some((n, true)) {
+                fc.cut_fired = true;
+            }
+            st.stop.get_or_insert(Stop::Replan);
+            true
+        },
+    )
+    .map_err(uc_err)?;
+    // Accesses to unmapped memory: note the address for BFAR.
+    uc.add_mem_hook(
+        HookType::MEM_UNMAPPED,
+        1,
+        0,
+        |uc: &mut Unicorn<'_, State>, _t: MemType, addr: u64, _size: usize, _v: i64| {
+            uc.get_data_mut().bus_error = Some(addr as u32);
+            false
+        },
+    )
+    .map_err(uc_err)?;
+    Ok(())
+}
+
+impl LogSink {
+    fn start(elf: &Path, decode: bool, echo: bool) -> Result<Self, Error> {
+        if !decode {
+            return Ok(Self {
+                stdin: None,
+                child: None,
+                rx: None,
+                lines: Vec::new(),
+                last_write: Instant::now(),
+            });
+        }
+        let mut child = Command::new("defmt-print")
+            .arg("-e")
+            .arg(elf)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| {
+                io::Error::new(
+                    e.kind(),
+                    format!("defmt-print: {e} (install it with `cargo install defmt-print --locked`; bash .ci/run does)"),
+                )
+            })?;
+        let stdin = child.stdin.take();
+        let out = child
+            .stdout
+            .take()
+            .ok_or_else(|| io::Error::other("no defmt-print stdout"))?;
+        let (tx, rx) = mpsc::channel();
+        thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                if echo {
+                    eprintln!("twin| {line}");
+                }
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(Self {
+            stdin,
+            child: Some(child),
+            rx: Some(rx),
+            lines: Vec::new(),
+            last_write: Instant::now(),
+        })
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        if let Some(s) = &mut self.stdin {
+            let _ = s.write_all(bytes);
+            let _ = s.flush();
+            self.last_write = Instant::now();
+        }
+        self.poll();
+    }
+
+    fn poll(&mut self) {
+        if let Some(rx) = &self.rx {
+            while let Ok(l) = rx.try_recv() {
+                self.lines.push(l);
+            }
+        }
+    }
+
+    /// Waits until the decoder has been quiet for 100 ms (at most 2 s).
+    fn settle(&mut self) {
+        let Some(rx) = &self.rx else { return };
+        let deadline = Instant::now() + Duration::from_secs(2);
+        loop {
+            match rx.recv_timeout(Duration::from_millis(100)) {
+                Ok(l) => self.lines.push(l),
+                Err(_) => {
+                    if self.last_write.elapsed() >= Duration::from_millis(100) {
+                        break;
+                    }
+                }
+            }
+            if Instant::now() > deadline {
+                break;
+            }
+        }
+    }
+}
+
+impl Drop for LogSink {
+    fn drop(&mut self) {
+        self.stdin = None;
+        if let Some(c) = &mut self.child {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+// Shared handle used by watchers that need the twin across closures.
+/// A shared, interior-mutable cell for values a watcher records.
+pub type Shared<T> = Rc<RefCell<T>>;
+
+/// `NEVER` re-exported for the plant.
+pub const NEVER_TICKS: Ticks = NEVER;

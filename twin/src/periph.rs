@@ -1,0 +1,1678 @@
+//! Peripheral models of the STM32F103 (medium density), written from the
+//! reference manual RM0008 (section numbers in the comments) and the
+//! Cortex-M3 generic user guide (PM0056) for the system control space.
+//!
+//! Every model is lazy: its state is brought up to date ("advanced") to the
+//! current time when the CPU touches a register or when the scheduler reaches
+//! the model's next event. Time is counted in [`Ticks`] of 1/72 MHz.
+
+use std::collections::VecDeque;
+
+/// Time in ticks of 1/72 MHz (the twin's time base, see docs/twin.md).
+pub type Ticks = u64;
+/// Ticks per second.
+pub const TICKS_PER_S: u64 = 72_000_000;
+/// HSI and HSE (the board's 8 MHz crystal), Hz.
+pub const HSI_HZ: u64 = 8_000_000;
+/// The board's crystal, Hz.
+pub const HSE_HZ: u64 = 8_000_000;
+/// "Never" for event times.
+pub const NEVER: Ticks = u64::MAX;
+
+/// Interrupt lines of the STM32F103 used by the models (RM0008 table 63).
+pub mod irq {
+    /// EXTI line 0.
+    pub const EXTI0: u32 = 6;
+    /// ADC1_2.
+    pub const ADC1_2: u32 = 18;
+    /// TIM1 update.
+    pub const TIM1_UP: u32 = 25;
+    /// TIM1 capture compare.
+    pub const TIM1_CC: u32 = 27;
+    /// TIM2.
+    pub const TIM2: u32 = 28;
+    /// TIM3.
+    pub const TIM3: u32 = 29;
+    /// TIM4.
+    pub const TIM4: u32 = 30;
+    /// USART1.
+    pub const USART1: u32 = 37;
+    /// USART2.
+    pub const USART2: u32 = 38;
+    /// EXTI lines 15..10.
+    pub const EXTI15_10: u32 = 40;
+    /// RCC (clock security is on NMI).
+    pub const RCC: u32 = 5;
+    /// FLASH.
+    pub const FLASH: u32 = 4;
+}
+
+/// Level of a pin as a scope would see it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Level {
+    /// Driven high (push-pull output at 1).
+    High,
+    /// Driven low.
+    Low,
+    /// Not driven by the MCU: floating input, analog, disabled AF output,
+    /// or an open-drain output at 1.
+    HiZ,
+    /// Input with the internal pull-up.
+    PullUp,
+    /// Input with the internal pull-down.
+    PullDown,
+}
+
+/// What the outside world does to an input pin.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum External {
+    /// Nothing connected.
+    #[default]
+    Open,
+    /// Driven (or switched) high.
+    High,
+    /// Driven (or switched) low.
+    Low,
+}
+
+/// The clock tree as configured in RCC (RM0008 §7.2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Clocks {
+    /// SYSCLK = HCLK (AHB prescaler applied), Hz.
+    pub hclk: u64,
+    /// SYSCLK before the AHB prescaler, Hz.
+    pub sysclk: u64,
+    /// APB1, Hz.
+    pub pclk1: u64,
+    /// APB2, Hz.
+    pub pclk2: u64,
+    /// TIM2..TIM4 kernel clock (×2 when the APB1 prescaler is not 1), Hz.
+    pub tim_apb1: u64,
+    /// TIM1 kernel clock, Hz.
+    pub tim_apb2: u64,
+}
+
+fn ticks_per(hz: u64) -> u64 {
+    (TICKS_PER_S / hz.max(1)).max(1)
+}
+
+// ---------------------------------------------------------------------------
+// RCC (RM0008 §7.3)
+// ---------------------------------------------------------------------------
+
+/// Reset and clock control.
+#[derive(Clone, Debug)]
+pub struct Rcc {
+    /// CR.
+    pub cr: u32,
+    /// CFGR (SWS is computed).
+    pub cfgr: u32,
+    /// CIR.
+    pub cir: u32,
+    /// APB2RSTR, APB1RSTR, AHBENR, APB2ENR, APB1ENR, BDCR.
+    pub apb2rstr: u32,
+    /// APB1RSTR.
+    pub apb1rstr: u32,
+    /// AHBENR.
+    pub ahbenr: u32,
+    /// APB2ENR.
+    pub apb2enr: u32,
+    /// APB1ENR.
+    pub apb1enr: u32,
+    /// BDCR.
+    pub bdcr: u32,
+    /// CSR (reset flags kept across system resets).
+    pub csr: u32,
+    /// The crystal never starts (a dead or missing HSE).
+    pub hse_dead: bool,
+    /// When HSEON was set.
+    hse_on_at: Option<Ticks>,
+    /// When PLLON was set.
+    pll_on_at: Option<Ticks>,
+}
+
+/// HSE start-up time assumed for a good crystal (datasheet tSU(HSE) ≈ 2 ms).
+const HSE_STARTUP: Ticks = 2 * TICKS_PER_S / 1000;
+/// PLL lock time (datasheet tLOCK ≤ 200 µs).
+const PLL_LOCK: Ticks = 200 * TICKS_PER_S / 1_000_000;
+
+impl Rcc {
+    fn new(csr: u32, hse_dead: bool) -> Self {
+        Self {
+            cr: 0x0000_0083,
+            cfgr: 0,
+            cir: 0,
+            apb2rstr: 0,
+            apb1rstr: 0,
+            ahbenr: 0x14,
+            apb2enr: 0,
+            apb1enr: 0,
+            bdcr: 0,
+            csr: csr | 0x0C00_0000, // NRSTF|PORRSTF at power-on
+            hse_dead,
+            hse_on_at: None,
+            pll_on_at: None,
+        }
+    }
+
+    fn hse_ready(&self, now: Ticks) -> bool {
+        !self.hse_dead && self.hse_on_at.is_some_and(|t| now >= t + HSE_STARTUP)
+    }
+
+    fn pll_ready(&self, now: Ticks) -> bool {
+        let src_ok = if self.cfgr & (1 << 16) != 0 {
+            self.hse_ready(now)
+        } else {
+            true
+        };
+        src_ok && self.pll_on_at.is_some_and(|t| now >= t + PLL_LOCK)
+    }
+
+    fn cr_read(&self, now: Ticks) -> u32 {
+        let mut v = self.cr & !((1 << 1) | (1 << 17) | (1 << 25));
+        if self.cr & 1 != 0 {
+            v |= 1 << 1;
+        }
+        if self.cr & (1 << 16) != 0 && self.hse_ready(now) {
+            v |= 1 << 17;
+        }
+        if self.cr & (1 << 24) != 0 && self.pll_ready(now) {
+            v |= 1 << 25;
+        }
+        v
+    }
+
+    /// SWS: the switch takes effect only onto a ready source.
+    fn sws(&self) -> u32 {
+        (self.cfgr >> 2) & 3
+    }
+
+    /// The clock tree in force.
+    pub fn clocks(&self) -> Clocks {
+        let sysclk = match self.sws() {
+            1 => HSE_HZ,
+            2 => {
+                let src = if self.cfgr & (1 << 16) != 0 {
+                    if self.cfgr & (1 << 17) != 0 {
+                        HSE_HZ / 2
+                    } else {
+                        HSE_HZ
+                    }
+                } else {
+                    HSI_HZ / 2
+                };
+                let mul = u64::from(((self.cfgr >> 18) & 0xF) + 2).min(16);
+                src * mul
+            }
+            _ => HSI_HZ,
+        };
+        let hpre = (self.cfgr >> 4) & 0xF;
+        let hdiv = if hpre < 8 {
+            1
+        } else {
+            [2, 4, 8, 16, 64, 128, 256, 512][(hpre - 8) as usize]
+        };
+        let hclk = sysclk / hdiv;
+        let apb = |bits: u32| if bits < 4 { 1 } else { 1 << (bits - 3) };
+        let d1 = apb((self.cfgr >> 8) & 7);
+        let d2 = apb((self.cfgr >> 11) & 7);
+        let pclk1 = hclk / d1;
+        let pclk2 = hclk / d2;
+        Clocks {
+            hclk,
+            sysclk,
+            pclk1,
+            pclk2,
+            tim_apb1: if d1 == 1 { pclk1 } else { pclk1 * 2 },
+            tim_apb2: if d2 == 1 { pclk2 } else { pclk2 * 2 },
+        }
+    }
+
+    fn update_switch(&mut self, now: Ticks) {
+        let sw = self.cfgr & 3;
+        let ready = match sw {
+            0 => true,
+            1 => self.hse_ready(now),
+            2 => self.pll_ready(now),
+            _ => false,
+        };
+        if ready {
+            self.cfgr = (self.cfgr & !0xC) | (sw << 2);
+        }
+    }
+
+    fn read(&mut self, off: u32, now: Ticks) -> u32 {
+        self.update_switch(now);
+        match off {
+            0x00 => self.cr_read(now),
+            0x04 => self.cfgr,
+            0x08 => self.cir,
+            0x0C => self.apb2rstr,
+            0x10 => self.apb1rstr,
+            0x14 => self.ahbenr,
+            0x18 => self.apb2enr,
+            0x1C => self.apb1enr,
+            0x20 => self.bdcr,
+            0x24 => self.csr | 0x2, // LSIRDY: the LSI runs (the IWDG forces it on)
+            _ => 0,
+        }
+    }
+
+    fn write(&mut self, off: u32, v: u32, now: Ticks) {
+        match off {
+            0x00 => {
+                let rw = 0x0109_00F9; // HSION, HSITRIM, HSEON, HSEBYP, CSSON, PLLON
+                let old = self.cr;
+                self.cr = (self.cr & !rw) | (v & rw);
+                if self.cr & (1 << 16) != 0 && old & (1 << 16) == 0 {
+                    self.hse_on_at = Some(now);
+                }
+                if self.cr & (1 << 16) == 0 {
+                    self.hse_on_at = None;
+                }
+                if self.cr & (1 << 24) != 0 && old & (1 << 24) == 0 {
+                    self.pll_on_at = Some(now);
+                }
+                if self.cr & (1 << 24) == 0 {
+                    self.pll_on_at = None;
+                }
+            }
+            0x04 => {
+                self.cfgr = (self.cfgr & 0xC) | (v & !0xC);
+            }
+            0x08 => {
+                // Clear bits (rc_w1 in the upper half) and enables.
+                let clear = (v >> 16) & 0x9F;
+                self.cir = (self.cir & !clear) & !0x1F00 | (v & 0x1F00);
+            }
+            0x0C => self.apb2rstr = v,
+            0x10 => self.apb1rstr = v,
+            0x14 => self.ahbenr = v,
+            0x18 => self.apb2enr = v,
+            0x1C => self.apb1enr = v,
+            0x20 => self.bdcr = v,
+            0x24 => {
+                if v & (1 << 24) != 0 {
+                    self.csr &= !0xFE00_0000; // RMVF
+                }
+                self.csr = (self.csr & !1) | (v & 1);
+            }
+            _ => {}
+        }
+        self.update_switch(now);
+    }
+}
+
+// ---------------------------------------------------------------------------
+// FLASH / FPEC (RM0008 §3.3; PM0075)
+// ---------------------------------------------------------------------------
+
+/// Start of the main flash.
+pub const FLASH_BASE: u32 = 0x0800_0000;
+/// 128 KB (STM32F103RB).
+pub const FLASH_SIZE: u32 = 128 * 1024;
+/// 1 KB pages (medium density).
+pub const FLASH_PAGE: u32 = 1024;
+/// Datasheet maximum of a half-word program time, tPROG = 70 µs.
+pub const T_PROG: Ticks = 70 * TICKS_PER_S / 1_000_000;
+/// Datasheet maximum of a page erase time, tERASE = 40 ms.
+pub const T_ERASE: Ticks = 40 * TICKS_PER_S / 1000;
+
+/// A flash operation the FPEC carried out (for power-cut tests).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FlashOp {
+    /// A half-word programmed at this address.
+    Program(u32, u16),
+    /// A page erased at this address.
+    Erase(u32),
+}
+
+/// The flash memory interface.
+#[derive(Clone, Debug)]
+pub struct FlashCtl {
+    /// ACR.
+    pub acr: u32,
+    /// CR.
+    pub cr: u32,
+    /// SR (BSY is never seen: the CPU stalls while the FPEC works).
+    pub sr: u32,
+    /// AR.
+    pub ar: u32,
+    key_step: u8,
+    /// Locked until reset after a wrong key.
+    key_fault: bool,
+    /// Operations carried out since the twin was built.
+    pub ops: u64,
+    /// Cut the power when the operation with this number (0-based, counted
+    /// in [`FlashCtl::ops`]) is about to happen; `after` cuts right after it.
+    pub cut_at: Option<(u64, bool)>,
+    /// Set when a cut fired: the twin resets at the next instruction boundary.
+    pub cut_fired: bool,
+    /// What the FPEC did, in order.
+    pub log: Vec<FlashOp>,
+}
+
+impl FlashCtl {
+    fn new() -> Self {
+        Self {
+            acr: 0x30,
+            cr: 0x80,
+            sr: 0,
+            ar: 0,
+            key_step: 0,
+            key_fault: false,
+            ops: 0,
+            cut_at: None,
+            cut_fired: false,
+            log: Vec::new(),
+        }
+    }
+
+    fn reset(&mut self) {
+        let keep = (self.ops, self.cut_at, std::mem::take(&mut self.log));
+        *self = Self::new();
+        (self.ops, self.cut_at, self.log) = keep;
+    }
+
+    fn read(&self, off: u32) -> u32 {
+        match off {
+            0x00 => {
+                // PRFTBS follows PRFTBE.
+                (self.acr & !0x20) | if self.acr & 0x10 != 0 { 0x20 } else { 0 }
+            }
+            0x0C => self.sr,
+            0x10 => self.cr,
+            0x14 => self.ar,
+            0x1C => 0x03FF_FFFC & 0x1C, // OBR: RDPRT off, software watchdog, nRST_STOP/STDBY
+            0x20 => 0xFFFF_FFFF,        // WRPR: no page write-protected
+            _ => 0,
+        }
+    }
+
+    fn write(&mut self, off: u32, v: u32) -> Option<FlashCmd> {
+        match off {
+            0x00 => self.acr = v & 0x1F,
+            0x04 => {
+                // KEYR: KEY1 then KEY2 (RM0008 §3.3.3 / PM0075 §2.3.1).
+                match (self.key_step, v) {
+                    _ if self.key_fault => {}
+                    (0, 0x4567_0123) => self.key_step = 1,
+                    (1, 0xCDEF_89AB) if self.cr & 0x80 != 0 => {
+                        self.cr &= !0x80;
+                        self.key_step = 0;
+                    }
+                    _ => {
+                        self.key_fault = true;
+                        self.cr |= 0x80;
+                    }
+                }
+            }
+            0x0C => {
+                // EOP, WRPRTERR, PGERR are rc_w1.
+                self.sr &= !(v & 0x34);
+            }
+            0x10 => {
+                if self.cr & 0x80 != 0 {
+                    return None; // locked: writes ignored
+                }
+                let was = self.cr;
+                self.cr = v & 0x1677;
+                if v & 0x80 != 0 {
+                    self.cr |= 0x80;
+                }
+                if v & 0x40 != 0 && self.cr & 2 != 0 && was & 0x40 == 0 {
+                    self.cr &= !0x40;
+                    return Some(FlashCmd::ErasePage(self.ar & !(FLASH_PAGE - 1)));
+                }
+                self.cr &= !0x40;
+            }
+            0x14 => self.ar = v,
+            _ => {}
+        }
+        None
+    }
+}
+
+/// What a register write asks the FPEC to do (carried out by the twin on
+/// the flash image, with the CPU stall).
+#[derive(Clone, Copy, Debug)]
+pub enum FlashCmd {
+    /// Erase the page at this address.
+    ErasePage(u32),
+}
+
+// ---------------------------------------------------------------------------
+// GPIO (RM0008 §9.2)
+// ---------------------------------------------------------------------------
+
+/// A GPIO port.
+#[derive(Clone, Debug)]
+pub struct Gpio {
+    /// CRL, CRH.
+    pub cr: [u32; 2],
+    /// ODR.
+    pub odr: u32,
+    /// LCKR.
+    pub lckr: u32,
+}
+
+impl Gpio {
+    fn new() -> Self {
+        Self {
+            cr: [0x4444_4444; 2],
+            odr: 0,
+            lckr: 0,
+        }
+    }
+
+    /// MODE and CNF of a pin: (mode, cnf).
+    pub fn config(&self, pin: u32) -> (u32, u32) {
+        let r = self.cr[(pin / 8) as usize] >> ((pin % 8) * 4);
+        (r & 3, (r >> 2) & 3)
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Timers (RM0008 §14 advanced TIM1, §15 general purpose TIM2..TIM4)
+// ---------------------------------------------------------------------------
+
+/// One of TIM1..TIM4.
+#[derive(Clone, Debug)]
+pub struct Timer {
+    /// 1 for TIM1 (advanced), 2..4.
+    pub number: u8,
+    /// CR1.
+    pub cr1: u32,
+    /// CR2.
+    pub cr2: u32,
+    /// SMCR.
+    pub smcr: u32,
+    /// DIER.
+    pub dier: u32,
+    /// SR.
+    pub sr: u32,
+    /// CCMR1, CCMR2.
+    pub ccmr: [u32; 2],
+    /// CCER.
+    pub ccer: u32,
+    /// BDTR (TIM1 only).
+    pub bdtr: u32,
+    /// RCR (TIM1 only).
+    pub rcr: u32,
+    /// PSC preload and active.
+    pub psc: u16,
+    /// Active prescaler.
+    pub psc_act: u16,
+    /// ARR preload.
+    pub arr: u16,
+    /// Active auto-reload.
+    pub arr_act: u16,
+    /// CCR preload registers (or captured values).
+    pub ccr: [u16; 4],
+    /// Active compare values.
+    pub ccr_act: [u16; 4],
+    /// Counter.
+    pub cnt: u16,
+    psc_cnt: u64,
+    /// Last advance.
+    t: Ticks,
+    frac: u64,
+    /// Update events so far (one output period each in PWM).
+    pub updates: u64,
+    /// Rising edges of OC1 so far (PWM mode 1 with 0 < CCR1).
+    pub oc1_pulses: u64,
+    /// Frozen by the debug halt (DBGMCU TIMx_STOP with the core halted).
+    pub halted: bool,
+}
+
+impl Timer {
+    fn new(number: u8) -> Self {
+        Self {
+            number,
+            cr1: 0,
+            cr2: 0,
+            smcr: 0,
+            dier: 0,
+            sr: 0,
+            ccmr: [0; 2],
+            ccer: 0,
+            bdtr: 0,
+            rcr: 0,
+            psc: 0,
+            psc_act: 0,
+            // RM0008 §15.4.12 / §14.4.12: ARR resets to 0.
+            arr: 0,
+            arr_act: 0,
+            ccr: [0; 4],
+            ccr_act: [0; 4],
+            cnt: 0,
+            psc_cnt: 0,
+            t: 0,
+            frac: 0,
+            updates: 0,
+            oc1_pulses: 0,
+            halted: false,
+        }
+    }
+
+    fn reset(&mut self, now: Ticks) {
+        let n = self.number;
+        let keep = (self.updates, self.oc1_pulses);
+        *self = Self::new(n);
+        self.t = now;
+        (self.updates, self.oc1_pulses) = keep;
+    }
+
+    /// Encoder mode (SMS = 001, 010, 011): the counter follows the inputs.
+    pub fn encoder_mode(&self) -> u32 {
+        let sms = self.smcr & 7;
+        if (1..=3).contains(&sms) {
+            sms
+        } else {
+            0
+        }
+    }
+
+    fn running(&self) -> bool {
+        self.cr1 & 1 != 0 && !self.halted && self.encoder_mode() == 0
+    }
+
+    fn oc_mode(&self, ch: usize) -> u32 {
+        (self.ccmr[ch / 2] >> (4 + 8 * (ch % 2) as u32)) & 7
+    }
+
+    fn cc_input(&self, ch: usize) -> bool {
+        (self.ccmr[ch / 2] >> (8 * (ch % 2) as u32)) & 3 != 0
+    }
+
+    fn oc_preload(&self, ch: usize) -> bool {
+        (self.ccmr[ch / 2] >> (3 + 8 * (ch % 2) as u32)) & 1 != 0
+    }
+
+    /// The update event: preloads transferred (RM0008 §15.3.2).
+    fn update_event(&mut self, set_flag: bool) {
+        self.psc_act = self.psc;
+        self.arr_act = self.arr;
+        for ch in 0..4 {
+            if !self.cc_input(ch) {
+                self.ccr_act[ch] = self.ccr[ch];
+            }
+        }
+        if set_flag && self.cr1 & 2 == 0 {
+            self.sr |= 1;
+        }
+        self.updates += 1;
+        if !self.cc_input(0) && self.oc_mode(0) == 0b110 && self.ccr_act[0] > 0 {
+            self.oc1_pulses += 1;
+        }
+    }
+
+    fn compare_flags(&mut self, from: u16, to: u16) {
+        // Output-compare channels whose CCR lies in (from, to].
+        for ch in 0..4 {
+            if !self.cc_input(ch) {
+                let c = self.ccr_act[ch];
+                if c > from && c <= to {
+                    self.sr |= 1 << (ch + 1);
+                }
+            }
+        }
+    }
+
+    fn advance(&mut self, now: Ticks, clk_hz: u64) {
+        if now <= self.t {
+            return;
+        }
+        let elapsed = now - self.t + self.frac;
+        self.t = now;
+        if !self.running() {
+            self.frac = 0;
+            return;
+        }
+        let per = ticks_per(clk_hz);
+        let mut n = elapsed / per;
+        self.frac = elapsed % per;
+        if self.arr_act == 0 {
+            // "The counter is blocked while the auto-reload value is null."
+            return;
+        }
+        let one_pulse = self.cr1 & 8 != 0;
+        loop {
+            let div = u64::from(self.psc_act) + 1;
+            let to_step = div - self.psc_cnt;
+            let to_uev = to_step + u64::from(self.arr_act - self.cnt.min(self.arr_act)) * div;
+            if n < to_uev {
+                let steps = (self.psc_cnt + n) / div;
+                self.psc_cnt = (self.psc_cnt + n) % div;
+                let from = self.cnt;
+                let to = (u64::from(self.cnt) + steps).min(0xFFFF) as u16;
+                self.compare_flags(from, to);
+                self.cnt = to;
+                return;
+            }
+            n -= to_uev;
+            self.psc_cnt = 0;
+            let from = self.cnt;
+            self.compare_flags(from, self.arr_act);
+            self.cnt = 0;
+            self.update_event(true);
+            if one_pulse {
+                self.cr1 &= !1;
+                return;
+            }
+            if self.arr_act == 0 {
+                return;
+            }
+            // Whole periods at once: preloads are now in force.
+            let period = (u64::from(self.arr_act) + 1) * (u64::from(self.psc_act) + 1);
+            let k = n / period;
+            if k > 0 {
+                n -= k * period;
+                self.updates += k;
+                if !self.cc_input(0) && self.oc_mode(0) == 0b110 && self.ccr_act[0] > 0 {
+                    self.oc1_pulses += k;
+                }
+                self.compare_flags(0, self.arr_act);
+                if self.cr1 & 2 == 0 {
+                    self.sr |= 1;
+                }
+            }
+        }
+    }
+
+    /// Time of the next update event, if the counter runs.
+    fn next_update(&self, clk_hz: u64) -> Ticks {
+        if !self.running() || self.arr_act == 0 {
+            return NEVER;
+        }
+        let div = u64::from(self.psc_act) + 1;
+        let to_uev =
+            (div - self.psc_cnt) + u64::from(self.arr_act - self.cnt.min(self.arr_act)) * div;
+        (self.t + to_uev * ticks_per(clk_hz)).saturating_sub(self.frac)
+    }
+
+    /// OC1REF now (PWM mode 1/2, forced levels).
+    pub fn oc1_ref(&self) -> bool {
+        match self.oc_mode(0) {
+            0b100 => false,
+            0b101 => true,
+            0b110 => self.arr_act != 0 && self.cnt < self.ccr_act[0],
+            0b111 => !(self.arr_act != 0 && self.cnt < self.ccr_act[0]),
+            _ => false,
+        }
+    }
+
+    /// CH1 output as the pin sees it when the pin is in AF mode: `None` when
+    /// the timer does not drive it (RM0008 table 83 for TIM1: MOE, OSSI,
+    /// OSSR, OIS1, CC1E; §15.4.9 for TIM2..TIM4: CC1E).
+    pub fn ch1_output(&self) -> Option<bool> {
+        let cc1e = self.ccer & 1 != 0;
+        let cc1p = self.ccer & 2 != 0;
+        if self.cc_input(0) {
+            return None;
+        }
+        if self.number != 1 {
+            return cc1e.then(|| self.oc1_ref() ^ cc1p);
+        }
+        let moe = self.bdtr & (1 << 15) != 0;
+        let ossi = self.bdtr & (1 << 10) != 0;
+        let ois1 = self.cr2 & (1 << 8) != 0;
+        if moe {
+            // CC1NE is unused on this board (0): OC1 is driven iff CC1E.
+            cc1e.then(|| self.oc1_ref() ^ cc1p)
+        } else if ossi && cc1e {
+            // Off-state: output enabled at its idle level OIS1.
+            Some(ois1)
+        } else {
+            None
+        }
+    }
+
+    /// The duty the CH1 output carries (PWM mode 1 on an enabled output),
+    /// 0..1, and whether it is driven at all.
+    pub fn ch1_duty(&self) -> Option<f64> {
+        let cc1p = self.ccer & 2 != 0;
+        let driven = self.ch1_output()?;
+        let moe = self.number != 1 || self.bdtr & (1 << 15) != 0;
+        if !moe || !self.running() || self.arr_act == 0 {
+            return Some(if driven { 1.0 } else { 0.0 });
+        }
+        let period = f64::from(self.arr_act) + 1.0;
+        let duty = match self.oc_mode(0) {
+            0b110 => f64::from(self.ccr_act[0]).min(period) / period,
+            0b111 => 1.0 - f64::from(self.ccr_act[0]).min(period) / period,
+            0b101 => 1.0,
+            _ => 0.0,
+        };
+        Some(if cc1p { 1.0 - duty } else { duty })
+    }
+
+    /// An input edge on CH1 at the current time (already advanced):
+    /// capture into CCR1, CC1IF, CC1OF (RM0008 §15.3.5).
+    fn capture1(&mut self) {
+        if !self.cc_input(0) || self.ccer & 1 == 0 {
+            return;
+        }
+        if self.sr & 2 != 0 {
+            self.sr |= 1 << 9; // CC1OF
+        }
+        self.ccr[0] = self.cnt;
+        self.ccr_act[0] = self.cnt;
+        self.sr |= 2;
+    }
+
+    /// The input filter delay of IC1 (IC1F, CKD), in timer clocks
+    /// (RM0008 §15.4.7: N consecutive samples at fSAMPLING).
+    pub fn ic1_filter_clocks(&self) -> u64 {
+        let icf = (self.ccmr[0] >> 4) & 0xF;
+        let dts = 1u64 << ((self.cr1 >> 8) & 3).min(2);
+        let (div, n) = match icf {
+            0 => (1, 0),
+            1 => (1, 2),
+            2 => (1, 4),
+            3 => (1, 8),
+            4 => (2 * dts, 6),
+            5 => (2 * dts, 8),
+            6 => (4 * dts, 6),
+            7 => (4 * dts, 8),
+            8 => (8 * dts, 6),
+            9 => (8 * dts, 8),
+            10 => (16 * dts, 5),
+            11 => (16 * dts, 6),
+            12 => (16 * dts, 8),
+            13 => (32 * dts, 5),
+            14 => (32 * dts, 6),
+            _ => (32 * dts, 8),
+        };
+        div * n
+    }
+
+    fn irq_line(&self) -> bool {
+        self.dier & self.sr & 0x5F != 0
+    }
+
+    fn read(&mut self, off: u32) -> u32 {
+        match off {
+            0x00 => self.cr1,
+            0x04 => self.cr2,
+            0x08 => self.smcr,
+            0x0C => self.dier,
+            0x10 => self.sr,
+            0x18 => self.ccmr[0],
+            0x1C => self.ccmr[1],
+            0x20 => self.ccer,
+            0x24 => u32::from(self.cnt),
+            0x28 => u32::from(self.psc),
+            0x2C => u32::from(self.arr),
+            0x30 => u32::from(self.rcr),
+            0x34..=0x40 => {
+                let ch = ((off - 0x34) / 4) as usize;
+                if self.cc_input(ch) && ch == 0 {
+                    // Reading CCR1 in capture mode clears CC1IF.
+                    self.sr &= !2;
+                }
+                u32::from(self.ccr[ch])
+            }
+            0x44 if self.number == 1 => self.bdtr,
+            _ => 0,
+        }
+    }
+
+    fn write(&mut self, off: u32, v: u32) {
+        match off {
+            0x00 => self.cr1 = v & 0x3FF,
+            0x04 => self.cr2 = v,
+            0x08 => self.smcr = v,
+            0x0C => self.dier = v,
+            // rc_w0: writing 0 clears, 1 leaves the flag as it is.
+            0x10 => self.sr &= v | !0x1E7F,
+            0x14 => {
+                if v & 1 != 0 {
+                    // UG: counter and prescaler restart, preloads load.
+                    self.cnt = 0;
+                    self.psc_cnt = 0;
+                    let urs = self.cr1 & 4 != 0;
+                    self.update_event(!urs);
+                }
+                for ch in 0..4 {
+                    if v & (2 << ch) != 0 {
+                        if self.cc_input(ch) {
+                            self.ccr[ch] = self.cnt;
+                            self.ccr_act[ch] = self.cnt;
+                        }
+                        self.sr |= 2 << ch;
+                    }
+                }
+            }
+            0x18 => self.ccmr[0] = v & 0xFFFF,
+            0x1C => self.ccmr[1] = v & 0xFFFF,
+            0x20 => self.ccer = v & 0xFFFF,
+            0x24 => self.cnt = v as u16,
+            0x28 => self.psc = v as u16,
+            0x2C => {
+                self.arr = v as u16;
+                if self.cr1 & 0x80 == 0 {
+                    self.arr_act = self.arr;
+                }
+            }
+            0x30 => self.rcr = v & 0xFF,
+            0x34..=0x40 => {
+                let ch = ((off - 0x34) / 4) as usize;
+                if !self.cc_input(ch) {
+                    self.ccr[ch] = v as u16;
+                    if !self.oc_preload(ch) {
+                        self.ccr_act[ch] = v as u16;
+                    }
+                }
+            }
+            0x44 if self.number == 1 => self.bdtr = v & 0xFFFF,
+            _ => {}
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// USART (RM0008 §27)
+// ---------------------------------------------------------------------------
+
+/// USART1 or USART2.
+#[derive(Clone, Debug)]
+pub struct Usart {
+    /// SR.
+    pub sr: u32,
+    /// Received data.
+    pub rdr: u8,
+    /// BRR.
+    pub brr: u32,
+    /// CR1, CR2, CR3.
+    pub cr1: u32,
+    /// CR2.
+    pub cr2: u32,
+    /// CR3.
+    pub cr3: u32,
+    /// Bytes waiting on the line (from the other end).
+    pub rx_line: VecDeque<u8>,
+    /// When the byte on the line finishes arriving.
+    rx_next: Ticks,
+    /// Transmit data register (None = empty).
+    tdr: Option<u8>,
+    /// Byte in the shift register and when it leaves it.
+    tx_shift: Option<(u8, Ticks)>,
+    /// Bytes sent to the other end.
+    pub tx_out: Vec<u8>,
+    /// SR was read with ORE set (first half of the clear sequence).
+    sr_read_ore: bool,
+    /// Overruns seen on this USART (twin-side count).
+    pub overruns: u64,
+}
+
+impl Usart {
+    fn new() -> Self {
+        Self {
+            sr: 0xC0,
+            rdr: 0,
+            brr: 0,
+            cr1: 0,
+            cr2: 0,
+            cr3: 0,
+            rx_line: VecDeque::new(),
+            rx_next: NEVER,
+            tdr: None,
+            tx_shift: None,
+            tx_out: Vec::new(),
+            sr_read_ore: false,
+            overruns: 0,
+        }
+    }
+
+    fn reset(&mut self) {
+        let out = std::mem::take(&mut self.tx_out);
+        let overruns = self.overruns;
+        *self = Self::new();
+        self.tx_out = out;
+        self.overruns = overruns;
+    }
+
+    /// One character (start, 8 data, stop) in ticks at this BRR and PCLK.
+    pub fn char_ticks(&self, pclk: u64) -> Ticks {
+        let brr = u64::from(self.brr.max(16));
+        let bits = if self.cr1 & (1 << 12) != 0 { 11 } else { 10 };
+        brr * bits * ticks_per(pclk)
+    }
+
+    fn enabled(&self) -> bool {
+        self.cr1 & (1 << 13) != 0
+    }
+
+    fn advance(&mut self, now: Ticks, pclk: u64) {
+        // Transmitter.
+        while let Some((b, done)) = self.tx_shift {
+            if done > now {
+                break;
+            }
+            self.tx_out.push(b);
+            self.tx_shift = self.tdr.take().map(|n| (n, done + self.char_ticks(pclk)));
+            if self.tx_shift.is_none() {
+                self.sr |= 1 << 6; // TC
+            }
+            self.sr |= 1 << 7; // TXE
+        }
+        // Receiver.
+        if !self.enabled() || self.cr1 & 4 == 0 {
+            self.rx_next = NEVER;
+            return;
+        }
+        if self.rx_next == NEVER && !self.rx_line.is_empty() {
+            self.rx_next = now + self.char_ticks(pclk);
+        }
+        while self.rx_next <= now {
+            let Some(b) = self.rx_line.pop_front() else {
+                self.rx_next = NEVER;
+                break;
+            };
+            if self.sr & (1 << 5) != 0 {
+                // RXNE still set: the new byte is lost, ORE (RM0008 §27.6.1).
+                self.sr |= 1 << 3;
+                self.overruns += 1;
+            } else {
+                self.rdr = b;
+                self.sr |= 1 << 5;
+            }
+            self.rx_next = if self.rx_line.is_empty() {
+                NEVER
+            } else {
+                self.rx_next + self.char_ticks(pclk)
+            };
+        }
+    }
+
+    fn next_event(&self) -> Ticks {
+        self.tx_shift.map_or(NEVER, |(_, t)| t).min(self.rx_next)
+    }
+
+    fn irq_line(&self) -> bool {
+        let c = self.cr1;
+        let s = self.sr;
+        (c & (1 << 5) != 0 && s & ((1 << 5) | (1 << 3)) != 0)
+            || (c & (1 << 7) != 0 && s & (1 << 7) != 0)
+            || (c & (1 << 6) != 0 && s & (1 << 6) != 0)
+            || (c & (1 << 4) != 0 && s & (1 << 4) != 0)
+    }
+
+    fn read(&mut self, off: u32) -> u32 {
+        match off {
+            0x00 => {
+                self.sr_read_ore = self.sr & 0x0F != 0;
+                self.sr
+            }
+            0x04 => {
+                // DR read clears RXNE; after an SR read it also clears the
+                // error flags ORE, NE, FE, PE.
+                if self.sr_read_ore {
+                    self.sr &= !0x0F;
+                    self.sr_read_ore = false;
+                }
+                self.sr &= !(1 << 5);
+                u32::from(self.rdr)
+            }
+            0x08 => self.brr,
+            0x0C => self.cr1,
+            0x10 => self.cr2,
+            0x14 => self.cr3,
+            _ => 0,
+        }
+    }
+
+    fn write(&mut self, off: u32, v: u32, now: Ticks, pclk: u64) {
+        match off {
+            0x00 => {
+                // RXNE, TC, LBD, CTS are rc_w0.
+                self.sr &= v | !0x360;
+            }
+            0x04 => {
+                self.sr &= !(1 << 6); // TC cleared by the write (after SR read)
+                if !self.enabled() || self.cr1 & 8 == 0 {
+                    return;
+                }
+                let b = v as u8;
+                if self.tx_shift.is_none() {
+                    self.tx_shift = Some((b, now + self.char_ticks(pclk)));
+                } else {
+                    self.tdr = Some(b);
+                    self.sr &= !(1 << 7);
+                }
+            }
+            0x08 => self.brr = v & 0xFFFF,
+            0x0C => self.cr1 = v & 0x3FFF,
+            0x10 => self.cr2 = v,
+            0x14 => self.cr3 = v,
+            _ => {}
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// IWDG (RM0008 §19)
+// ---------------------------------------------------------------------------
+
+/// The independent watchdog.
+#[derive(Clone, Debug)]
+pub struct Iwdg {
+    /// PR.
+    pub pr: u32,
+    /// RLR.
+    pub rlr: u32,
+    /// Started (0xCCCC), cannot be stopped.
+    pub running: bool,
+    unlocked: bool,
+    /// When the counter was last reloaded.
+    reloaded_at: Ticks,
+    /// LSI frequency, Hz (30..60 kHz on the F103; 40 kHz nominal).
+    pub lsi_hz: u64,
+}
+
+impl Iwdg {
+    fn new(lsi_hz: u64) -> Self {
+        Self {
+            pr: 0,
+            rlr: 0xFFF,
+            running: false,
+            unlocked: false,
+            reloaded_at: 0,
+            lsi_hz,
+        }
+    }
+
+    /// The timeout from a reload: (RLR + 1) × 4·2^PR LSI periods.
+    pub fn timeout_ticks(&self) -> Ticks {
+        let div = 4u64 << self.pr.min(6);
+        (u64::from(self.rlr) + 1) * div * TICKS_PER_S / self.lsi_hz
+    }
+
+    /// When the counter reaches 0 (a system reset).
+    pub fn expires_at(&self) -> Ticks {
+        if self.running {
+            self.reloaded_at + self.timeout_ticks()
+        } else {
+            NEVER
+        }
+    }
+
+    fn write(&mut self, off: u32, v: u32, now: Ticks) {
+        match off {
+            0x00 => match v & 0xFFFF {
+                0x5555 => self.unlocked = true,
+                0xAAAA => {
+                    self.reloaded_at = now;
+                    self.unlocked = false;
+                }
+                0xCCCC => {
+                    if !self.running {
+                        self.running = true;
+                        self.reloaded_at = now;
+                    }
+                    self.unlocked = false;
+                }
+                _ => self.unlocked = false,
+            },
+            0x04 if self.unlocked => self.pr = v & 7,
+            0x08 if self.unlocked => self.rlr = v & 0xFFF,
+            _ => {}
+        }
+    }
+
+    fn read(&self, off: u32) -> u32 {
+        match off {
+            0x04 => self.pr,
+            0x08 => self.rlr,
+            _ => 0, // SR: updates complete at once
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// SysTick (PM0056 §4.5)
+// ---------------------------------------------------------------------------
+
+/// The SysTick timer.
+#[derive(Clone, Debug, Default)]
+pub struct SysTick {
+    /// CSR (COUNTFLAG kept separately).
+    pub ctrl: u32,
+    /// RVR.
+    pub load: u32,
+    /// CVR at `t`.
+    val: u32,
+    t: Ticks,
+    frac: u64,
+    countflag: bool,
+    /// Wraps to be turned into a pending exception.
+    pub fired: bool,
+}
+
+impl SysTick {
+    /// COUNTFLAG, cleared by the read (PM0056 §4.5.1).
+    pub fn countflag_take(&mut self) -> bool {
+        std::mem::take(&mut self.countflag)
+    }
+
+    /// CVR now (after an advance).
+    pub fn val(&self) -> u32 {
+        self.val
+    }
+
+    /// CSR written: counting restarts from the current value.
+    pub fn restart(&mut self, now: Ticks) {
+        self.t = now;
+        self.frac = 0;
+    }
+
+    /// A write to CVR clears it and COUNTFLAG.
+    pub fn clear(&mut self, now: Ticks) {
+        self.val = 0;
+        self.countflag = false;
+        self.t = now;
+        self.frac = 0;
+    }
+
+    fn clk(&self, c: &Clocks) -> u64 {
+        if self.ctrl & 4 != 0 {
+            c.hclk
+        } else {
+            c.hclk / 8
+        }
+    }
+
+    fn advance(&mut self, now: Ticks, c: &Clocks) {
+        if now <= self.t {
+            return;
+        }
+        let el = now - self.t + self.frac;
+        self.t = now;
+        if self.ctrl & 1 == 0 {
+            self.frac = 0;
+            return;
+        }
+        let per = ticks_per(self.clk(c));
+        let n = el / per;
+        self.frac = el % per;
+        if n == 0 {
+            return;
+        }
+        let v = u64::from(self.val);
+        let period = u64::from(self.load) + 1;
+        if v > 0 && n < v {
+            self.val = (v - n) as u32;
+            return;
+        }
+        // Reaching 0 sets COUNTFLAG and, with TICKINT, pends SysTick; the
+        // next clock reloads RVR.
+        let (zeros, r) = if v > 0 {
+            (1 + (n - v) / period, (n - v) % period)
+        } else {
+            (n / period, n % period)
+        };
+        self.val = if r == 0 || self.load == 0 {
+            0
+        } else {
+            (period - r) as u32
+        };
+        if zeros > 0 && self.load > 0 {
+            self.countflag = true;
+            if self.ctrl & 2 != 0 {
+                self.fired = true;
+            }
+        }
+    }
+
+    fn next_event(&self, c: &Clocks) -> Ticks {
+        if self.ctrl & 3 != 3 || self.load == 0 {
+            return NEVER;
+        }
+        let per = ticks_per(self.clk(c));
+        let to_zero = if self.val == 0 {
+            u64::from(self.load) + 1
+        } else {
+            u64::from(self.val)
+        };
+        (self.t + to_zero * per).saturating_sub(self.frac)
+    }
+}
+
+// ---------------------------------------------------------------------------
+// EXTI and AFIO (RM0008 §10, §9.4)
+// ---------------------------------------------------------------------------
+
+/// EXTI.
+#[derive(Clone, Debug, Default)]
+pub struct Exti {
+    /// IMR, EMR, RTSR, FTSR, PR.
+    pub imr: u32,
+    /// EMR.
+    pub emr: u32,
+    /// RTSR.
+    pub rtsr: u32,
+    /// FTSR.
+    pub ftsr: u32,
+    /// PR.
+    pub pr: u32,
+}
+
+/// AFIO.
+#[derive(Clone, Debug, Default)]
+pub struct Afio {
+    /// EVCR.
+    pub evcr: u32,
+    /// MAPR.
+    pub mapr: u32,
+    /// EXTICR1..4.
+    pub exticr: [u32; 4],
+}
+
+// ---------------------------------------------------------------------------
+// The bus: all models, address decoding and interrupt lines
+// ---------------------------------------------------------------------------
+
+/// Everything on the peripheral buses.
+#[derive(Clone, Debug)]
+pub struct Bus {
+    /// RCC.
+    pub rcc: Rcc,
+    /// FLASH interface.
+    pub flash: FlashCtl,
+    /// GPIOA..GPIOE.
+    pub gpio: [Gpio; 5],
+    /// AFIO.
+    pub afio: Afio,
+    /// EXTI.
+    pub exti: Exti,
+    /// TIM1..TIM4.
+    pub tim: [Timer; 4],
+    /// USART1, USART2.
+    pub usart: [Usart; 2],
+    /// IWDG.
+    pub iwdg: Iwdg,
+    /// SysTick.
+    pub systick: SysTick,
+    /// DBGMCU_CR.
+    pub dbgmcu_cr: u32,
+    /// What the outside world drives onto each pin, ports A..E.
+    pub external: [[External; 16]; 5],
+    /// Last sampled level of each EXTI line's pin (for edge detection).
+    exti_last: [bool; 16],
+    /// A flash erase requested by a register write.
+    pub flash_cmd: Option<FlashCmd>,
+    /// Accesses to registers the twin does not model (address, write).
+    pub unmodelled: Vec<(u32, bool)>,
+    /// The core is halted by a (virtual) debugger.
+    pub debug_halt: bool,
+}
+
+/// Base addresses.
+pub mod addr {
+    /// TIM2.
+    pub const TIM2: u32 = 0x4000_0000;
+    /// TIM3.
+    pub const TIM3: u32 = 0x4000_0400;
+    /// TIM4.
+    pub const TIM4: u32 = 0x4000_0800;
+    /// IWDG.
+    pub const IWDG: u32 = 0x4000_3000;
+    /// USART2.
+    pub const USART2: u32 = 0x4000_4400;
+    /// AFIO.
+    pub const AFIO: u32 = 0x4001_0000;
+    /// EXTI.
+    pub const EXTI: u32 = 0x4001_0400;
+    /// GPIOA (B, C, D, E follow at 0x400 steps).
+    pub const GPIOA: u32 = 0x4001_0800;
+    /// TIM1.
+    pub const TIM1: u32 = 0x4001_2C00;
+    /// USART1.
+    pub const USART1: u32 = 0x4001_3800;
+    /// RCC.
+    pub const RCC: u32 = 0x4002_1000;
+    /// FLASH interface.
+    pub const FLASH: u32 = 0x4002_2000;
+}
+
+impl Bus {
+    /// The bus after a power-on reset.
+    pub fn new(hse_dead: bool, lsi_hz: u64) -> Self {
+        Self {
+            rcc: Rcc::new(0, hse_dead),
+            flash: FlashCtl::new(),
+            gpio: std::array::from_fn(|_| Gpio::new()),
+            afio: Afio::default(),
+            exti: Exti::default(),
+            tim: [Timer::new(1), Timer::new(2), Timer::new(3), Timer::new(4)],
+            usart: [Usart::new(), Usart::new()],
+            iwdg: Iwdg::new(lsi_hz),
+            systick: SysTick::default(),
+            dbgmcu_cr: 0,
+            external: [[External::Open; 16]; 5],
+            exti_last: [false; 16],
+            flash_cmd: None,
+            unmodelled: Vec::new(),
+            debug_halt: false,
+        }
+    }
+
+    /// A system reset (IWDG, SYSRESETREQ, NRST): every peripheral back to
+    /// its reset state, the reset flags in RCC_CSR kept and `flag` added.
+    pub fn system_reset(&mut self, now: Ticks, csr_flag: u32) {
+        let csr = (self.rcc.csr & 0xFC00_0000) | csr_flag;
+        self.rcc = Rcc::new(0, self.rcc.hse_dead);
+        self.rcc.csr = csr;
+        self.flash.reset();
+        self.gpio = std::array::from_fn(|_| Gpio::new());
+        self.afio = Afio::default();
+        self.exti = Exti::default();
+        for t in &mut self.tim {
+            t.reset(now);
+        }
+        for u in &mut self.usart {
+            u.reset();
+        }
+        let lsi = self.iwdg.lsi_hz;
+        self.iwdg = Iwdg::new(lsi);
+        self.systick = SysTick {
+            t: now,
+            ..SysTick::default()
+        };
+        self.dbgmcu_cr = 0;
+        self.flash_cmd = None;
+    }
+
+    /// The clock tree in force.
+    pub fn clocks(&self) -> Clocks {
+        self.rcc.clocks()
+    }
+
+    fn tim_clk(&self, i: usize) -> u64 {
+        let c = self.clocks();
+        if i == 0 {
+            c.tim_apb2
+        } else {
+            c.tim_apb1
+        }
+    }
+
+    /// Brings every model up to `now`.
+    pub fn advance(&mut self, now: Ticks) {
+        let c = self.clocks();
+        for i in 0..4 {
+            let clk = self.tim_clk(i);
+            self.tim[i].advance(now, clk);
+        }
+        self.usart[0].advance(now, c.pclk2);
+        self.usart[1].advance(now, c.pclk1);
+        self.systick.advance(now, &c);
+        self.rcc.update_switch(now);
+        self.sample_exti();
+    }
+
+    /// The earliest time at which a model raises an interrupt, finishes a
+    /// byte or resets the MCU.
+    pub fn next_event(&self) -> Ticks {
+        let c = self.clocks();
+        let mut t = self.iwdg.expires_at();
+        for i in 0..4 {
+            let tim = &self.tim[i];
+            if tim.dier & 1 != 0 {
+                t = t.min(tim.next_update(self.tim_clk(i)));
+            }
+        }
+        for u in &self.usart {
+            t = t.min(u.next_event());
+        }
+        t = t.min(self.systick.next_event(&c));
+        if self.rcc.cr & (1 << 16) != 0 && !self.rcc.hse_dead {
+            if let Some(on) = self.rcc.hse_on_at {
+                if on + HSE_STARTUP > self.systick.t {
+                    t = t.min(on + HSE_STARTUP);
+                }
+            }
+        }
+        t
+    }
+
+    /// Interrupt request lines (IRQ numbers) asserted now.
+    pub fn irq_lines(&self) -> Vec<u32> {
+        let mut v = Vec::new();
+        let t = &self.tim;
+        if t[0].dier & t[0].sr & 1 != 0 {
+            v.push(irq::TIM1_UP);
+        }
+        if t[0].dier & t[0].sr & 0x1E != 0 {
+            v.push(irq::TIM1_CC);
+        }
+        for (i, n) in [(1, irq::TIM2), (2, irq::TIM3), (3, irq::TIM4)] {
+            if t[i].irq_line() {
+                v.push(n);
+            }
+        }
+        if self.usart[0].irq_line() {
+            v.push(irq::USART1);
+        }
+        if self.usart[1].irq_line() {
+            v.push(irq::USART2);
+        }
+        let ex = self.exti.pr & self.exti.imr;
+        for line in 0..5 {
+            if ex & (1 << line) != 0 {
+                v.push(irq::EXTI0 + line);
+            }
+        }
+        if ex & 0xFC00 != 0 {
+            v.push(irq::EXTI15_10);
+        }
+        if ex & 0x03E0 != 0 {
+            v.push(23); // EXTI9_5
+        }
+        v
+    }
+
+    /// Level of pin `pin` of port `port` (0 = A) as a scope sees it.
+    pub fn pin_level(&self, port: usize, pin: u32) -> Level {
+        let g = &self.gpio[port];
+        let (mode, cnf) = g.config(pin);
+        let odr = g.odr & (1 << pin) != 0;
+        if mode == 0 {
+            return match cnf {
+                2 => {
+                    if odr {
+                        Level::PullUp
+                    } else {
+                        Level::PullDown
+                    }
+                }
+                _ => Level::HiZ,
+            };
+        }
+        let value = match cnf {
+            0 | 1 => Some(odr),
+            _ => self.af_output(port, pin),
+        };
+        match (value, cnf & 1 != 0) {
+            (None, _) => Level::HiZ,
+            (Some(true), true) => Level::HiZ, // open drain released
+            (Some(true), false) => Level::High,
+            (Some(false), _) => Level::Low,
+        }
+    }
+
+    /// The logic level an input reads (IDR), given external drive.
+    pub fn input_high(&self, port: usize, pin: u32) -> bool {
+        match self.pin_level(port, pin) {
+            Level::High => true,
+            Level::Low => false,
+            lvl => match self.external[port][pin as usize] {
+                External::High => true,
+                External::Low => false,
+                External::Open => lvl == Level::PullUp,
+            },
+        }
+    }
+
+    /// The alternate-function output routed to a pin (no remaps: the board
+    /// uses the default mapping, AFIO_MAPR = 0).
+    fn af_output(&self, port: usize, pin: u32) -> Option<bool> {
+        match (port, pin) {
+            (0, 8) => self.tim[0].ch1_output(),
+            (1, 6) => self.tim[3].ch1_output(),
+            (0, 0) => self.tim[1].ch1_output(),
+            (0, 6) => self.tim[2].ch1_output(),
+            (0, 9) | (0, 2) => Some(true), // USART TX idles high
+            _ => None,
+        }
+    }
+
+    fn sample_exti(&mut self) {
+        let active = self.exti.rtsr | self.exti.ftsr;
+        if active == 0 {
+            return;
+        }
+        for line in 0..16u32 {
+            if active & (1 << line) == 0 {
+                continue;
+            }
+            let port = ((self.afio.exticr[(line / 4) as usize] >> ((line % 4) * 4)) & 0xF) as usize;
+            let level = self.input_high(port.min(4), line);
+            let last = self.exti_last[line as usize];
+            if level != last {
+                let rising = level && !last;
+                if (rising && self.exti.rtsr & (1 << line) != 0)
+                    || (!rising && self.exti.ftsr & (1 << line) != 0)
+                {
+                    self.exti.pr |= 1 << line;
+                }
+                self.exti_last[line as usize] = level;
+            }
+        }
+    }
+
+    /// A falling edge on TIM2 CH1's pin (PA0) at `now` (the Hall switch);
+    /// `filter` says whether the capture is taken after the IC1F delay.
+    pub fn hall_edge(&mut self, now: Ticks) {
+        self.advance(now);
+        let t = &self.tim[1];
+        let falling = t.ccer & 2 != 0;
+        if falling {
+            self.tim[1].capture1();
+        }
+    }
+
+    /// Reads a peripheral register (`addr` in 0x4000_0000..0x4002_4000).
+    pub fn read(&mut self, a: u32, now: Ticks) -> u32 {
+        self.advance(now);
+        let off = a & 0x3FF;
+        let base = a & !0x3FF;
+        let v = match base {
+            addr::TIM2 => self.tim[1].read(off),
+            addr::TIM3 => self.tim[2].read(off),
+            addr::TIM4 => self.tim[3].read(off),
+            addr::TIM1 => self.tim[0].read(off),
+            addr::IWDG => self.iwdg.read(off),
+            addr::USART2 => self.usart[1].read(off),
+            addr::USART1 => self.usart[0].read(off),
+            addr::AFIO => match off {
+                0x00 => self.afio.evcr,
+                0x04 => self.afio.mapr,
+                0x08..=0x14 => self.afio.exticr[((off - 8) / 4) as usize],
+                _ => 0,
+            },
+            addr::EXTI => match off {
+                0x00 => self.exti.imr,
+                0x04 => self.exti.emr,
+                0x08 => self.exti.rtsr,
+                0x0C => self.exti.ftsr,
+                0x14 => self.exti.pr,
+                _ => 0,
+            },
+            0x4001_0800..=0x4001_1800 => {
+                let p = ((base - addr::GPIOA) / 0x400) as usize;
+                match off {
+                    0x00 => self.gpio[p].cr[0],
+                    0x04 => self.gpio[p].cr[1],
+                    0x08 => {
+                        let mut idr = 0;
+                        for pin in 0..16 {
+                            if self.input_high(p, pin) {
+                                idr |= 1 << pin;
+                            }
+                        }
+                        idr
+                    }
+                    0x0C => self.gpio[p].odr,
+                    0x18 => self.gpio[p].lckr,
+                    _ => 0,
+                }
+            }
+            addr::RCC => self.rcc.read(off, now),
+            addr::FLASH => self.flash.read(off),
+            _ => {
+                self.unmodelled.push((a, false));
+                0
+            }
+        };
+        v
+    }
+
+    /// Writes a peripheral register.
+    pub fn write(&mut self, a: u32, v: u32, now: Ticks) {
+        self.advance(now);
+        let off = a & 0x3FF;
+        let base = a & !0x3FF;
+        let c = self.clocks();
+        match base {
+            addr::TIM2 => self.tim[1].write(off, v),
+            addr::TIM3 => self.tim[2].write(off, v),
+            addr::TIM4 => self.tim[3].write(off, v),
+            addr::TIM1 => self.tim[0].write(off, v),
+            addr::IWDG => self.iwdg.write(off, v, now),
+            addr::USART2 => self.usart[1].write(off, v, now, c.pclk1),
+            addr::USART1 => self.usart[0].write(off, v, now, c.pclk2),
+            addr::AFIO => match off {
+                0x00 => self.afio.evcr = v,
+                0x04 => self.afio.mapr = v,
+                0x08..=0x14 => self.afio.exticr[((off - 8) / 4) as usize] = v & 0xFFFF,
+                _ => {}
+            },
+            addr::EXTI => match off {
+                0x00 => self.exti.imr = v,
+                0x04 => self.exti.emr = v,
+                0x08 => self.exti.rtsr = v,
+                0x0C => self.exti.ftsr = v,
+                0x10 => self.exti.pr |= v & self.exti.imr,
+                0x14 => self.exti.pr &= !v,
+                _ => {}
+            },
+            0x4001_0800..=0x4001_1800 => {
+                let p = ((base - addr::GPIOA) / 0x400) as usize;
+                let g = &mut self.gpio[p];
+                match off {
+                    0x00 => g.cr[0] = v,
+                    0x04 => g.cr[1] = v,
+                    0x0C => g.odr = v & 0xFFFF,
+                    0x10 => {
+                        let set = v & 0xFFFF;
+                        let reset = v >> 16;
+                        g.odr = (g.odr & !reset) | set;
+                    }
+                    0x14 => g.odr &= !(v & 0xFFFF),
+                    0x18 => g.lckr = v,
+                    _ => {}
+                }
+            }
+            addr::RCC => self.rcc.write(off, v, now),
+            addr::FLASH => {
+                if let Some(cmd) = self.flash.write(off, v) {
+                    self.flash_cmd = Some(cmd);
+                }
+            }
+            _ => self.unmodelled.push((a, true)),
+        }
+        self.sample_exti();
+    }
+}

@@ -32,12 +32,13 @@ use std::time::{Duration, Instant};
 use object::{Object, ObjectSection, ObjectSymbol};
 use unicorn_engine::{
     unicorn_const::{Arch, HookType, MemType, Mode, Prot},
-    ArmCpuModel, RegisterARM, Unicorn,
+    ArmCpuModel, Unicorn,
 };
 
 use crate::core::{exc, Nvic};
 use crate::periph::{Bus, FlashOp, FLASH_BASE, FLASH_SIZE, NEVER};
 pub use crate::periph::{External, Level, Ticks, TICKS_PER_S};
+pub use unicorn_engine::RegisterARM;
 
 /// Start of SRAM.
 pub const RAM_BASE: u32 = 0x2000_0000;
@@ -1046,6 +1047,61 @@ impl Twin {
     /// Ticks of the pending stop, for tests.
     pub fn lockup(&self) -> bool {
         self.core == CoreState::Lockup
+    }
+
+    /// Runs for `n` ticks of firmware time.
+    pub fn run_ticks(&mut self, n: Ticks) -> Result<(), Error> {
+        let until = self.now() + n;
+        self.run_until_time(until, &mut |_| false)
+    }
+
+    /// Wires a machine model to the pins (see [`plant`]).
+    pub fn attach_plant(&mut self, machine: machine_sim::Machine, wiring: plant::Wiring) {
+        let now = self.now();
+        self.plant = Some(plant::Plant::new(machine, wiring, now));
+    }
+
+    /// The operator taps a button on the touchscreen; 60 ms pass.
+    pub fn tap(&mut self, name: &str) -> Result<(), Error> {
+        if let Some(s) = &mut self.screen {
+            s.tap(name)
+                .map_err(|e| Error::Engine(format!("tap {name}: {e:?}")))?;
+        }
+        self.run_ms(60)
+    }
+
+    /// The operator types `value` into `field` and taps `apply`; 150 ms pass.
+    pub fn enter(&mut self, field: &str, value: i32, apply: &str) -> Result<(), Error> {
+        if let Some(s) = &mut self.screen {
+            s.set_value(field, value)
+                .map_err(|e| Error::Engine(format!("set {field}: {e:?}")))?;
+        }
+        self.tap(apply)?;
+        self.run_ms(150)
+    }
+
+    /// Runs until the screen satisfies `pred` or `ms` pass.
+    pub fn run_until_screen(
+        &mut self,
+        ms: u64,
+        mut pred: impl FnMut(&hmi_proto::virtual_screen::VirtualScreen) -> bool,
+    ) -> Result<bool, Error> {
+        self.run_until(ms, |t| t.screen.as_ref().is_some_and(&mut pred))
+    }
+
+    /// A debugger sets the PC to `addr` (a call from the current context:
+    /// LR is made invalid so that a return faults) and resumes.
+    pub fn jump(&mut self, addr: u32) -> Result<(), Error> {
+        self.set_reg(RegisterARM::LR, 0xFFFF_FFFF)?;
+        self.set_reg(RegisterARM::PC, addr | 1)?;
+        self.core = CoreState::Running;
+        Ok(())
+    }
+
+    /// A u32 static of the firmware by (part of) its mangled name.
+    pub fn static_u32(&self, name_part: &str) -> Option<u32> {
+        let (a, _) = self.symbol_like(&[name_part])?;
+        self.read_u32(a)
     }
 
     /// Pends an external interrupt as a debugger writing NVIC_ISPR would.

@@ -1,0 +1,332 @@
+//! The real board's safe states on the twin (issue 15): faults injected as a
+//! debug probe would inject them, the pins watched as a scope would watch
+//! them.
+//!
+//! Safe state (docs/firmware.md, decisions of issue 15): PA8 (drum PWM /
+//! planting step) driven low — not floating — and PB12 (driver enable) low.
+//!
+//! How each fault is injected (a probe halts the core, changes registers,
+//! resumes):
+//! - panic: the PC is set to the image's `#[panic_handler]`
+//!   (`rust_begin_unwind`), as if a `panic!` had been reached where the core
+//!   was;
+//! - HardFault: the PC is set beyond the 20 KB of SRAM (0x2000_5000): the
+//!   instruction fetch is a bus error, escalated to HardFault;
+//! - stack overflow: SP is set 16 bytes above the stack's bottom (flip-link
+//!   puts it at the start of RAM, 0x2000_0000) and an enabled interrupt
+//!   (TIM2) is pended: its exception entry stacks below RAM.
+
+use twin::image::Image;
+use twin::plant::Wiring;
+use twin::RegisterARM;
+use twin::{CoreState, External, Level, Options, ResetCause, Twin, TICKS_PER_S};
+
+const US: u64 = TICKS_PER_S / 1_000_000;
+
+fn boot_a(options: Options) -> Twin {
+    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let mut twin = Twin::new(&elf, options).expect("load the ELF");
+    let machine = machine_sim::Config {
+        initial_gear: Some(kinematics::consts::Gear::ALL[1]),
+        ..machine_sim::Config::noiseless()
+    }
+    .build()
+    .expect("machine");
+    twin.attach_plant(machine, Wiring::ProfileA);
+    twin.connect_screen();
+    assert!(
+        twin.run_until_screen(3000, |s| s.page() == 1).unwrap(),
+        "the screen never reached the mode page"
+    );
+    twin
+}
+
+/// Profile A with the drum running in Fixed mode (PWM on PA8, PB12 high).
+fn running_drum() -> Twin {
+    let mut twin = boot_a(Options::default());
+    twin.tap("bfixed").unwrap();
+    twin.tap("bstart").unwrap();
+    twin.run_ms(500).unwrap();
+    assert_eq!(twin.pin('B', 12), Level::High, "the drum driver is enabled");
+    assert!(twin.state().bus.tim[0].ccr_act[0] > 0, "the drum PWM runs");
+    twin
+}
+
+/// Firmware time from now until PA8 and PB12 are both driven low and stay
+/// so (checked every µs for 200 µs, four PWM periods), within 5 ms; `None`
+/// if that never happens before a reset.
+fn time_to_safe(twin: &mut Twin) -> Option<f64> {
+    let t0 = twin.now();
+    let resets = twin.resets.len();
+    while twin.now() - t0 < 5_000 * US {
+        if twin.pin('A', 8) == Level::Low && twin.pin('B', 12) == Level::Low {
+            let at = twin.now();
+            let mut held = true;
+            for _ in 0..200 {
+                twin.run_ticks(US).unwrap();
+                if twin.pin('A', 8) != Level::Low || twin.pin('B', 12) != Level::Low {
+                    held = false;
+                    break;
+                }
+            }
+            if held {
+                return Some((at - t0) as f64 / US as f64);
+            }
+        }
+        twin.run_ticks(US).unwrap();
+        if twin.resets.len() != resets {
+            return None;
+        }
+    }
+    None
+}
+
+fn assert_safe(twin: &mut Twin, what: &str) {
+    let t = time_to_safe(twin);
+    let pins = (twin.pin('A', 8), twin.pin('B', 12));
+    eprintln!(
+        "{what}: safe pins after {t:?} µs (core {:?}, PA8/PB12 {pins:?})",
+        twin.core
+    );
+    let t = t.unwrap_or_else(|| {
+        panic!(
+            "{what}: PA8/PB12 not both driven low within 5 ms: {pins:?}, core {:?}",
+            twin.core
+        )
+    });
+    // Immediately: well within one PWM period … a tenth of a control period.
+    assert!(t <= 1000.0, "{what}: {t} µs to safe pins");
+    // And they stay safe until the watchdog resets the board.
+    for _ in 0..50 {
+        twin.run_ms(1).unwrap();
+        if twin.resets.len() > 1 {
+            break;
+        }
+        assert_eq!(twin.pin('A', 8), Level::Low, "{what}: PA8 later");
+        assert_eq!(twin.pin('B', 12), Level::Low, "{what}: PB12 later");
+    }
+}
+
+#[test]
+fn panic_drives_pa8_and_pb12_low() {
+    let mut twin = running_drum();
+    let (handler, _) = twin
+        .symbol_like(&["rust_begin_unwind"])
+        .expect("the panic handler");
+    // r0 = &PanicInfo: any readable RAM (the real board does not read it).
+    twin.set_reg(RegisterARM::R0, twin::RAM_BASE + 0x1000)
+        .unwrap();
+    twin.jump(handler).unwrap();
+    assert_safe(&mut twin, "panic");
+}
+
+#[test]
+fn hardfault_drives_pa8_and_pb12_low() {
+    let mut twin = running_drum();
+    // Fetch from beyond SRAM (0x2000_0000 + 20 KB): a bus error.
+    twin.jump(twin::RAM_BASE + twin::RAM_SIZE).unwrap();
+    assert_safe(&mut twin, "HardFault");
+}
+
+#[test]
+fn stack_overflow_drives_pa8_and_pb12_low() {
+    let mut twin = running_drum();
+    let (stack_end, _) = twin.symbol("_stack_end").expect("flip-link's stack bottom");
+    twin.set_reg(RegisterARM::SP, stack_end + 16).unwrap();
+    twin.pend_irq(28); // TIM2, enabled at priority 3
+    twin.core = CoreState::Running;
+    assert_safe(&mut twin, "stack overflow");
+}
+
+/// The control task's dispatcher: the enabled one of RTIC's dispatchers
+/// (CAN_RX1 21, CAN_SCE 22, ADC1_2 18) at priority 2, (16 − 2) << 4
+/// (PM0056 §4.2.7).
+fn control_dispatcher(twin: &Twin) -> u32 {
+    [21u32, 22, 18]
+        .into_iter()
+        .find(|&irq| {
+            let ipr = (twin.peek(0xE000_E400 + (irq & !3)) >> (8 * (irq % 4))) & 0xFF;
+            ipr == (16 - 2) << 4
+        })
+        .expect("a dispatcher at priority 2")
+}
+
+/// IWDG timeout from its registers (RM0008 §19.3): 4·2^PR·(RLR + 1) / LSI.
+fn iwdg_timeout_s(twin: &Twin, lsi_hz: f64) -> f64 {
+    let pr = twin.peek(0x4000_3004);
+    let rlr = twin.peek(0x4000_3008);
+    4.0 * f64::from(1u32 << pr) * f64::from(rlr + 1) / lsi_hz
+}
+
+/// From a run page: the settings page, Save, confirmed on the screen.
+fn save(twin: &mut Twin) {
+    twin.tap("bback").unwrap();
+    twin.tap("bset").unwrap();
+    twin.tap("bsave").unwrap();
+    assert!(
+        twin.run_until_screen(3000, |s| s.text("tmsg") == Some("Settings saved"))
+            .unwrap(),
+        "save not confirmed: {:?}",
+        twin.screen
+            .as_ref()
+            .and_then(|s| s.text("tmsg").map(str::to_string))
+    );
+}
+
+fn boots(logs: &[String]) -> usize {
+    logs.iter()
+        .filter(|l| l.contains("boot: transplanter"))
+        .count()
+}
+
+#[test]
+fn a_stopped_control_task_gets_the_board_reset_by_the_watchdog_and_it_comes_back_stopped_on_its_saved_settings(
+) {
+    let mut twin = boot_a(Options::default());
+    // Saved settings that differ from the defaults: Fixed mode.
+    twin.tap("bfixed").unwrap();
+    save(&mut twin);
+    twin.tap("bback").unwrap();
+    twin.tap("bfixed").unwrap();
+    twin.tap("bstart").unwrap();
+    twin.run_ms(300).unwrap();
+    assert_eq!(twin.pin('B', 12), Level::High, "running");
+    let before = twin.log_lines("status: uptime");
+    let mode = before
+        .last()
+        .and_then(|l| l.split(" ms, ").nth(1))
+        .and_then(|r| r.split_whitespace().next())
+        .expect("mode in the status line")
+        .to_string();
+    // The probe disables the control task's dispatcher: it never runs again.
+    let irq = control_dispatcher(&twin);
+    twin.state_mut().nvic.enabled[(irq / 32) as usize] &= !(1 << (irq % 32));
+    let t0 = twin.now();
+    let timeout = iwdg_timeout_s(&twin, twin.state().bus.iwdg.lsi_hz as f64);
+    let reset = twin
+        .run_until(2000, |t| {
+            t.resets.iter().any(|r| r.1 == ResetCause::Watchdog)
+        })
+        .unwrap();
+    assert!(reset, "no watchdog reset within 2 s");
+    let t1 = twin
+        .resets
+        .iter()
+        .find(|r| r.1 == ResetCause::Watchdog)
+        .unwrap()
+        .0;
+    let dt = (t1 - t0) as f64 / TICKS_PER_S as f64;
+    eprintln!(
+        "watchdog reset {:.1} ms after the control task stopped (timeout {:.1} ms)",
+        dt * 1e3,
+        timeout * 1e3
+    );
+    // The last feed was at most one control period (10 ms) before the stop.
+    assert!(
+        dt <= timeout + 1e-4 && dt >= timeout - 0.010 - 1e-4,
+        "{dt} s vs {timeout} s"
+    );
+    // Back: stopped, on the saved settings.
+    twin.run_ms(1500).unwrap();
+    let logs = twin.logs();
+    assert_eq!(boots(&logs), 2, "booted twice");
+    let after_boot: Vec<&String> = logs
+        .iter()
+        .skip_while(|l| !l.contains("boot: transplanter"))
+        .skip(1)
+        .skip_while(|l| !l.contains("boot: transplanter"))
+        .collect();
+    assert!(
+        after_boot
+            .iter()
+            .any(|l| l.contains("settings: loaded record")),
+        "the saved record was loaded after the reset"
+    );
+    assert!(!after_boot.iter().any(|l| l.contains("defaults in use")));
+    let status = after_boot
+        .iter()
+        .rev()
+        .find(|l| l.contains("status: uptime"))
+        .expect("status after the reset");
+    assert!(
+        status.contains(&format!(" {mode} Stopped")),
+        "{status} (mode {mode})"
+    );
+    assert_eq!(twin.pin('B', 12), Level::Low);
+}
+
+#[test]
+fn hse_never_ready_keeps_the_outputs_safe_and_the_watchdog_retries() {
+    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let mut twin = Twin::new(
+        &elf,
+        Options {
+            hse_dead: true,
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    let mut unsafe_samples = Vec::new();
+    for ms in 0..1500u64 {
+        twin.run_ms(1).unwrap();
+        let since_reset = twin.now() - twin.resets.last().unwrap().0;
+        // From 1 ms after each reset (the pins float in the reset state
+        // until the first instructions drive them).
+        if since_reset >= TICKS_PER_S / 1000 {
+            let pins = (twin.pin('A', 8), twin.pin('B', 12));
+            if pins != (Level::Low, Level::Low) && unsafe_samples.len() < 5 {
+                unsafe_samples.push((ms, pins));
+            }
+        }
+    }
+    let wd = twin
+        .resets
+        .iter()
+        .filter(|r| r.1 == ResetCause::Watchdog)
+        .count();
+    eprintln!("HSE dead: {wd} watchdog resets in 1.5 s; unsafe samples {unsafe_samples:?}");
+    assert!(
+        unsafe_samples.is_empty(),
+        "outputs not safe: {unsafe_samples:?}"
+    );
+    assert!(wd >= 1, "the board never reset to retry the crystal");
+}
+
+#[test]
+fn usart1_overrun_is_counted_and_the_link_recovers() {
+    let mut twin = boot_a(Options::default());
+    twin.tap("bfixed").unwrap();
+    twin.tap("bback").unwrap();
+    twin.tap("bset").unwrap();
+    // Save (a page erase stalls the CPU for tERASE) while the line is busy:
+    // bytes arrive faster than they can be read.
+    twin.tap("bsave").unwrap();
+    for _ in 0..100 {
+        // A `sendme` answer (0x66 page) over and over: valid frames.
+        let burst: Vec<u8> = [0x66u8, 0x01, 0xFF, 0xFF, 0xFF].repeat(12);
+        twin.send_serial(0, &burst);
+        twin.run_ms(5).unwrap();
+    }
+    let ore = twin.state().bus.usart[0].overruns;
+    let counted = twin
+        .static_u32("HMI_RX_ERRORS")
+        .expect("stats::HMI_RX_ERRORS");
+    eprintln!("overruns on the line {ore}, counted by the firmware {counted}");
+    assert!(ore > 0, "the test produced no overrun");
+    assert!(counted > 0, "the firmware did not count the overrun");
+    // The link recovers: the save is confirmed and Start works.
+    assert!(
+        twin.run_until_screen(3000, |s| s.text("tmsg") == Some("Settings saved"))
+            .unwrap(),
+        "save confirmed"
+    );
+    twin.tap("bback").unwrap();
+    twin.tap("bfixed").unwrap();
+    twin.tap("bstart").unwrap();
+    assert!(
+        twin.run_until(1000, |t| t.pin('B', 12) == Level::High)
+            .unwrap(),
+        "Start after the overrun"
+    );
+    let _ = External::Open;
+}

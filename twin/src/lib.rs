@@ -204,6 +204,21 @@ impl State {
     }
 }
 
+/// A saved instant of a twin ([`Twin::snapshot`]).
+pub struct Snapshot {
+    ctx: unicorn_engine::Context,
+    ram: Vec<u8>,
+    flash: Vec<u8>,
+    now: Ticks,
+    bus: Bus,
+    nvic: Nvic,
+    instructions: u64,
+    core: CoreState,
+    resets: Vec<(Ticks, ResetCause)>,
+    screen: Option<hmi_proto::virtual_screen::VirtualScreen>,
+    screen_next: Ticks,
+}
+
 /// Where the defmt frames go.
 struct LogSink {
     stdin: Option<ChildStdin>,
@@ -239,6 +254,7 @@ pub struct Twin {
     /// Host time spent in [`Twin::run_for`].
     pub host_time: Duration,
     screen_next: Ticks,
+    echo: bool,
 }
 
 /// Reads a little-endian u32 from unicorn memory.
@@ -330,6 +346,7 @@ impl Twin {
             watchers: Vec::new(),
             host_time: Duration::ZERO,
             screen_next: 0,
+            echo: options.echo_logs,
         };
         twin.reset(ResetCause::PowerOn)?;
         Ok(twin)
@@ -1104,6 +1121,67 @@ impl Twin {
         self.read_u32(a)
     }
 
+    /// Everything needed to come back to this instant (core registers,
+    /// RAM, flash, peripherals, screen, machine excluded).
+    pub fn snapshot(&self) -> Result<Snapshot, Error> {
+        let st = self.state();
+        Ok(Snapshot {
+            ctx: self.uc.context_init().map_err(uc_err)?,
+            ram: self
+                .uc
+                .mem_read_as_vec(u64::from(RAM_BASE), RAM_SIZE as usize)
+                .map_err(uc_err)?,
+            flash: self.flash(),
+            now: st.now,
+            bus: st.bus.clone(),
+            nvic: st.nvic.clone(),
+            instructions: st.instructions,
+            core: self.core,
+            resets: self.resets.clone(),
+            screen: self.screen.clone(),
+            screen_next: self.screen_next,
+        })
+    }
+
+    /// Goes back to a [`Twin::snapshot`]; the log decoder starts afresh.
+    pub fn restore(&mut self, snap: &Snapshot) -> Result<(), Error> {
+        self.uc.context_restore(&snap.ctx).map_err(uc_err)?;
+        self.uc
+            .mem_write(u64::from(RAM_BASE), &snap.ram)
+            .map_err(uc_err)?;
+        let now_flash = self.flash();
+        for (i, (a, b)) in now_flash
+            .chunks(periph::FLASH_PAGE as usize)
+            .zip(snap.flash.chunks(periph::FLASH_PAGE as usize))
+            .enumerate()
+        {
+            if a != b {
+                let at = FLASH_BASE + i as u32 * periph::FLASH_PAGE;
+                self.uc.mem_write(u64::from(at), b).map_err(uc_err)?;
+            }
+        }
+        {
+            let st = self.uc.get_data_mut();
+            st.now = snap.now;
+            st.bus = snap.bus.clone();
+            st.nvic = snap.nvic.clone();
+            st.instructions = snap.instructions;
+            st.stop = None;
+            st.stall = 0;
+            st.fixups.clear();
+            st.bus_error = None;
+        }
+        self.core = snap.core;
+        self.lockup_at = None;
+        self.resets = snap.resets.clone();
+        self.screen = snap.screen.clone();
+        self.screen_next = snap.screen_next;
+        let decode = self.log.child.is_some();
+        self.log = LogSink::start(&self.elf_path, decode, self.echo)?;
+        self.rtt_bytes.clear();
+        Ok(())
+    }
+
     /// Pends an external interrupt as a debugger writing NVIC_ISPR would.
     pub fn pend_irq(&mut self, irq: u32) {
         self.state_mut().nvic.pend_irq(irq);
@@ -1446,10 +1524,10 @@ impl LogSink {
         let Some(rx) = &self.rx else { return };
         let deadline = Instant::now() + Duration::from_secs(2);
         loop {
-            match rx.recv_timeout(Duration::from_millis(100)) {
+            match rx.recv_timeout(Duration::from_millis(30)) {
                 Ok(l) => self.lines.push(l),
                 Err(_) => {
-                    if self.last_write.elapsed() >= Duration::from_millis(100) {
+                    if self.last_write.elapsed() >= Duration::from_millis(30) {
                         break;
                     }
                 }

@@ -272,10 +272,14 @@ fn profile_a_boots_to_idle_with_rm0008_registers() {
 fn profile_b_boots_to_idle_with_rm0008_registers() {
     let mut twin = boot(Image::ProfileB);
     check_common(&mut twin, Image::ProfileB);
-    // TIM4 CH1 on PB6: PWM mode 1 with preload, output enabled (RM0008
-    // §15.4.7, §15.4.9), counter enabled with ARR preload.
+    // TIM4 CH1 on PB6: PWM mode 1 with preload — or, while the steppers
+    // are idle, forced inactive — output enabled (RM0008 §15.4.7, §15.4.9),
+    // counter enabled with ARR preload.
     let ccmr1 = twin.peek(0x4000_0818);
-    assert_eq!(field(ccmr1, 4, 3), 0b110, "TIM4 OC1M = PWM mode 1");
+    assert!(
+        [0b110, 0b100].contains(&field(ccmr1, 4, 3)),
+        "TIM4 OC1M = PWM mode 1 or forced inactive: {ccmr1:#x}"
+    );
     assert_eq!(field(ccmr1, 3, 1), 1, "TIM4 OC1PE");
     assert_eq!(twin.peek(0x4000_0820) & 0b11, 0b01, "TIM4 CC1E");
     assert_eq!(twin.peek(0x4000_0800) & 0x81, 0x81, "TIM4 ARPE, CEN");

@@ -1,0 +1,189 @@
+//! The real board's images in closed loop with the simulated machine on the
+//! twin: the same scenarios as the QEMU tests (tests/tests/profile_a.rs,
+//! profile_b.rs), but through the real board layer — TIM1's PWM on PA8, the
+//! enable on PB12, TIM2's Hall captures, TIM3's encoder count, TIM4's steps.
+//!
+//! References: the drum against an f64 form of eq. 7 for the machine's true
+//! ground speed (machine_sim::reference); profile B's step pulses against
+//! the rates the firmware reports (planting/feeding speed × steps per
+//! revolution / 60, the steps per revolution being the settings' defaults,
+//! kinematics::profile_b::ProfileBSettings).
+
+use kinematics::consts::Gear;
+use machine_sim::reference::eq7_drum_speed;
+use twin::image::Image;
+use twin::plant::Wiring;
+use twin::{Options, Twin, TICKS_PER_S};
+
+fn number_after(line: &str, key: &str) -> Option<f64> {
+    line.split(key)
+        .nth(1)?
+        .split_whitespace()
+        .next()?
+        .trim_end_matches(',')
+        .parse()
+        .ok()
+}
+
+#[test]
+fn profile_a_speed_adaptive_7cm_low2_tracks_eq7_within_1_percent_through_a_10_percent_change() {
+    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let mut twin = Twin::new(
+        &elf,
+        Options {
+            decode_logs: false,
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    // Noiseless machine at Low 2 whose chassis answers with a 2.5 s time
+    // constant (as the QEMU test).
+    let mut config = machine_sim::Config::noiseless();
+    config.initial_gear = Some(Gear::ALL[1]);
+    config.track_tau_s = 2.5;
+    twin.attach_plant(config.build().unwrap(), Wiring::ProfileA);
+    twin.connect_screen();
+    assert!(twin.run_until_screen(3000, |s| s.page() == 1).unwrap());
+    twin.tap("badapt").unwrap();
+    twin.enter("nspacing", 70, "bapply").unwrap();
+    twin.tap("bgearup").unwrap();
+    assert_eq!(
+        twin.screen.as_ref().and_then(|s| s.text("tgear")),
+        Some("Low 2")
+    );
+    // Start once the tractor is at speed (10 s), +10 % at 14 s, back at 20 s.
+    twin.run_ms(10_000 - (twin.now() * 1000 / TICKS_PER_S))
+        .unwrap();
+    twin.tap("bstart").unwrap();
+    let start = twin.now();
+    let mut worst = (0.0f64, 0.0f64);
+    let mut v_min = f64::MAX;
+    let mut v_max = 0.0f64;
+    let host = std::time::Instant::now();
+    let fw0 = twin.now();
+    while twin.now() < 25 * TICKS_PER_S {
+        twin.run_ms(100).unwrap();
+        let t = twin.now_s();
+        let plant = twin.plant.as_mut().unwrap();
+        if (t - 14.0).abs() < 0.05 {
+            plant.machine.inject_speed_step(0.10);
+        }
+        if (t - 20.0).abs() < 0.05 {
+            plant.machine.inject_speed_step(0.0);
+        }
+        if twin.now() < start + TICKS_PER_S {
+            continue;
+        }
+        let m = &twin.plant.as_ref().unwrap().machine;
+        let v = f64::from(m.travel_speed_m_s());
+        let target = eq7_drum_speed(v, 0.07);
+        let err = (f64::from(m.drum_speed_rpm()) - target).abs() / target;
+        v_min = v_min.min(v);
+        v_max = v_max.max(v);
+        if err > worst.0 {
+            worst = (err, t);
+        }
+    }
+    let speed = (twin.now() - fw0) as f64 / TICKS_PER_S as f64 / host.elapsed().as_secs_f64();
+    eprintln!(
+        "profile A on the twin: worst drum error {:.3} % at {:.1} s; ground {v_min:.4}..{v_max:.4} m/s; {speed:.1}× real time",
+        worst.0 * 100.0,
+        worst.1
+    );
+    assert!(
+        worst.0 <= 0.01,
+        "worst {:.2} % at {:.1} s",
+        worst.0 * 100.0,
+        worst.1
+    );
+    assert!(
+        v_max / v_min > 1.08,
+        "the disturbance happened: {v_min} → {v_max}"
+    );
+}
+
+#[test]
+fn profile_b_steps_at_the_commanded_rates_and_stops_with_the_tractor() {
+    let elf = Image::ProfileB.elf().expect("build the profile B image");
+    let spr = f64::from(kinematics::profile_b::ProfileBSettings::default().planting_steps_per_rev);
+    let spr_feed =
+        f64::from(kinematics::profile_b::ProfileBSettings::default().feeding_steps_per_rev);
+    for mm_s in [200u32, 300, 400] {
+        let mut twin = Twin::new(&elf, Options::default()).unwrap();
+        let mut config = machine_sim::Config::noiseless();
+        config.profile = machine_sim::Profile::B;
+        config.target_spacing_m = 0.25;
+        let mut machine = config.build().unwrap();
+        machine.set_travel_speed_m_s(mm_s as f32 / 1000.0);
+        twin.attach_plant(machine, Wiring::ProfileB);
+        twin.connect_screen();
+        assert!(
+            twin.run_until_screen(3000, |s| s.page() == 7).unwrap(),
+            "profile B's run page"
+        );
+        twin.tap("bstart").unwrap();
+        twin.run_ms(4000).unwrap();
+        // Steady state: pulses over 2 s against the reported speeds.
+        let p0 = twin.plant.as_ref().unwrap().steps_delivered;
+        let t0 = twin.now();
+        twin.run_ms(2000).unwrap();
+        let p1 = twin.plant.as_ref().unwrap().steps_delivered;
+        let dt = (twin.now() - t0) as f64 / TICKS_PER_S as f64;
+        let status = twin
+            .log_lines("status: uptime")
+            .last()
+            .cloned()
+            .expect("status");
+        let n1 = number_after(&status, "n1 ").expect("n1") / 1000.0;
+        let n2 = number_after(&status, "n2 ").expect("n2") / 1000.0;
+        let plant_hz = (p1.0 - p0.0) as f64 / dt;
+        let feed_hz = (p1.1 - p0.1) as f64 / dt;
+        let want_plant = n1 * spr / 60.0;
+        let want_feed = n2 * spr_feed / 60.0;
+        eprintln!(
+            "profile B at {mm_s} mm/s: planting {plant_hz:.1} Hz (commanded {want_plant:.1}), feeding {feed_hz:.1} Hz (commanded {want_feed:.1})"
+        );
+        assert!(want_plant > 0.0 && want_feed > 0.0, "{status}");
+        assert!(
+            (plant_hz - want_plant).abs() / want_plant <= 0.01,
+            "planting steps {plant_hz:.1} Hz vs {want_plant:.1} Hz at {mm_s} mm/s"
+        );
+        assert!(
+            (feed_hz - want_feed).abs() / want_feed <= 0.01,
+            "feeding steps {feed_hz:.1} Hz vs {want_feed:.1} Hz at {mm_s} mm/s"
+        );
+        // The tractor stops. The firmware knows it only from the ground
+        // encoder: the period that takes the last count still sees motion,
+        // the next one (10 ms later) sees none and stops both outputs — so
+        // the last step comes at most two control periods (20 ms, the QEMU
+        // test's bound) after the last count, plus the 1 ms the twin counts
+        // pulses in.
+        twin.plant.as_mut().unwrap().machine.stop_travel();
+        let mut last_count = (
+            twin.plant.as_ref().unwrap().machine.ground_encoder_count(),
+            twin.now(),
+        );
+        let mut last_pulse = (twin.plant.as_ref().unwrap().steps_delivered, twin.now());
+        for _ in 0..1000 {
+            twin.run_ms(1).unwrap();
+            let p = twin.plant.as_ref().unwrap();
+            let c = p.machine.ground_encoder_count();
+            if c != last_count.0 {
+                last_count = (c, twin.now());
+            }
+            if p.steps_delivered != last_pulse.0 {
+                last_pulse = (p.steps_delivered, twin.now());
+            }
+        }
+        let lag = (last_pulse.1 as f64 - last_count.1 as f64) / TICKS_PER_S as f64;
+        eprintln!(
+            "profile B at {mm_s} mm/s: last step {:.1} ms after the last ground count",
+            lag * 1e3
+        );
+        assert!(
+            lag <= 0.020 + 0.001,
+            "steps went on {:.1} ms after the tractor stopped",
+            lag * 1e3
+        );
+    }
+}

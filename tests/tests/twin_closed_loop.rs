@@ -106,8 +106,6 @@ fn profile_a_speed_adaptive_7cm_low2_tracks_eq7_within_1_percent_through_a_10_pe
 fn profile_b_steps_at_the_commanded_rates_and_stops_with_the_tractor() {
     let elf = Image::ProfileB.elf().expect("build the profile B image");
     let spr = f64::from(kinematics::profile_b::ProfileBSettings::default().planting_steps_per_rev);
-    let spr_feed =
-        f64::from(kinematics::profile_b::ProfileBSettings::default().feeding_steps_per_rev);
     for mm_s in [200u32, 300, 400] {
         let mut twin = Twin::new(&elf, Options::default()).unwrap();
         let mut config = machine_sim::Config::noiseless();
@@ -123,10 +121,30 @@ fn profile_b_steps_at_the_commanded_rates_and_stops_with_the_tractor() {
         );
         twin.tap("bstart").unwrap();
         twin.run_ms(4000).unwrap();
-        // Steady state: pulses over 2 s against the reported speeds.
+        // Steady state, 2 s: the pulses on the pins against the rates the
+        // firmware programmed, f = f_TIM / ((PSC + 1)(ARR + 1)) (RM0008
+        // §15.3.1; PSC and ARR read back every millisecond, integrated);
+        // and the planting rate against the reported planting speed n1.
         let p0 = twin.plant.as_ref().unwrap().steps_delivered;
         let t0 = twin.now();
-        twin.run_ms(2000).unwrap();
+        let mut want = (0.0f64, 0.0f64);
+        for _ in 0..2000 {
+            let rate = |twin: &Twin, base: u32, clk: f64| {
+                let psc = f64::from(twin.peek(base + 0x28));
+                let arr = f64::from(twin.peek(base + 0x2C));
+                let ccr = twin.peek(base + 0x34);
+                let ocm = (twin.peek(base + 0x18) >> 4) & 7;
+                if ccr == 0 || ocm != 0b110 {
+                    0.0
+                } else {
+                    clk / ((psc + 1.0) * (arr + 1.0))
+                }
+            };
+            // TIM1 on APB2 (72 MHz), TIM4 on 2 × APB1 (72 MHz).
+            want.0 += rate(&twin, 0x4001_2C00, 72e6) * 1e-3;
+            want.1 += rate(&twin, 0x4000_0800, 72e6) * 1e-3;
+            twin.run_ms(1).unwrap();
+        }
         let p1 = twin.plant.as_ref().unwrap().steps_delivered;
         let dt = (twin.now() - t0) as f64 / TICKS_PER_S as f64;
         let status = twin
@@ -135,22 +153,32 @@ fn profile_b_steps_at_the_commanded_rates_and_stops_with_the_tractor() {
             .cloned()
             .expect("status");
         let n1 = number_after(&status, "n1 ").expect("n1") / 1000.0;
-        let n2 = number_after(&status, "n2 ").expect("n2") / 1000.0;
-        let plant_hz = (p1.0 - p0.0) as f64 / dt;
-        let feed_hz = (p1.1 - p0.1) as f64 / dt;
-        let want_plant = n1 * spr / 60.0;
-        let want_feed = n2 * spr_feed / 60.0;
+        let plant = (p1.0 - p0.0) as f64;
+        let feed = (p1.1 - p0.1) as f64;
         eprintln!(
-            "profile B at {mm_s} mm/s: planting {plant_hz:.1} Hz (commanded {want_plant:.1}), feeding {feed_hz:.1} Hz (commanded {want_feed:.1})"
+            "profile B at {mm_s} mm/s: planting {:.1} Hz (programmed {:.1}, n1 × steps/rev {:.1}), feeding {:.1} Hz (programmed {:.1})",
+            plant / dt,
+            want.0 / dt,
+            n1 * spr / 60.0,
+            feed / dt,
+            want.1 / dt
         );
-        assert!(want_plant > 0.0 && want_feed > 0.0, "{status}");
+        assert!(want.0 > 0.0 && want.1 > 0.0, "rates programmed: {status}");
         assert!(
-            (plant_hz - want_plant).abs() / want_plant <= 0.01,
-            "planting steps {plant_hz:.1} Hz vs {want_plant:.1} Hz at {mm_s} mm/s"
+            (plant - want.0).abs() / want.0 <= 0.01,
+            "planting steps {plant} vs {:.0} programmed at {mm_s} mm/s",
+            want.0
         );
         assert!(
-            (feed_hz - want_feed).abs() / want_feed <= 0.01,
-            "feeding steps {feed_hz:.1} Hz vs {want_feed:.1} Hz at {mm_s} mm/s"
+            (feed - want.1).abs() / want.1 <= 0.01,
+            "feeding steps {feed} vs {:.0} programmed at {mm_s} mm/s",
+            want.1
+        );
+        let n1_hz = n1 * spr / 60.0;
+        assert!(
+            (plant / dt - n1_hz).abs() / n1_hz <= 0.01,
+            "planting {:.1} Hz vs n1 {n1_hz:.1} Hz",
+            plant / dt
         );
         // The tractor stops. The firmware knows it only from the ground
         // encoder: the period that takes the last count still sees motion,

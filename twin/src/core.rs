@@ -285,12 +285,10 @@ impl Nvic {
                 }
             }
             0xE000_ED08 => self.vtor = v & 0x3FFF_FF80,
-            0xE000_ED0C => {
-                if v >> 16 == 0x05FA {
-                    self.aircr = v & 0x700;
-                    if v & 4 != 0 {
-                        self.reset_requested = true;
-                    }
+            0xE000_ED0C if v >> 16 == 0x05FA => {
+                self.aircr = v & 0x700;
+                if v & 4 != 0 {
+                    self.reset_requested = true;
                 }
             }
             0xE000_ED10 => self.scr = v & 0x16,

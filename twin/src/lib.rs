@@ -204,6 +204,9 @@ impl State {
     }
 }
 
+/// A probe on the twin's state ([`Twin::watch`]).
+pub type Watcher = Box<dyn FnMut(&State) -> bool>;
+
 /// A saved instant of a twin ([`Twin::snapshot`]).
 pub struct Snapshot {
     ctx: unicorn_engine::Context,
@@ -250,7 +253,7 @@ pub struct Twin {
     /// The touchscreen on USART1, if any.
     pub screen: Option<hmi_proto::virtual_screen::VirtualScreen>,
     /// Called after every scheduling step (a probe on the pins).
-    watchers: Vec<Box<dyn FnMut(&State) -> bool>>,
+    watchers: Vec<Watcher>,
     /// Host time spent in [`Twin::run_for`].
     pub host_time: Duration,
     screen_next: Ticks,

@@ -804,7 +804,7 @@ impl Timer {
             0x24 => u32::from(self.cnt),
             0x28 => u32::from(self.psc),
             0x2C => u32::from(self.arr),
-            0x30 => u32::from(self.rcr),
+            0x30 => self.rcr,
             0x34..=0x40 => {
                 let ch = ((off - 0x34) / 4) as usize;
                 if self.cc_input(ch) && ch == 0 {
@@ -1568,7 +1568,7 @@ impl Bus {
         self.advance(now);
         let off = a & 0x3FF;
         let base = a & !0x3FF;
-        let v = match base {
+        match base {
             addr::TIM2 => self.tim[1].read(off),
             addr::TIM3 => self.tim[2].read(off),
             addr::TIM4 => self.tim[3].read(off),
@@ -1615,8 +1615,7 @@ impl Bus {
                 self.unmodelled.push((a, false));
                 0
             }
-        };
-        v
+        }
     }
 
     /// Writes a peripheral register.

@@ -92,6 +92,57 @@ fn write_file(path: &Path, text: &str) -> Result {
     std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
 }
 
+/// Section 7: the twin's speed (firmware seconds per host second), from
+/// `twin`'s `speed` example on the profile A image (docs/twin.md).
+fn twin_section(doc: &mut String) -> Result {
+    eprintln!("xtask: bench 7 twin speed");
+    let elf = Board::Stm32f103.build()?;
+    let out =
+        std::process::Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
+            .current_dir(root())
+            .args([
+                "run",
+                "--quiet",
+                "-p",
+                "twin",
+                "--release",
+                "--example",
+                "speed",
+                "--",
+            ])
+            .arg(&elf)
+            .output()
+            .map_err(|e| format!("twin speed: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("twin-speed"))
+        .ok_or_else(|| {
+            format!(
+                "twin speed: no result ({})",
+                String::from_utf8_lossy(&out.stderr)
+            )
+        })?;
+    let num = |key: &str| -> f64 {
+        line.split(key)
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0)
+    };
+    let (fw, host) = (num("firmware_s="), num("host_s="));
+    doc.push_str(&format!(
+        "\n## 7. The twin's speed\n\n\
+         The register-level twin of the real board (docs/twin.md) ran the profile A \
+         release image with the machine at Low 2 and the drum running in Fixed mode: \
+         {fw:.1} s of firmware time in {host:.1} s on this machine, **{:.2} firmware \
+         seconds per host second** (the aim is at least 0.2). One executed instruction \
+         counts as one 72 MHz cycle; `wfi` skips to the next event.\n",
+        if host > 0.0 { fw / host } else { 0.0 }
+    ));
+    Ok(())
+}
+
 /// `cargo xtask bench`: regenerates docs/PERFORMANCE.md and docs/img/.
 pub fn run() -> Result {
     ensure_tools()?;
@@ -203,6 +254,7 @@ pub fn run() -> Result {
         let (flash, ram) = footprint(&board.build()?)?;
         doc.push_str(&format!("| {} | {flash} B | {ram} B |\n", board.name()));
     }
+    twin_section(&mut doc)?;
     let path = root().join("docs").join("PERFORMANCE.md");
     write_file(&path, &doc)?;
     eprintln!(

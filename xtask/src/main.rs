@@ -209,7 +209,57 @@ fn ensure_tools() -> Result {
             Command::new("cargo").args(["install", "defmt-print", "--locked"]),
         )?;
     }
+    ensure_twin_tools()?;
     ensure_linker()
+}
+
+/// Whether libclang (for unicorn's bindgen) is installed.
+fn have_libclang() -> bool {
+    [
+        "/usr/lib",
+        "/usr/lib/x86_64-linux-gnu",
+        "/usr/lib/aarch64-linux-gnu",
+    ]
+    .iter()
+    .flat_map(|d| std::fs::read_dir(d).into_iter().flatten().flatten())
+    .any(|e| {
+        let name = e.file_name().to_string_lossy().into_owned();
+        (name.starts_with("llvm-")
+            && std::fs::read_dir(e.path().join("lib"))
+                .into_iter()
+                .flatten()
+                .flatten()
+                .any(|l| l.file_name().to_string_lossy().starts_with("libclang")))
+            || name.starts_with("libclang-") && name.contains(".so")
+    })
+}
+
+/// The twin (tests/tests/twin_*.rs) builds unicorn from source: cmake and
+/// libclang (Debian's `cmake libclang-dev`), installed here when missing.
+fn ensure_twin_tools() -> Result {
+    if have("cmake") && have_libclang() {
+        return Ok(());
+    }
+    let root = Command::new("id")
+        .arg("-u")
+        .output()
+        .map(|o| o.stdout.starts_with(b"0"))
+        .unwrap_or(false);
+    if !root {
+        return Err(
+            "the twin needs cmake and libclang: `sudo apt-get install cmake libclang-dev`".into(),
+        );
+    }
+    run(
+        "apt-get update",
+        Command::new("apt-get").args(["update", "-qq"]),
+    )?;
+    run(
+        "apt-get install cmake libclang-dev (the twin's unicorn build)",
+        Command::new("apt-get")
+            .args(["install", "-y", "-qq", "cmake", "libclang-dev"])
+            .env("DEBIAN_FRONTEND", "noninteractive"),
+    )
 }
 
 /// The thumbv7m target and llvm-tools of rust-toolchain.toml. rustup adds
@@ -431,15 +481,21 @@ fn test() -> Result<Totals> {
         )?;
     }
     let elf = Board::Qemu.build()?;
+    // The twin tests (tests/tests/twin_*.rs) run the real board's release
+    // images: the ones `cargo xtask size` checks, built once here.
+    let twin_a = Board::Stm32f103.build()?;
+    let twin_b = Board::Stm32f103ProfileB.build()?;
     run_tests(
-        "QEMU tests (tests/)",
+        "QEMU and twin tests (tests/)",
         cargo()
             // One QEMU at a time: the real-time tests judge 10 ms control
             // periods, and on a two-core machine a second QEMU (the
             // accelerated 70 m row takes a whole core) starved them into
             // late periods (seen once: 2.9 % tracking error with a busy host).
             .args(["test", "-p", "qemu-tests", "--", "--test-threads=1"])
-            .env("FIRMWARE_QEMU_ELF", &elf),
+            .env("FIRMWARE_QEMU_ELF", &elf)
+            .env("TWIN_ELF_A", &twin_a)
+            .env("TWIN_ELF_B", &twin_b),
         &mut totals,
     )?;
     println!(

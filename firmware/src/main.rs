@@ -11,6 +11,7 @@
 //!
 //! | task | priority | release | budget |
 //! |---|---|---|---|
+//! | [`app::stop_input`] | 5 | each edge of the stop input (PB10, EXTI10) | 1 µs |
 //! | [`app::usart1_rx`] | 4 | each touchscreen byte (≤ 11.5 kHz) | 2 µs |
 //! | [`app::hall_capture`] | 3 | each Hall edge (≤ 1 kHz) and TIM2 overflow | 2 µs |
 //! | [`app::control`] | 2 | every 10 ms | 1 ms |
@@ -75,6 +76,7 @@ mod app {
         control::Effect,
         machine::Machine,
         settings::{Profile, Settings},
+        stop_input::{StopChange, StopLatch},
         store::{Loaded, SettingsStore},
     };
     #[cfg(feature = "profile-b")]
@@ -118,6 +120,15 @@ mod app {
         hmi: &'static mut Hmi,
         /// TIM2: its interrupt (3) and the control task's clock (2).
         hall: board::HallCapture,
+        /// The stop input: its interrupt (5), the control task (2, which
+        /// writes the outputs under this lock) and Start (hmi, 1).
+        stop: StopCircuit,
+    }
+
+    /// The stop input's pin and latch.
+    pub struct StopCircuit {
+        pin: board::StopInput,
+        latch: StopLatch,
     }
 
     #[local]
@@ -185,6 +196,10 @@ mod app {
                 machine,
                 hmi,
                 hall: board.hall,
+                stop: StopCircuit {
+                    pin: board.stop_input,
+                    latch: StopLatch::new(),
+                },
             },
             Local {
                 hmi_rx: board.hmi_rx,
@@ -365,6 +380,25 @@ mod app {
         }
     }
 
+    /// The stop input (a normally closed contact on PB10): outputs off at
+    /// once, in the interrupt, then the latch.
+    ///
+    /// - Priority 5 (highest): nothing delays a stop.
+    /// - Released by each edge of the contact (a bouncing contact: a few per
+    ///   operation).
+    /// - Budget: 1 µs (register writes only); the alarm and the log follow
+    ///   in the next control period.
+    #[task(binds = EXTI15_10, priority = 5, shared = [stop])]
+    fn stop_input(mut cx: stop_input::Context) {
+        cx.shared.stop.lock(|stop| {
+            stop.pin.clear_interrupt();
+            if stop.pin.is_open() {
+                board::stop_outputs();
+                stop.latch.trip();
+            }
+        });
+    }
+
     /// Touchscreen bytes: drains USART1 into the queue of [`hmi`].
     ///
     /// - Priority 4 (highest): the F103's USART has no FIFO, so a byte must
@@ -413,7 +447,7 @@ mod app {
     ///   ends after its next release is counted as an overrun and does not
     ///   feed the watchdog.
     /// - Budget: 1 ms (measured cost: docs/PERFORMANCE.md).
-    #[task(priority = 2, local = [sensors, actuators, watchdog, edges_out], shared = [machine, hmi, hall])]
+    #[task(priority = 2, local = [sensors, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop])]
     async fn control(mut cx: control::Context) {
         let mut next = Mono::now();
         #[cfg(feature = "profile-a")]
@@ -425,47 +459,81 @@ mod app {
             let sample = cx.local.sensors.sample(uptime_ms());
             #[cfg(feature = "profile-a")]
             let now = Ticks(cx.shared.hall.lock(|h| h.now()));
+            // The stop input: sampled every period (the interrupt has
+            // already switched the outputs off on an opening).
+            let (stop_change, stop_latched) = cx.shared.stop.lock(|stop| {
+                let open = stop.pin.is_open();
+                let change = stop.latch.sample(open, CONTROL_PERIOD_MS * 1000);
+                (change, stop.latch.is_latched())
+            });
             let edges_out = &mut cx.local.edges_out;
-            let step = cx.shared.machine.lock(|m| match m {
-                #[cfg(feature = "profile-a")]
-                Machine::DrumBelt(sup) => {
-                    while let Some(edge) = edges_out.dequeue() {
-                        sup.hall_edge(Ticks(edge));
-                    }
-                    for &edge in &sample.hall_edges {
-                        sup.hall_edge(Ticks(edge));
-                    }
-                    let a = sup.control_step(now, sample.drum_encoder);
-                    Step::Drum(a, sup.alarm(), sup.run_state())
+            let step = cx.shared.machine.lock(|m| {
+                if stop_latched {
+                    // Idempotent: the machine stays stopped while latched.
+                    let _ = m.command(hmi_proto::screen::Command::Stop);
                 }
-                #[cfg(feature = "profile-b")]
-                Machine::SeedlingBelt(belt) => {
-                    // Profile B wiring: TIM3 counts the ground-wheel encoder,
-                    // TIM2 captures one index pulse per feeding-roller turn.
-                    let mut pulses = sample.hall_edges.len() as u32;
-                    while edges_out.dequeue().is_some() {
-                        pulses = pulses.saturating_add(1);
+                match m {
+                    #[cfg(feature = "profile-a")]
+                    Machine::DrumBelt(sup) => {
+                        while let Some(edge) = edges_out.dequeue() {
+                            sup.hall_edge(Ticks(edge));
+                        }
+                        for &edge in &sample.hall_edges {
+                            sup.hall_edge(Ticks(edge));
+                        }
+                        let a = sup.control_step(now, sample.drum_encoder);
+                        Step::Drum(a, sup.alarm(), sup.run_state())
                     }
-                    let c = belt.control_step(sample.drum_encoder, pulses);
-                    let snap = belt.planter().snapshot();
-                    Step::Belt(c, snap.alarm, snap.state)
+                    #[cfg(feature = "profile-b")]
+                    Machine::SeedlingBelt(belt) => {
+                        // Profile B wiring: TIM3 counts the ground-wheel encoder,
+                        // TIM2 captures one index pulse per feeding-roller turn.
+                        let mut pulses = sample.hall_edges.len() as u32;
+                        while edges_out.dequeue().is_some() {
+                            pulses = pulses.saturating_add(1);
+                        }
+                        let c = belt.control_step(sample.drum_encoder, pulses);
+                        let snap = belt.planter().snapshot();
+                        Step::Belt(c, snap.alarm, snap.state)
+                    }
                 }
             });
             stats::HALL_EDGES.add(sample.hall_edges.len() as u32);
 
-            #[allow(unreachable_patterns)]
-            match (&step, &mut *cx.local.actuators) {
-                #[cfg(feature = "profile-a")]
-                (Step::Drum(a, ..), Actuators::Drum(drum)) => {
-                    drum.set_enabled(a.driver_enabled);
-                    drum.set_compare(a.ccr);
+            // The outputs are written under the stop input's lock: an
+            // opening between the step and here cannot be overwritten.
+            let actuators = &mut *cx.local.actuators;
+            cx.shared.stop.lock(|stop| {
+                if stop.latch.is_latched() {
+                    board::stop_outputs();
+                    return;
                 }
-                #[cfg(feature = "profile-b")]
-                (Step::Belt(c, ..), Actuators::Steppers(steppers)) => {
-                    steppers.set(c.feed_step_hz, c.plant_step_hz, c.enabled);
+                #[allow(unreachable_patterns)]
+                match (&step, actuators) {
+                    #[cfg(feature = "profile-a")]
+                    (Step::Drum(a, ..), Actuators::Drum(drum)) => {
+                        drum.set_enabled(a.driver_enabled);
+                        drum.set_compare(a.ccr);
+                    }
+                    #[cfg(feature = "profile-b")]
+                    (Step::Belt(c, ..), Actuators::Steppers(steppers)) => {
+                        steppers.set(c.feed_step_hz, c.plant_step_hz, c.enabled);
+                    }
+                    // The outputs were built for the machine: never mixed.
+                    _ => board::safe_state(),
                 }
-                // The outputs were built for the machine: never mixed.
-                _ => board::safe_state(),
+            });
+            match stop_change {
+                Some(StopChange::Opened) => {
+                    defmt::warn!("stop input: open, outputs off (latched until closed and Start)");
+                    cx.shared.hmi.lock(|hmi| {
+                        if hmi.show_alarm(STOP_INPUT_ALARM).is_err() {
+                            stats::HMI_TX_DROPPED.inc();
+                        }
+                    });
+                }
+                Some(StopChange::Closed) => defmt::info!("stop input: closed, Start allowed"),
+                None => {}
             }
 
             match step {
@@ -564,7 +632,7 @@ mod app {
     /// - Released by received bytes, and at least every 20 ms to time the
     ///   link (handshake retries, heartbeats, `get` timeouts).
     /// - Budget: 3 ms, most of it writing instructions at 115200 baud.
-    #[task(priority = 1, local = [bytes_out, hmi_tx, saves_in, boot_notice], shared = [machine, hmi])]
+    #[task(priority = 1, local = [bytes_out, hmi_tx, saves_in, boot_notice], shared = [machine, hmi, stop])]
     async fn hmi(mut cx: hmi::Context) {
         // Whether the screen has answered, or its silence was logged, since boot.
         let mut link_reported = false;
@@ -616,6 +684,12 @@ mod app {
                         });
                         Effect::Message(NOT_BUILT_IN)
                     }
+                    // Start only with the stop input proven closed; it also
+                    // releases the stop latch.
+                    Command::Start => match cx.shared.stop.lock(|s| s.latch.start()) {
+                        Ok(()) => cx.shared.machine.lock(|m| m.command(cmd)),
+                        Err(e) => Effect::Message(e.message()),
+                    },
                     _ => cx.shared.machine.lock(|m| m.command(cmd)),
                 };
                 match effect {
@@ -663,6 +737,11 @@ mod app {
                 if let Some(alarm) = cx.shared.machine.lock(|m| latched_alarm(m)) {
                     cx.shared.hmi.lock(|hmi| show_alarm(hmi, alarm));
                 }
+                if cx.shared.stop.lock(|s| s.latch.is_latched()) {
+                    cx.shared.hmi.lock(|hmi| {
+                        let _ = hmi.show_alarm(STOP_INPUT_ALARM);
+                    });
+                }
                 if let Some(notice) = cx.local.boot_notice.take() {
                     cx.shared.hmi.lock(|hmi| {
                         let _ = hmi.show_message(notice);
@@ -676,6 +755,9 @@ mod app {
             Event::ReplyTimeout(field) => defmt::warn!("screen reply timeout: {}", field),
         }
     }
+
+    /// The stop input's alarm text (both machines).
+    const STOP_INPUT_ALARM: &str = "Stop input open (stop switch)";
 
     /// Profile A's alarm on the screen's alarm page.
     #[cfg(feature = "profile-a")]

@@ -83,6 +83,10 @@ pub const HEARTBEAT_MS: u32 = 1_000;
 /// A connected screen that has sent nothing for this long is lost
 /// ([`Event::Disconnected`]): two heartbeats went unanswered.
 pub const LINK_TIMEOUT_MS: u32 = 2_500;
+/// A partial frame is forgotten when the line has been quiet for this long
+/// (a screen sends each frame in one go: 9 bytes take 0.8 ms at 115200 baud),
+/// so the next byte is read as a header whatever came before it.
+pub const RX_GAP_MS: u32 = 10;
 
 /// What the application layer reports to the firmware.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -136,6 +140,8 @@ pub struct HmiStats {
     pub decode_errors: u32,
     /// Times a connected screen went silent for [`LINK_TIMEOUT_MS`].
     pub link_losses: u32,
+    /// Partial frames forgotten after a quiet line ([`RX_GAP_MS`]).
+    pub gap_resyncs: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -176,6 +182,10 @@ pub struct Hmi {
     events: heapless::Deque<Event, EVENT_QUEUE>,
     tx: heapless::Deque<u8, TX_CAPACITY>,
     stats: HmiStats,
+    /// Bytes arrived since the last [`tick`](Self::tick).
+    rx_since_tick: bool,
+    /// The last tick that followed received bytes.
+    last_rx_ms: u32,
 }
 
 impl Hmi {
@@ -198,6 +208,8 @@ impl Hmi {
             events: heapless::Deque::new(),
             tx: heapless::Deque::new(),
             stats: HmiStats::default(),
+            rx_since_tick: false,
+            last_rx_ms: 0,
         }
     }
 
@@ -250,12 +262,16 @@ impl Hmi {
 
     /// Feeds one received byte.
     pub fn push(&mut self, byte: u8) {
-        match self.decoder.push(byte) {
-            Some(Ok(frame)) => self.on_frame(frame),
-            Some(Err(_)) => {
-                self.stats.decode_errors = self.stats.decode_errors.wrapping_add(1);
+        self.rx_since_tick = true;
+        let mut next = self.decoder.push(byte);
+        while let Some(result) = next {
+            match result {
+                Ok(frame) => self.on_frame(frame),
+                Err(_) => {
+                    self.stats.decode_errors = self.stats.decode_errors.wrapping_add(1);
+                }
             }
-            None => {}
+            next = self.decoder.poll();
         }
     }
 
@@ -271,6 +287,13 @@ impl Hmi {
     /// timed from the last `tick`.
     pub fn tick(&mut self, now_ms: u32) {
         self.now_ms = now_ms;
+        if core::mem::take(&mut self.rx_since_tick) {
+            self.last_rx_ms = now_ms;
+        } else if !self.decoder.is_idle() && now_ms.wrapping_sub(self.last_rx_ms) >= RX_GAP_MS {
+            // The rest of that frame is not coming: the next byte is a header.
+            self.decoder.reset();
+            self.stats.gap_resyncs = self.stats.gap_resyncs.wrapping_add(1);
+        }
         if let Link::Connected { heard_ms, probe_ms } = self.link {
             let quiet = now_ms.wrapping_sub(heard_ms);
             if quiet >= LINK_TIMEOUT_MS {
@@ -481,6 +504,17 @@ impl Hmi {
                 self.page = Page::Boot;
             }
             Frame::Ready => self.connect(),
+            // Stop counts on press and on release, connected or not (a
+            // corrupted frame may have looked like a screen restart): the
+            // screen file sends its ID on both, so one lost frame never
+            // loses a Stop (docs/hmi.md).
+            Frame::Touch {
+                page, component, ..
+            } if Component::lookup(page, component)
+                .is_some_and(|c| c.role == Role::Action(Action::Stop)) =>
+            {
+                self.event(Event::Command(Command::Stop));
+            }
             Frame::Touch {
                 page,
                 component,
@@ -508,11 +542,6 @@ impl Hmi {
             self.stats.unknown_touches = self.stats.unknown_touches.wrapping_add(1);
             return;
         };
-        if comp.role == Role::Action(Action::Stop) {
-            // Safety first: Stop never waits behind a pending `get`.
-            self.event(Event::Command(Command::Stop));
-            return;
-        }
         if self.pending.is_some() {
             if self.touches.push_back((page, id)).is_err() {
                 self.stats.touches_dropped = self.stats.touches_dropped.wrapping_add(1);

@@ -124,7 +124,8 @@ impl VirtualScreen {
     }
 
     /// The transplanter's screen file ([`crate::screen::COMPONENTS`]): buttons
-    /// send their id on release only. Shows page 0; call [`boot`](Self::boot)
+    /// send their id on release, Stop buttons on press too (docs/hmi.md).
+    /// Shows page 0; call [`boot`](Self::boot)
     /// to emit the power-on frames.
     pub fn with_contract() -> Self {
         let pages = Page::ALL.iter().map(|p| p.name().to_string()).collect();
@@ -135,7 +136,7 @@ impl VirtualScreen {
                 id: c.id,
                 name: c.name.to_string(),
                 is_text: c.kind == Kind::Text,
-                send_on_press: false,
+                send_on_press: c.role == crate::screen::Role::Action(crate::screen::Action::Stop),
                 send_on_release: c.kind == Kind::Button,
                 val: 0,
                 txt: String::new(),

@@ -15,4 +15,5 @@ pub mod crc;
 pub mod machine;
 pub mod profile_b;
 pub mod settings;
+pub mod stop_input;
 pub mod store;

@@ -58,6 +58,12 @@ static HALL_TIMER_NOW: AtomicU32 = AtomicU32::new(0);
 /// Stand-ins for the step-pulse timers of profile B (rate, U16F16 Hz bits).
 static FEED_STEP_BITS: AtomicU32 = AtomicU32::new(0);
 static PLANT_STEP_BITS: AtomicU32 = AtomicU32::new(0);
+/// Stand-in for the stop input pin PB10 (high = contact open = stop).
+static STOP_INPUT_OPEN: AtomicBool = AtomicBool::new(false);
+/// Truth: when the simulated contact opened, and when [`stop_outputs`] made
+/// the outputs safe after it (µs of firmware time).
+static STOP_OPENED_US: AtomicU32 = AtomicU32::new(0);
+static STOP_SAFE_US: AtomicU32 = AtomicU32::new(0);
 
 /// Everything the application owns after [`init`].
 pub struct Board {
@@ -73,6 +79,8 @@ pub struct Board {
     pub hall: HallCapture,
     /// Status LED stand-in.
     pub led: StatusLed,
+    /// The stop input (the scenario opens and closes it and pends EXTI15_10).
+    pub stop_input: StopInput,
     /// The watchdog stand-in.
     pub watchdog: Watchdog,
     /// Profile B's feeding step output stand-in.
@@ -99,7 +107,8 @@ struct CmdLine {
 /// `step=T:+P` / `step=T:-P` sets the travel speed P % off its gear speed at
 /// T ms (`step=T:0` returns to it; up to four); `tau=MS` gives the chassis a
 /// speed time constant;
-/// `stop=T` stops the tractor at T ms; `stall=T`, `hall_loss=T`,
+/// `stop=T` stops the tractor at T ms; `stop_input=T` opens the stop
+/// input's contact at T ms and `stop_input_close=T` closes it; `stall=T`, `hall_loss=T`,
 /// `enc_loss=T` inject faults at T ms; `noise=0` makes the model noiseless;
 /// `seed=N` seeds it; `slip=P` scales the track slip of paper A's Table 12
 /// to P % (a machine whose calibration is not the paper's).
@@ -109,6 +118,8 @@ struct Scenario {
     step: [Option<(u32, i32)>; 4],
     tau_ms: Option<u32>,
     stop: Option<u32>,
+    stop_input: Option<u32>,
+    stop_input_close: Option<u32>,
     stall: Option<u32>,
     hall_loss: Option<u32>,
     enc_loss: Option<u32>,
@@ -203,6 +214,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         },
         hall: HallCapture,
         led: StatusLed,
+        stop_input: StopInput,
         watchdog: Watchdog,
         #[cfg(feature = "profile-b")]
         feed_step: FeedStep,
@@ -337,6 +349,23 @@ impl Sensors {
             self.machine.stop_travel();
             defmt::info!("sim: tractor stops");
         }
+        if due(s.stop_input, from, to) {
+            // The contact opens now: the pin goes high and its interrupt is
+            // pended (EXTI15_10, priority 5, runs before this returns).
+            STOP_INPUT_OPEN.store(true, Relaxed);
+            STOP_OPENED_US.store(now_us(), Relaxed);
+            pac::NVIC::pend(pac::Interrupt::EXTI15_10);
+            defmt::warn!(
+                "sim: stop input opened at {=u32} us, outputs safe at {=u32} us",
+                STOP_OPENED_US.load(Relaxed),
+                STOP_SAFE_US.load(Relaxed)
+            );
+        }
+        if due(s.stop_input_close, from, to) {
+            STOP_INPUT_OPEN.store(false, Relaxed);
+            pac::NVIC::pend(pac::Interrupt::EXTI15_10);
+            defmt::info!("sim: stop input closed");
+        }
         if due(s.stall, from, to) {
             self.machine.inject_fault(Fault::DrumStall);
             defmt::warn!("sim: drum stall injected");
@@ -466,6 +495,45 @@ impl Watchdog {
     pub fn feed(&mut self) {}
 }
 
+/// The stop input stand-in: PB10's level comes from the scenario.
+pub struct StopInput;
+
+impl StopInput {
+    /// The contact is open: stop.
+    pub fn is_open(&self) -> bool {
+        STOP_INPUT_OPEN.load(Relaxed)
+    }
+
+    /// Nothing to acknowledge (the interrupt was pended by software).
+    pub fn clear_interrupt(&mut self) {}
+}
+
+/// Firmware time in µs: the monotonic's milliseconds and SysTick's count
+/// within the current one (a pending SysTick means a millisecond more).
+fn now_us() -> u32 {
+    use cortex_m::peripheral::{SCB, SYST};
+    loop {
+        let ms = crate::uptime_ms();
+        let reload = SYST::get_reload();
+        let current = SYST::get_current();
+        let pending = SCB::is_pendst_pending();
+        if crate::uptime_ms() != ms {
+            continue;
+        }
+        let into = reload.saturating_sub(current).saturating_mul(1000) / reload.saturating_add(1);
+        let ms = if pending { ms.wrapping_add(1) } else { ms };
+        return ms.wrapping_mul(1000).wrapping_add(into);
+    }
+}
+
+/// The stop input's response (see the real board's): zeroes the PWM and
+/// step stand-ins and the enable, and notes the time for the simulator's
+/// truth line.
+pub fn stop_outputs() {
+    safe_state();
+    STOP_SAFE_US.store(now_us(), Relaxed);
+}
+
 /// Zeroes the PWM and step stand-ins and the enable (the model coasts the
 /// drum down; the steppers stop).
 pub fn safe_state() {
@@ -577,6 +645,8 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
                 }
             }
             b"stop" => s.stop = parse_u32(value),
+            b"stop_input" => s.stop_input = parse_u32(value),
+            b"stop_input_close" => s.stop_input_close = parse_u32(value),
             b"tau" => s.tau_ms = parse_u32(value),
             b"profile" => s.profile_b = value == b"b" || value == b"B",
             b"speed" => s.speed_mm_s = parse_u32(value),

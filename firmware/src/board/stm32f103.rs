@@ -11,13 +11,15 @@
 //! | PA6 / PA7 | drum motor encoder A/B, TIM3 encoder mode |
 //! | PA9 / PA10 | USART1 TX/RX, touchscreen, 115200 8N1 |
 //! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable, RS-485 to the motor driver, 9600 8N1 |
+//! | PB10 | stop input: NC contact to ground, internal pull-up (FT pin), EXTI10 on both edges |
 //! | PC13 | status LED (low = on) |
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use kinematics::speed::CaptureExtender;
 use stm32f1xx_hal::{
+    afio::AfioExt,
     flash::{self, FlashSize, SectorSize},
-    gpio::{Output, PushPull, PA1, PB12, PB13, PC13},
+    gpio::{Edge, ExtiPin, Input, Output, PullUp, PushPull, PA1, PB10, PB12, PB13, PC13},
     pac::{self, IWDG, TIM1, TIM2, TIM3, USART1, USART2},
     prelude::*,
     rcc,
@@ -63,6 +65,8 @@ pub struct Board {
     pub rs485: Rs485,
     /// Status LED.
     pub led: StatusLed,
+    /// The stop input (its interrupt is EXTI15_10).
+    pub stop_input: StopInput,
     /// The independent watchdog (running).
     pub watchdog: Watchdog,
     /// Profile B's feeding-motor step output (TIM4 CH1 on PB6), idle. The
@@ -161,6 +165,16 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let sensors = Sensors::new(tim3);
 
     let led = StatusLed(gpioc.pc13.into_push_pull_output(&mut gpioc.crh));
+
+    // Stop input, PB10 (5 V tolerant): NC contact to ground, pulled up, so
+    // open contact or broken wire = high = stop. EXTI10 on both edges.
+    let mut afio = dp.AFIO.constrain(&mut rcc);
+    let mut exti = dp.EXTI;
+    let mut stop_pin = gpiob.pb10.into_pull_up_input(&mut gpiob.crh);
+    stop_pin.make_interrupt_source(&mut afio);
+    stop_pin.trigger_on_edge(&mut exti, Edge::RisingFalling);
+    stop_pin.enable_interrupt(&mut exti);
+    let stop_input = StopInput { pin: stop_pin };
     let watchdog = Watchdog::start(dp.IWDG);
 
     Board {
@@ -171,6 +185,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         hall,
         rs485: Rs485 { tx, rx, de },
         led,
+        stop_input,
         watchdog,
         #[cfg(feature = "profile-b")]
         feed_step,
@@ -506,6 +521,50 @@ impl NorFlash for SettingsFlash {
         writer
             .write(SETTINGS_OFFSET + offset, bytes)
             .map_err(|_| FlashError::Device)
+    }
+}
+
+/// The stop input on PB10: a normally closed contact to ground with the
+/// internal pull-up (datasheet: PB10 is a 5 V tolerant "FT" pin). An open
+/// contact, a cut wire or an unplugged connector read high: stop.
+pub struct StopInput {
+    pin: PB10<Input<PullUp>>,
+}
+
+impl StopInput {
+    /// The contact is open (the pin reads high): stop.
+    pub fn is_open(&self) -> bool {
+        self.pin.is_high()
+    }
+
+    /// Acknowledges the pin's EXTI interrupt.
+    pub fn clear_interrupt(&mut self) {
+        self.pin.clear_interrupt_pending_bit();
+    }
+}
+
+/// The stop input's response, from its interrupt: drum PWM compare 0 now
+/// (the preloaded CCR1 = 0 is loaded at once by an update event, UG), the
+/// drivers' enable PB12 low; profile B's feed step timer (TIM4) likewise.
+/// Unlike [`safe_state`], the outputs stay armed: the control task drives
+/// them again once the operator restarts.
+pub fn stop_outputs() {
+    // SAFETY: single writes to TIM1/TIM4 CCR1 and EGR and to GPIOB's BSRR,
+    // which are write-only in effect (no read-modify-write), from the
+    // highest-priority interrupt; the control task re-writes CCR1 and PB12
+    // only when the stop latch allows it (under the same lock).
+    unsafe {
+        let gpiob = &*pac::GPIOB::ptr();
+        gpiob.bsrr().write(|w| w.bits(1 << (12 + 16)));
+        let tim1 = &*TIM1::ptr();
+        tim1.ccr1().write(|w| w.ccr().set(0));
+        tim1.egr().write(|w| w.ug().set_bit());
+        #[cfg(feature = "profile-b")]
+        {
+            let tim4 = &*pac::TIM4::ptr();
+            tim4.ccr1().write(|w| w.ccr().set(0));
+            tim4.egr().write(|w| w.ug().set_bit());
+        }
     }
 }
 

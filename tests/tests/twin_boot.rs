@@ -220,6 +220,28 @@ fn check_common(twin: &mut Twin, image: Image) {
         dispatch.contains(&nvic_prio(2)) && dispatch.contains(&nvic_prio(1)),
         "dispatcher priorities {dispatch:x?}"
     );
+    // The stop input (decision of issue 15's helpers: PB10, EXTI line 10 →
+    // EXTI15_10, IRQ 40, priority 5 above every task): AFIO_EXTICR3's EXTI10
+    // field selects port B (0001, RM0008 §9.4.5), the line is unmasked and
+    // both edges trigger (RM0008 §10.3).
+    assert!(enabled(40), "EXTI15_10 enabled");
+    assert_eq!(ipr(twin, 40), nvic_prio(5), "EXTI15_10 priority");
+    assert_eq!(
+        field(twin.peek(0x4001_0010), 8, 4),
+        0b0001,
+        "EXTICR3 EXTI10 = PB"
+    );
+    assert_ne!(twin.peek(0x4001_0400) & (1 << 10), 0, "EXTI IMR10");
+    assert_ne!(
+        twin.peek(0x4001_0408) & (1 << 10),
+        0,
+        "EXTI RTSR10 (contact opens)"
+    );
+    assert_ne!(
+        twin.peek(0x4001_040C) & (1 << 10),
+        0,
+        "EXTI FTSR10 (contact closes)"
+    );
     // SysTick: 1 kHz monotonic from the core clock (PM0056 §4.5).
     assert_eq!(
         twin.peek(0xE000_E014) + 1,

@@ -138,6 +138,19 @@ fn stack_overflow_drives_pa8_and_pb12_low() {
     assert_safe(&mut twin, "stack overflow");
 }
 
+/// The stop input (PB10, a normally-closed contact to ground with the
+/// internal pull-up): the contact opens while the drum runs.
+#[test]
+fn opening_the_stop_contact_drives_pa8_and_pb12_low() {
+    let mut twin = running_drum();
+    twin.set_external('B', 10, External::Open);
+    assert_safe(&mut twin, "stop input");
+    // Closing the contact again does not restart the drum by itself.
+    twin.set_external('B', 10, External::Low);
+    twin.run_ms(200).unwrap();
+    assert_eq!(twin.pin('B', 12), Level::Low, "latched until Start");
+}
+
 /// The control task's dispatcher: the enabled one of RTIC's dispatchers
 /// (CAN_RX1 21, CAN_SCE 22, ADC1_2 18) at priority 2, (16 − 2) << 4
 /// (PM0056 §4.2.7).
@@ -189,7 +202,8 @@ fn a_stopped_control_task_gets_the_board_reset_by_the_watchdog_and_it_comes_back
     twin.tap("bback").unwrap();
     twin.tap("bfixed").unwrap();
     twin.tap("bstart").unwrap();
-    twin.run_ms(300).unwrap();
+    // A status line (1 Hz) of the running machine.
+    twin.run_ms(1100).unwrap();
     assert_eq!(twin.pin('B', 12), Level::High, "running");
     let before = twin.log_lines("status: uptime");
     let mode = before
@@ -328,5 +342,4 @@ fn usart1_overrun_is_counted_and_the_link_recovers() {
             .unwrap(),
         "Start after the overrun"
     );
-    let _ = External::Open;
 }

@@ -1336,6 +1336,16 @@ pub mod addr {
     pub const FLASH: u32 = 0x4002_2000;
 }
 
+/// What the machine's wiring drives onto the pins when nothing else is
+/// said: the stop input's normally-closed contact on PB10 is closed (to
+/// ground) — the machine is not stopped. Open it with
+/// `Twin::set_external('B', 10, External::Open)`.
+fn board_wiring() -> [[External; 16]; 5] {
+    let mut e = [[External::Open; 16]; 5];
+    e[1][10] = External::Low;
+    e
+}
+
 impl Bus {
     /// The bus after a power-on reset.
     pub fn new(hse_dead: bool, lsi_hz: u64) -> Self {
@@ -1350,7 +1360,7 @@ impl Bus {
             iwdg: Iwdg::new(lsi_hz),
             systick: SysTick::default(),
             dbgmcu_cr: 0,
-            external: [[External::Open; 16]; 5],
+            external: board_wiring(),
             exti_last: [false; 16],
             flash_cmd: None,
             unmodelled: Vec::new(),

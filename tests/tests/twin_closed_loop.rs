@@ -119,6 +119,9 @@ fn profile_b_steps_at_the_commanded_rates_and_stops_with_the_tractor() {
             twin.run_until_screen(3000, |s| s.page() == 7).unwrap(),
             "profile B's run page"
         );
+        // The operator starts a moment later (the stop input must have been
+        // seen closed for 20 ms since boot).
+        twin.run_ms(500).unwrap();
         twin.tap("bstart").unwrap();
         twin.run_ms(4000).unwrap();
         // Steady state, 2 s: the pulses on the pins against the rates the
@@ -163,7 +166,11 @@ fn profile_b_steps_at_the_commanded_rates_and_stops_with_the_tractor() {
             feed / dt,
             want.1 / dt
         );
-        assert!(want.0 > 0.0 && want.1 > 0.0, "rates programmed: {status}");
+        assert!(
+            want.0 > 0.0 && want.1 > 0.0,
+            "rates programmed: {status}\n{}",
+            twin.logs().join("\n")
+        );
         assert!(
             (plant - want.0).abs() / want.0 <= 0.01,
             "planting steps {plant} vs {:.0} programmed at {mm_s} mm/s",

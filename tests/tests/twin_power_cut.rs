@@ -103,7 +103,15 @@ fn a_power_cut_at_every_flash_step_of_a_save_boots_old_or_new_settings() {
         let status = logs
             .iter()
             .find(|l| l.contains("status: uptime"))
-            .unwrap_or_else(|| panic!("step {k}: no status line:\n{text}"));
+            .unwrap_or_else(|| {
+                panic!(
+                    "step {k}: no status line (core {:?}, resets {:?}, {} RTT bytes, pc {:#x}):\n{text}",
+                    twin.core,
+                    twin.resets,
+                    twin.rtt_bytes.len(),
+                    twin.reg(twin::RegisterARM::PC)
+                )
+            });
         if text.contains("settings: loaded record 1") {
             assert!(
                 status.contains(" Fixed "),

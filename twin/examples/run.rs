@@ -15,6 +15,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     twin.connect_screen();
     twin.run_ms(ms)?;
     let logs = twin.logs();
+    let zeros = twin.rtt_bytes.iter().filter(|&&b| b == 0).count();
+    println!(
+        "zeros in RTT stream {zeros}, lines {}; head {:02x?}",
+        logs.len(),
+        &twin.rtt_bytes[..twin.rtt_bytes.len().min(24)]
+    );
     println!(
         "{} lines; firmware {:.3} s in {:.3} s host; core {:?}; pc {:#x}; resets {:?}; instr {}",
         logs.len(),

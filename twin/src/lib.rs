@@ -162,6 +162,10 @@ pub struct State {
     pub bus_error: Option<u32>,
     /// A peripheral register write happened (for the waker).
     touched: bool,
+    /// Stop before the first block that starts at or after this time.
+    deadline: Ticks,
+    /// Instructions per translated block (start address, bytes).
+    block_insns: std::collections::HashMap<(u32, u32), u64>,
 }
 
 impl State {
@@ -220,10 +224,19 @@ pub struct Snapshot {
     resets: Vec<(Ticks, ResetCause)>,
     screen: Option<hmi_proto::virtual_screen::VirtualScreen>,
     screen_next: Ticks,
+    rtt_last: Option<u8>,
 }
 
 /// Where the defmt frames go.
 struct LogSink {
+    /// Complete defmt frames (rzcobs: each ends with a 0x00) sent to the
+    /// decoder: one log line each.
+    frames: usize,
+    /// Bytes before the first frame boundary are dropped (a decoder started
+    /// after a restore joins the stream mid-frame).
+    synced: bool,
+    /// The last byte sent.
+    prev: u8,
     stdin: Option<ChildStdin>,
     child: Option<Child>,
     rx: Option<Receiver<String>>,
@@ -258,6 +271,8 @@ pub struct Twin {
     pub host_time: Duration,
     screen_next: Ticks,
     echo: bool,
+    /// The last defmt byte sent to the decoder (frame boundary if 0).
+    rtt_last: Option<u8>,
 }
 
 /// Reads a little-endian u32 from unicorn memory.
@@ -314,6 +329,8 @@ impl Twin {
             fixups: Vec::new(),
             bus_error: None,
             touched: false,
+            deadline: 0,
+            block_insns: std::collections::HashMap::new(),
         };
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::MCLASS | Mode::LITTLE_ENDIAN, state)
             .map_err(uc_err)?;
@@ -350,6 +367,7 @@ impl Twin {
             host_time: Duration::ZERO,
             screen_next: 0,
             echo: options.echo_logs,
+            rtt_last: None,
         };
         twin.reset(ResetCause::PowerOn)?;
         Ok(twin)
@@ -526,6 +544,12 @@ impl Twin {
             st.fixups.clear();
             st.watch_masks = false;
             st.bus_error = None;
+        }
+        // A frame cut by the reset: end it for the decoder (not counted as a
+        // line); the new run's frames start on a boundary.
+        if self.rtt_last.is_some_and(|b| b != 0) {
+            self.log.terminate();
+            self.rtt_last = Some(0);
         }
         // Clear the RTT control block so that a stale one is never read.
         if let Some(a) = self.rtt {
@@ -898,15 +922,15 @@ impl Twin {
             st.stop = None;
             (st.cost, st.now)
         };
-        let count = ((until.saturating_sub(now)) / cost).max(1) as usize;
-        let r = self.uc.emu_start(u64::from(pc | 1), 0, 0, count);
+        self.uc.get_data_mut().deadline = until;
+        let r = self.uc.emu_start(u64::from(pc | 1), 0, 0, 0);
         // Flash fix-ups and stalls.
         self.apply_fixups();
         let stop = self.uc.get_data_mut().stop.take();
         let pc_now = self.reg(RegisterARM::PC);
         if std::env::var_os("TWIN_TRACE").is_some() {
             eprintln!(
-                "exec pc {pc:#x} -> {pc_now:#x} count {count} ran {} r {r:?} stop {stop:?} core {:?}",
+                "exec pc {pc:#x} -> {pc_now:#x} until {until} ran {} r {r:?} stop {stop:?} core {:?}",
                 (self.now() - now) / cost,
                 self.core
             );
@@ -1027,6 +1051,9 @@ impl Twin {
         }
         let _ = self.uc.mem_write(u64::from(desc + 16), &r.to_le_bytes());
         self.log.write(&out);
+        if let Some(&b) = out.last() {
+            self.rtt_last = Some(b);
+        }
         self.rtt_bytes.extend(out);
     }
 
@@ -1143,6 +1170,7 @@ impl Twin {
             resets: self.resets.clone(),
             screen: self.screen.clone(),
             screen_next: self.screen_next,
+            rtt_last: self.rtt_last,
         })
     }
 
@@ -1181,6 +1209,10 @@ impl Twin {
         self.screen_next = snap.screen_next;
         let decode = self.log.child.is_some();
         self.log = LogSink::start(&self.elf_path, decode, self.echo)?;
+        // Mid-frame at the snapshot: the new decoder joins at the next
+        // boundary.
+        self.log.synced = snap.rtt_last.is_none_or(|b| b == 0);
+        self.rtt_last = snap.rtt_last;
         self.rtt_bytes.clear();
         Ok(())
     }
@@ -1360,35 +1392,53 @@ fn do_flash_cmd(uc: &mut Unicorn<'_, State>, cmd: periph::FlashCmd) {
 
 fn add_hooks(uc: &mut Unicorn<'static, State>) -> Result<(), Error> {
     // Every instruction: time, and the masks while an exception waits.
-    uc.add_code_hook(
-        1,
-        0,
-        |uc: &mut Unicorn<'_, State>, _addr: u64, _size: u32| {
+    // Every translated block, before it runs: time advances by its
+    // instructions (Thumb-2: a half-word whose top five bits are 0b11101,
+    // 0b11110 or 0b11111 starts a 32-bit instruction), and the run stops
+    // here — before the block — for a re-plan, at the deadline, or when an
+    // exception waiting behind a mask can now be taken. Unicorn checks for
+    // a stop right after this hook, so a stopped block has not run.
+    uc.add_block_hook(1, 0, |uc: &mut Unicorn<'_, State>, addr: u64, size: u32| {
+        let st = uc.get_data_mut();
+        if st.stop.is_some() || st.now >= st.deadline {
+            let _ = uc.emu_stop();
+            return;
+        }
+        if st.watch_masks {
+            let pm = uc.reg_read(RegisterARM::PRIMASK).unwrap_or(0) & 1 != 0;
+            let fm = uc.reg_read(RegisterARM::FAULTMASK).unwrap_or(0) & 1 != 0;
+            let bp = uc.reg_read(RegisterARM::BASEPRI).unwrap_or(0) as u8;
             let st = uc.get_data_mut();
-            if st.stop.is_some() {
-                // A register write asked for a re-plan: stop before this
-                // instruction (unicorn checks for a stop right after the hook).
+            let exec = st.nvic.execution_priority(pm, fm, bp);
+            if st.nvic.top_pending().is_some_and(|(_, p)| p < exec) {
+                st.watch_masks = false;
+                st.stop.get_or_insert(Stop::Replan);
                 let _ = uc.emu_stop();
                 return;
             }
-            st.now += st.cost;
-            st.instructions += 1;
-            if st.watch_masks {
-                let pm = uc.reg_read(RegisterARM::PRIMASK).unwrap_or(0) & 1 != 0;
-                let fm = uc.reg_read(RegisterARM::FAULTMASK).unwrap_or(0) & 1 != 0;
-                let bp = uc.reg_read(RegisterARM::BASEPRI).unwrap_or(0) as u8;
-                let st = uc.get_data_mut();
-                let exec = st.nvic.execution_priority(pm, fm, bp);
-                if st.nvic.top_pending().is_some_and(|(_, p)| p < exec) {
-                    st.watch_masks = false;
-                    st.now -= st.cost;
-                    st.instructions -= 1;
-                    st.stop.get_or_insert(Stop::Replan);
-                    let _ = uc.emu_stop();
+        }
+        let key = (addr as u32, size);
+        let n = match uc.get_data().block_insns.get(&key) {
+            Some(&n) => n,
+            None => {
+                let mut bytes = vec![0u8; size as usize];
+                let _ = uc.mem_read(addr, &mut bytes);
+                let mut n = 0u64;
+                let mut i = 0usize;
+                while i + 1 < bytes.len() {
+                    let hw = u16::from_le_bytes([bytes[i], bytes[i + 1]]);
+                    i += if hw >> 11 >= 0b11101 { 4 } else { 2 };
+                    n += 1;
                 }
+                let n = n.max(1);
+                uc.get_data_mut().block_insns.insert(key, n);
+                n
             }
-        },
-    )
+        };
+        let st = uc.get_data_mut();
+        st.now += n * st.cost;
+        st.instructions += n;
+    })
     .map_err(uc_err)?;
     // Exceptions raised by the instruction set (UDF, BKPT, SVC, aborts).
     uc.add_intr_hook(|uc: &mut Unicorn<'_, State>, intno: u32| {
@@ -1460,6 +1510,9 @@ impl LogSink {
     fn start(elf: &Path, decode: bool, echo: bool) -> Result<Self, Error> {
         if !decode {
             return Ok(Self {
+                frames: 0,
+                synced: true,
+                prev: 0,
                 stdin: None,
                 child: None,
                 rx: None,
@@ -1497,6 +1550,9 @@ impl LogSink {
             }
         });
         Ok(Self {
+            frames: 0,
+            synced: true,
+            prev: 0,
             stdin,
             child: Some(child),
             rx: Some(rx),
@@ -1506,12 +1562,39 @@ impl LogSink {
     }
 
     fn write(&mut self, bytes: &[u8]) {
+        let mut bytes = bytes;
+        if !self.synced {
+            match bytes.iter().position(|&b| b == 0) {
+                Some(i) => {
+                    bytes = &bytes[i + 1..];
+                    self.synced = true;
+                }
+                None => return,
+            }
+        }
+        // A frame ends with a 0x00 after its bytes; a 0x00 after a 0x00 (or
+        // at the start of the stream, as defmt-rtt begins) is no frame.
+        for &b in bytes {
+            if b == 0 && self.prev != 0 {
+                self.frames += 1;
+            }
+            self.prev = b;
+        }
         if let Some(s) = &mut self.stdin {
             let _ = s.write_all(bytes);
             let _ = s.flush();
             self.last_write = Instant::now();
         }
         self.poll();
+    }
+
+    /// Ends a frame cut short (the decoder drops it; no line expected).
+    fn terminate(&mut self) {
+        if let Some(s) = &mut self.stdin {
+            let _ = s.write_all(&[0]);
+            let _ = s.flush();
+        }
+        self.prev = 0;
     }
 
     fn poll(&mut self) {
@@ -1522,22 +1605,19 @@ impl LogSink {
         }
     }
 
-    /// Waits until the decoder has been quiet for 100 ms (at most 2 s).
+    /// Waits until the decoder has printed a line for every complete frame
+    /// sent (deterministic whatever the host's load; 20 s at most, reached
+    /// only if the decoder fails).
     fn settle(&mut self) {
         let Some(rx) = &self.rx else { return };
-        let deadline = Instant::now() + Duration::from_secs(2);
-        loop {
-            match rx.recv_timeout(Duration::from_millis(30)) {
-                Ok(l) => self.lines.push(l),
-                Err(_) => {
-                    if self.last_write.elapsed() >= Duration::from_millis(30) {
-                        break;
-                    }
-                }
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while self.lines.len() < self.frames && Instant::now() < deadline {
+            if let Ok(l) = rx.recv_timeout(Duration::from_millis(50)) {
+                self.lines.push(l);
             }
-            if Instant::now() > deadline {
-                break;
-            }
+        }
+        while let Ok(l) = rx.try_recv() {
+            self.lines.push(l);
         }
     }
 }

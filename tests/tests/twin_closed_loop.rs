@@ -222,3 +222,59 @@ fn profile_b_steps_at_the_commanded_rates_and_stops_with_the_tractor() {
         );
     }
 }
+
+#[test]
+fn profile_a_70_m_row_at_7_cm_gets_its_1000_plants_within_half_a_percent() {
+    // The QEMU test's scenario on the real board layer: Low 2, the full
+    // noise model (terrain, slip variation, tooth errors, seedling load),
+    // Speed-Adaptive at the default 7 cm; plants counted by the machine
+    // model over the first 70 m after Start (70 m / 7 cm = 1000).
+    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let mut twin = Twin::new(
+        &elf,
+        Options {
+            decode_logs: false,
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    let config = machine_sim::Config {
+        initial_gear: Some(Gear::ALL[1]),
+        ..machine_sim::Config::default()
+    };
+    twin.attach_plant(config.build().unwrap(), Wiring::ProfileA);
+    twin.connect_screen();
+    assert!(twin.run_until_screen(3000, |s| s.page() == 1).unwrap());
+    twin.tap("badapt").unwrap();
+    assert!(twin.run_until_screen(3000, |s| s.page() == 3).unwrap());
+    assert_eq!(
+        twin.screen.as_ref().and_then(|s| s.value("nspacing")),
+        Some(70)
+    );
+    twin.tap("bstart").unwrap();
+    // As in QEMU's accelerated run: taps only, then the screen's cable is
+    // unplugged (the machine runs on; the link supervision logs it).
+    twin.screen = None;
+    let m = &twin.plant.as_ref().unwrap().machine;
+    let (x0, p0) = (m.ground_position_m(), m.plants_dropped());
+    let host = std::time::Instant::now();
+    let fw0 = twin.now();
+    let done = twin
+        .run_until(700_000, |t| {
+            t.plant.as_ref().unwrap().machine.ground_position_m() - x0 >= 70.0
+        })
+        .unwrap();
+    assert!(done, "the row never reached 70 m");
+    let plants = f64::from(twin.plant.as_ref().unwrap().machine.plants_dropped() - p0);
+    let speed = (twin.now() - fw0) as f64 / TICKS_PER_S as f64 / host.elapsed().as_secs_f64();
+    let error = (plants - 1000.0) / 1000.0;
+    eprintln!(
+        "70 m row on the twin: {plants} plants ({:+.2} %), {speed:.1}× real time",
+        error * 100.0
+    );
+    assert!(
+        error.abs() <= 0.005,
+        "{plants} plants ({:+.2} %)",
+        error * 100.0
+    );
+}

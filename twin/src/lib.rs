@@ -172,13 +172,13 @@ impl State {
     fn ppb_read(&mut self, a: u32) -> u32 {
         match a {
             0xE000_E010 => {
-                self.bus.advance(self.now);
+                self.bus.advance_systick(self.now);
                 let st = &mut self.bus.systick;
                 st.ctrl | if st.countflag_take() { 1 << 16 } else { 0 }
             }
             0xE000_E014 => self.bus.systick.load,
             0xE000_E018 => {
-                self.bus.advance(self.now);
+                self.bus.advance_systick(self.now);
                 self.bus.systick.val()
             }
             0xE000_E01C => 0x4000_2328, // CALIB: NOREF, 9000 (1 ms at HCLK/8)
@@ -192,13 +192,13 @@ impl State {
     fn ppb_write(&mut self, a: u32, v: u32, size: usize) {
         match a {
             0xE000_E010 => {
-                self.bus.advance(self.now);
+                self.bus.advance_systick(self.now);
                 self.bus.systick.ctrl = v & 7;
                 self.bus.systick.restart(self.now);
             }
             0xE000_E014 => self.bus.systick.load = v & 0x00FF_FFFF,
             0xE000_E018 => {
-                self.bus.advance(self.now);
+                self.bus.advance_systick(self.now);
                 self.bus.systick.clear(self.now);
             }
             0xE004_2004 => self.bus.dbgmcu_cr = v,

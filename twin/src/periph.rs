@@ -1408,6 +1408,30 @@ impl Bus {
         }
     }
 
+    /// Brings the model behind `base` up to `now` before a register access
+    /// (the others are advanced by the scheduler; a GPIO access advances
+    /// all, for the AF outputs and EXTI).
+    fn advance_for(&mut self, base: u32, now: Ticks) {
+        let c = self.clocks();
+        match base {
+            addr::TIM1 => self.tim[0].advance(now, c.tim_apb2),
+            addr::TIM2 => self.tim[1].advance(now, c.tim_apb1),
+            addr::TIM3 => self.tim[2].advance(now, c.tim_apb1),
+            addr::TIM4 => self.tim[3].advance(now, c.tim_apb1),
+            addr::USART1 => self.usart[0].advance(now, c.pclk2),
+            addr::USART2 => self.usart[1].advance(now, c.pclk1),
+            addr::RCC => self.rcc.update_switch(now),
+            addr::FLASH | addr::IWDG | addr::AFIO | addr::EXTI => {}
+            _ => self.advance(now),
+        }
+    }
+
+    /// SysTick alone up to `now` (its registers are on the PPB).
+    pub fn advance_systick(&mut self, now: Ticks) {
+        let c = self.clocks();
+        self.systick.advance(now, &c);
+    }
+
     /// Brings every model up to `now`.
     pub fn advance(&mut self, now: Ticks) {
         let c = self.clocks();
@@ -1575,9 +1599,9 @@ impl Bus {
 
     /// Reads a peripheral register (`addr` in 0x4000_0000..0x4002_4000).
     pub fn read(&mut self, a: u32, now: Ticks) -> u32 {
-        self.advance(now);
         let off = a & 0x3FF;
         let base = a & !0x3FF;
+        self.advance_for(base, now);
         match base {
             addr::TIM2 => self.tim[1].read(off),
             addr::TIM3 => self.tim[2].read(off),
@@ -1630,9 +1654,9 @@ impl Bus {
 
     /// Writes a peripheral register.
     pub fn write(&mut self, a: u32, v: u32, now: Ticks) {
-        self.advance(now);
         let off = a & 0x3FF;
         let base = a & !0x3FF;
+        self.advance_for(base, now);
         let c = self.clocks();
         match base {
             addr::TIM2 => self.tim[1].write(off, v),
@@ -1682,6 +1706,8 @@ impl Bus {
             }
             _ => self.unmodelled.push((a, true)),
         }
-        self.sample_exti();
+        if matches!(base, addr::AFIO | addr::EXTI | 0x4001_0800..=0x4001_1800) {
+            self.sample_exti();
+        }
     }
 }

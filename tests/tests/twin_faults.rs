@@ -138,6 +138,53 @@ fn stack_overflow_drives_pa8_and_pb12_low() {
     assert_safe(&mut twin, "stack overflow");
 }
 
+/// An enabled interrupt without a handler of its own (WWDG, IRQ 0, enabled
+/// and pended by the probe) ends in the default handler.
+#[test]
+fn an_unused_interrupt_drives_pa8_and_pb12_low() {
+    let mut twin = running_drum();
+    twin.state_mut().nvic.enabled[0] |= 1;
+    twin.pend_irq(0);
+    assert_safe(&mut twin, "unused interrupt");
+}
+
+/// NMI (the probe sets ICSR.NMIPENDSET; on the board the clock security
+/// system raises it when the crystal fails).
+#[test]
+fn an_nmi_drives_pa8_and_pb12_low() {
+    let mut twin = running_drum();
+    twin.state_mut().nvic.set_pending(2);
+    assert_safe(&mut twin, "NMI");
+}
+
+/// A probe halts the core while the drum runs (issue 15 item 7): with
+/// DBGMCU_CR DBG_TIM1_STOP (and TIM4's) the counter stops and TIM1's outputs
+/// are disabled as on a break (RM0008 §31.16.3): PA8 must not go on
+/// pulsing, and must not float with the driver enabled.
+#[test]
+fn a_debug_halt_stops_the_drum_pwm() {
+    let mut twin = running_drum();
+    twin.debug_halt(true);
+    let mut levels = Vec::new();
+    for _ in 0..200 {
+        twin.run_ticks(US).unwrap();
+        levels.push(twin.pin('A', 8));
+    }
+    let enable = twin.pin('B', 12);
+    twin.debug_halt(false);
+    let pulsing = levels.windows(2).any(|w| w[0] != w[1]);
+    eprintln!(
+        "debug halt: PA8 {:?}…, PB12 {enable:?}, pulsing {pulsing}",
+        &levels[..3]
+    );
+    assert!(!pulsing, "PA8 goes on pulsing while the core is halted");
+    assert!(
+        levels[0] == Level::Low || enable == Level::Low,
+        "PA8 {:?} with the driver enabled ({enable:?})",
+        levels[0]
+    );
+}
+
 /// The stop input (PB10, a normally-closed contact to ground with the
 /// internal pull-up): the contact opens while the drum runs.
 #[test]

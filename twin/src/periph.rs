@@ -714,7 +714,9 @@ impl Timer {
         if self.number != 1 {
             return cc1e.then(|| self.oc1_ref() ^ cc1p);
         }
-        let moe = self.bdtr & (1 << 15) != 0;
+        // DBG_TIM1_STOP with the core halted: "the outputs are disabled (as
+        // if during a break event)" (RM0008 §31.16.3): MOE reads as 0.
+        let moe = self.bdtr & (1 << 15) != 0 && !self.halted;
         let ossi = self.bdtr & (1 << 10) != 0;
         let ois1 = self.cr2 & (1 << 8) != 0;
         if moe {

@@ -157,6 +157,17 @@ fn an_nmi_drives_pa8_and_pb12_low() {
     assert_safe(&mut twin, "NMI");
 }
 
+/// The crystal fails while the drum runs (decision of issue 15: the clock
+/// security system is on; its NMI drives the outputs safe and ends in the
+/// fatal state). Without CSS the core loses its clock with the PWM as it
+/// was.
+#[test]
+fn a_crystal_failing_while_running_drives_pa8_and_pb12_low() {
+    let mut twin = running_drum();
+    twin.fail_crystal();
+    assert_safe(&mut twin, "crystal failure");
+}
+
 /// A probe halts the core while the drum runs (issue 15 item 7): with
 /// DBGMCU_CR DBG_TIM1_STOP (and TIM4's) the counter stops and TIM1's outputs
 /// are disabled as on a break (RM0008 §31.16.3): PA8 must not go on

@@ -100,6 +100,9 @@ pub enum CoreState {
     Lockup,
     /// Halted by the (virtual) debugger.
     DebugHalt,
+    /// Its clock is gone (crystal failure without the clock security
+    /// system): executes nothing until a reset.
+    NoClock,
 }
 
 /// Options of a twin.
@@ -651,7 +654,7 @@ impl Twin {
                         self.state_mut().now = next;
                     }
                 }
-                CoreState::Lockup | CoreState::DebugHalt => {
+                CoreState::Lockup | CoreState::DebugHalt | CoreState::NoClock => {
                     self.state_mut().now = next;
                 }
             }
@@ -1091,7 +1094,21 @@ impl Twin {
         }
     }
 
-    /// Ticks of the pending stop, for tests.
+    /// The board's crystal fails now (see [`periph::Bus::crystal_fails`]):
+    /// the clock security system's NMI, or a core without a clock.
+    pub fn fail_crystal(&mut self) {
+        let now = self.now();
+        let st = self.uc.get_data_mut();
+        let (nmi, lost) = st.bus.crystal_fails(now);
+        if nmi {
+            st.nvic.set_pending(exc::NMI);
+        }
+        if lost {
+            self.core = CoreState::NoClock;
+        }
+    }
+
+    /// Whether the core is locked up.
     pub fn lockup(&self) -> bool {
         self.core == CoreState::Lockup
     }

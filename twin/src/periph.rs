@@ -1308,6 +1308,9 @@ pub struct Bus {
     pub unmodelled: Vec<(u32, bool)>,
     /// The core is halted by a (virtual) debugger.
     pub debug_halt: bool,
+    /// The system clock is gone (its crystal failed without the clock
+    /// security system): nothing clocked by it moves; the IWDG (LSI) runs.
+    pub clock_stopped: bool,
 }
 
 /// Base addresses.
@@ -1367,6 +1370,7 @@ impl Bus {
             flash_cmd: None,
             unmodelled: Vec::new(),
             debug_halt: false,
+            clock_stopped: false,
         }
     }
 
@@ -1393,12 +1397,48 @@ impl Bus {
             ..SysTick::default()
         };
         self.dbgmcu_cr = 0;
+        self.clock_stopped = false;
         self.flash_cmd = None;
     }
 
     /// The clock tree in force.
     pub fn clocks(&self) -> Clocks {
         self.rcc.clocks()
+    }
+
+    /// The crystal stops at `now` (RM0008 §7.2.7). With CSSON and the HSE
+    /// running, the clock security system turns HSE (and a PLL fed by it)
+    /// off, switches SYSCLK to the HSI if it came from them, sets CSSF,
+    /// sends the failure to TIM1's break input (MOE cleared when BKE is
+    /// set) and raises the NMI: returns `(nmi, false)`. Without CSSON a
+    /// system clock taken from the crystal is lost: returns `(false, true)`.
+    pub fn crystal_fails(&mut self, now: Ticks) -> (bool, bool) {
+        self.advance(now);
+        let r = &mut self.rcc;
+        let was_ready = r.hse_ready(now);
+        let pll_on_hse = r.cfgr & (1 << 16) != 0;
+        let sws = r.sws();
+        let in_use = was_ready && (sws == 1 || (sws == 2 && pll_on_hse));
+        r.hse_dead = true;
+        if r.cr & (1 << 19) != 0 && was_ready {
+            r.cr &= !(1 << 16);
+            r.hse_on_at = None;
+            if pll_on_hse {
+                r.cr &= !(1 << 24);
+                r.pll_on_at = None;
+            }
+            if in_use {
+                r.cfgr &= !0xF;
+            }
+            r.cir |= 1 << 7;
+            if self.tim[0].bdtr & (1 << 12) != 0 {
+                self.tim[0].bdtr &= !(1 << 15);
+            }
+            (true, false)
+        } else {
+            self.clock_stopped = in_use;
+            (false, in_use)
+        }
     }
 
     fn tim_clk(&self, i: usize) -> u64 {
@@ -1436,6 +1476,9 @@ impl Bus {
 
     /// Brings every model up to `now`.
     pub fn advance(&mut self, now: Ticks) {
+        if self.clock_stopped {
+            return;
+        }
         let c = self.clocks();
         for i in 0..4 {
             let clk = self.tim_clk(i);
@@ -1451,6 +1494,9 @@ impl Bus {
     /// The earliest time at which a model raises an interrupt, finishes a
     /// byte or resets the MCU.
     pub fn next_event(&self) -> Ticks {
+        if self.clock_stopped {
+            return self.iwdg.expires_at();
+        }
         let c = self.clocks();
         let mut t = self.iwdg.expires_at();
         for i in 0..4 {

@@ -196,6 +196,28 @@ fn a_debug_halt_stops_the_drum_pwm() {
     );
 }
 
+/// Hall edges captured while TIM2's interrupt cannot run (the probe masks
+/// it for half a second, NVIC_ICER): the second capture sets CC1OF (RM0008
+/// §15.4.5); the firmware must count the lost edges (issue 15 item 6).
+#[test]
+fn hall_overcaptures_are_counted() {
+    let mut twin = running_drum();
+    let edges0 = twin.plant.as_ref().unwrap().edges_delivered;
+    twin.state_mut().nvic.enabled[0] &= !(1 << 28);
+    twin.run_ms(500).unwrap();
+    twin.state_mut().nvic.enabled[0] |= 1 << 28;
+    twin.run_ms(1500).unwrap();
+    let edges = twin.plant.as_ref().unwrap().edges_delivered - edges0;
+    let over = twin.state().bus.tim[1].overcaptures;
+    let lost = twin.static_u32("HALL_EDGES_LOST");
+    eprintln!("Hall: {edges} edges, {over} overcaptures, firmware counted {lost:?} lost");
+    assert!(over > 0, "the test produced no overcapture ({edges} edges)");
+    assert!(
+        lost.is_some_and(|n| n > 0),
+        "the firmware did not count the lost Hall edges: {lost:?}"
+    );
+}
+
 /// The stop input (PB10, a normally-closed contact to ground with the
 /// internal pull-up): the contact opens while the drum runs.
 #[test]

@@ -523,6 +523,8 @@ pub struct Timer {
     pub oc1_pulses: u64,
     /// Frozen by the debug halt (DBGMCU TIMx_STOP with the core halted).
     pub halted: bool,
+    /// Captures that found CC1IF still set (each sets CC1OF).
+    pub overcaptures: u64,
 }
 
 impl Timer {
@@ -552,15 +554,16 @@ impl Timer {
             updates: 0,
             oc1_pulses: 0,
             halted: false,
+            overcaptures: 0,
         }
     }
 
     fn reset(&mut self, now: Ticks) {
         let n = self.number;
-        let keep = (self.updates, self.oc1_pulses);
+        let keep = (self.updates, self.oc1_pulses, self.overcaptures);
         *self = Self::new(n);
         self.t = now;
-        (self.updates, self.oc1_pulses) = keep;
+        (self.updates, self.oc1_pulses, self.overcaptures) = keep;
     }
 
     /// Encoder mode (SMS = 001, 010, 011): the counter follows the inputs.
@@ -757,6 +760,7 @@ impl Timer {
         }
         if self.sr & 2 != 0 {
             self.sr |= 1 << 9; // CC1OF
+            self.overcaptures += 1;
         }
         self.ccr[0] = self.cnt;
         self.ccr_act[0] = self.cnt;

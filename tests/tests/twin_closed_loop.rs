@@ -278,3 +278,43 @@ fn profile_a_70_m_row_at_7_cm_gets_its_1000_plants_within_half_a_percent() {
         error * 100.0
     );
 }
+
+/// Encoder A/B swapped on the machine (issue 15 item 5): the count runs
+/// backwards. The operator reverses the encoder direction on the settings
+/// page (`benc`, the persisted `drum_encoder_reversed` setting) and the drum
+/// then holds its Fixed-mode speed, 20 r/min, like a correctly wired one.
+#[test]
+fn a_swapped_drum_encoder_runs_once_its_direction_is_reversed_on_the_screen() {
+    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let mut twin = Twin::new(
+        &elf,
+        Options {
+            decode_logs: false,
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    let mut config = machine_sim::Config::noiseless();
+    config.initial_gear = Some(Gear::ALL[1]);
+    twin.attach_plant(config.build().unwrap(), Wiring::ProfileA);
+    twin.plant.as_mut().unwrap().encoder_swapped = true;
+    twin.connect_screen();
+    assert!(twin.run_until_screen(3000, |s| s.page() == 1).unwrap());
+    twin.tap("bset").unwrap();
+    twin.tap("benc")
+        .expect("the settings page has the encoder direction button `benc`");
+    twin.tap("bback").unwrap();
+    twin.tap("bfixed").unwrap();
+    twin.enter("nspeed", 2000, "bapply").unwrap();
+    twin.tap("bstart").unwrap();
+    twin.run_ms(3000).unwrap();
+    let mut sum = 0.0;
+    for _ in 0..20 {
+        twin.run_ms(100).unwrap();
+        sum += f64::from(twin.plant.as_ref().unwrap().machine.drum_speed_rpm());
+    }
+    let mean = sum / 20.0;
+    eprintln!("swapped encoder, reversed setting: drum {mean:.2} r/min");
+    assert_eq!(twin.pin('B', 12), twin::Level::High, "the drive is on");
+    assert!((mean - 20.0).abs() <= 0.2, "drum {mean:.2} r/min, want 20");
+}

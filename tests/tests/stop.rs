@@ -1,10 +1,10 @@
 //! Stopping, through the firmware on the QEMU board (issue 16, items 1–2):
 //! a Stop touch after a corrupted frame, and the controller's stop input.
 //!
-//! All runs use QEMU's instruction-counting mode (`accelerated`): every
-//! time asserted here is firmware time from the firmware's own log stamps
-//! (1 ms) or the QEMU board's µs truth, never the host's clock, so a busy
-//! host cannot change the result.
+//! All runs are in lock-step (QEMU's instruction counting, paced by the
+//! test): every time asserted here is firmware time from the firmware's own
+//! log stamps (1 ms) or the QEMU board's µs truth, never the host's clock,
+//! so a busy host cannot change the result.
 
 use std::time::Duration;
 
@@ -25,7 +25,6 @@ fn boot_to(scenario: &[&str], run_ms: u32, pages: &[u8]) -> Bench {
     let options = BootOptions {
         run_ms: Some(run_ms),
         scenario: scenario.iter().map(|s| s.to_string()).collect(),
-        accelerated: true,
         ..BootOptions::default()
     };
     let mut bench = Bench::boot(&options).expect("boot QEMU");
@@ -97,7 +96,9 @@ fn a_stop_touch_right_after_a_corrupted_frame_stops_the_drum_within_one_control_
         let before = bench.fw.logs().len();
         bench.fw.send(&corrupted).unwrap();
         if let Some(gap) = gap {
-            std::thread::sleep(gap);
+            // Firmware time (lock-step): the corrupted frame goes in the
+            // next period, the Stop 50 ms later.
+            bench.pump(gap).unwrap();
         }
         bench.fw.send(&stop).unwrap();
         let deadline = std::time::Instant::now() + Duration::from_secs(60);

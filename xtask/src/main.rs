@@ -286,7 +286,9 @@ fn qemu(args: &[String]) -> Result {
             "gear=2".into(),
             format!("step={}:+10", seconds.saturating_mul(500)),
         ],
-        accelerated: false,
+        // Lock-step (firmware time paced by the virtual screen,
+        // deterministic whatever the host's load).
+        ..BootOptions::default()
     };
     let mut bench = qemu_tests::Bench::boot(&options).map_err(|e| e.to_string())?;
     let io = |e: std::io::Error| e.to_string();
@@ -434,11 +436,10 @@ fn test() -> Result<Totals> {
     run_tests(
         "QEMU tests (tests/)",
         cargo()
-            // One QEMU at a time: the real-time tests judge 10 ms control
-            // periods, and on a two-core machine a second QEMU (the
-            // accelerated 70 m row takes a whole core) starved them into
-            // late periods (seen once: 2.9 % tracking error with a busy host).
-            .args(["test", "-p", "qemu-tests", "--", "--test-threads=1"])
+            // Every QEMU test runs in lock-step (firmware time paced by the
+            // test, tests/src/lib.rs): a busy host, or a second QEMU, makes
+            // them slower, never different. Two at a time on two cores.
+            .args(["test", "-p", "qemu-tests", "--", "--test-threads=2"])
             .env("FIRMWARE_QEMU_ELF", &elf),
         &mut totals,
     )?;

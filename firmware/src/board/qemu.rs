@@ -43,8 +43,37 @@ use super::{
 
 /// Transmit half of the touchscreen UART.
 pub type HmiTx = Tx<USART1>;
-/// Receive half of the touchscreen UART.
-pub type HmiRx = Rx<USART1>;
+
+/// Most screen bytes one lock-step period carries (a real line carries
+/// ≈ 115 per 10 ms; the tests send at most this many).
+const GATE_BYTES: usize = 32;
+/// Screen bytes delivered through the lock-step gate, for [`HmiRx`].
+type GateQueue = heapless::spsc::Queue<u8, { GATE_BYTES + 1 }>;
+
+/// Receive half of the touchscreen UART. In lock-step the screen's bytes
+/// come through the gate at the start of a control period (see
+/// [`Sensors::sample`]) and are read here first, through the same USART1
+/// interrupt task; otherwise from the emulated USART1.
+pub struct HmiRx {
+    uart: Rx<USART1>,
+    gate: heapless::spsc::Consumer<'static, u8>,
+}
+
+impl HmiRx {
+    /// The next received byte.
+    pub fn read(&mut self) -> nb::Result<u8, serial::Error> {
+        match self.gate.dequeue() {
+            Some(byte) => {
+                if self.gate.ready() {
+                    // More to come: the interrupt task runs again.
+                    pac::NVIC::pend(pac::Interrupt::USART1);
+                }
+                Ok(byte)
+            }
+            None => self.uart.read(),
+        }
+    }
+}
 
 /// QEMU's `stm32vldiscovery` clocks SysTick at a fixed 24 MHz.
 pub const SYSCLK_HZ: u32 = 24_000_000;
@@ -99,7 +128,14 @@ pub struct Board {
 struct CmdLine {
     run_ms: Option<u32>,
     scenario: Scenario,
+    /// `gate=PATH`: the lock-step gate (see [`Sensors::sample`]).
+    gate: [u8; GATE_PATH_MAX],
+    gate_len: usize,
 }
+
+/// Longest lock-step gate path (the tests use a short one in `/tmp`;
+/// 32 keeps `Default` derivable).
+const GATE_PATH_MAX: usize = 32;
 
 /// Scheduled changes to the simulated machine, in firmware milliseconds.
 ///
@@ -150,8 +186,17 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
-    let (hmi_tx, mut hmi_rx) = hmi.split();
-    hmi_rx.listen();
+    let (hmi_tx, mut uart_rx) = hmi.split();
+    uart_rx.listen();
+    // Note: `init` runs once, so the singleton is still free.
+    let Some(gate_queue) = cortex_m::singleton!(: GateQueue = GateQueue::new()) else {
+        fatal()
+    };
+    let (gate_in, gate_out) = gate_queue.split();
+    let hmi_rx = HmiRx {
+        uart: uart_rx,
+        gate: gate_out,
+    };
     DRUM_CCR.store(0, Relaxed);
     DRIVER_ENABLE.store(false, Relaxed);
 
@@ -162,6 +207,12 @@ pub fn init(dp: pac::Peripherals) -> Board {
         .get(..path_len)
         .filter(|p| !p.is_empty())
         .and_then(SettingsFlash::open);
+    // Mode 1 = "rb".
+    let gate = cmd
+        .gate
+        .get(..cmd.gate_len)
+        .filter(|p| !p.is_empty())
+        .and_then(|p| sh::open(p, 1));
 
     let scenario = cmd.scenario;
     let mut config = if scenario.noiseless {
@@ -211,6 +262,8 @@ pub fn init(dp: pac::Peripherals) -> Board {
             now_ms: 0,
             roller_turns_seen: 0,
             stop_watch: StopWatch::default(),
+            gate,
+            gate_in,
         },
         hall: HallCapture,
         led: StatusLed,
@@ -311,6 +364,10 @@ pub struct Sensors {
     roller_turns_seen: u32,
     /// Profile B: when the steppers came to rest after the tractor stopped.
     stop_watch: StopWatch,
+    /// The lock-step gate: a host FIFO read once per control period.
+    gate: Option<usize>,
+    /// Screen bytes from the gate, to [`HmiRx`].
+    gate_in: heapless::spsc::Producer<'static, u8>,
 }
 
 /// Profile B's stop check, on the simulator's side: after the scenario's
@@ -331,7 +388,37 @@ fn due(at: Option<u32>, from: u32, to: u32) -> bool {
 impl Sensors {
     /// Advances the machine to `now_ms` under the current PWM output and
     /// reads the encoder and the Hall edges that happened meanwhile.
+    ///
+    /// Lock-step (`gate=PATH`, under QEMU's `-icount`): first reads the
+    /// next message from the host FIFO — a count `n` (≤ 32) and `n` bytes
+    /// the screen sent during the period — blocking the whole emulation
+    /// until the test allows one more control period, so that firmware time
+    /// never runs ahead of the virtual touchscreen and a busy host cannot
+    /// make a period late. The screen's bytes then reach the USART1
+    /// interrupt task (pended here) as if the emulated USART had received
+    /// them. At end of file (the test closed its end) the board runs free.
     pub fn sample(&mut self, now_ms: u32) -> SensorSample {
+        if let Some(h) = self.gate {
+            let mut count = [0u8; 1];
+            let mut bytes = [0u8; GATE_BYTES];
+            let ok = sh::read(h, &mut count) && {
+                let n = usize::from(count[0]).min(GATE_BYTES);
+                bytes
+                    .get_mut(..n)
+                    .is_some_and(|b| b.is_empty() || sh::read(h, b))
+            };
+            if ok {
+                let n = usize::from(count[0]).min(GATE_BYTES);
+                for &b in bytes.get(..n).unwrap_or(&[]) {
+                    let _ = self.gate_in.enqueue(b);
+                }
+                if n > 0 {
+                    pac::NVIC::pend(pac::Interrupt::USART1);
+                }
+            } else {
+                self.gate = None;
+            }
+        }
         let mut edges = heapless::Vec::new();
         let (from, to) = (self.now_ms, now_ms);
         let s = self.scenario;
@@ -631,6 +718,12 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
                 if let Some(dst) = path.get_mut(..value.len()) {
                     dst.copy_from_slice(value);
                     path_len = value.len();
+                }
+            }
+            b"gate" => {
+                if let Some(dst) = cmd.gate.get_mut(..value.len()) {
+                    dst.copy_from_slice(value);
+                    cmd.gate_len = value.len();
                 }
             }
             b"gear" => s.gear = parse_u32(value).and_then(|g| u8::try_from(g).ok()),

@@ -240,3 +240,75 @@ fn start_is_refused_while_the_stop_input_is_open() {
         "the drum started with the stop input open"
     );
 }
+
+/// Profile B: the stop input switches both stepper outputs off within
+/// 1 ms and the planter stops (its commanded rates are zero from the next
+/// period on, and the simulated machine drops no more plants).
+#[test]
+fn the_stop_input_stops_both_steppers_of_profile_b() {
+    let open_at = 4_000;
+    let options = BootOptions {
+        run_ms: Some(7_000),
+        scenario: ["profile=b", "speed=300", &format!("stop_input={open_at}")]
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
+        ..BootOptions::default()
+    };
+    let mut bench = Bench::boot_image(qemu_tests::Image::ProfileBOnly, &options).unwrap();
+    assert!(bench
+        .pump_until(Duration::from_secs(30), |s| s.page() == Page::Belt.id())
+        .unwrap());
+    bench.tap("bstart").unwrap();
+    let truth = pump_until_log(&mut bench, "stop input truth", |l| {
+        l.contains("sim: stop input opened at")
+    });
+    let latency_us = number_after(&truth, "outputs safe at").unwrap()
+        - number_after(&truth, "opened at").unwrap();
+    assert!((0.0..=1000.0).contains(&latency_us), "{latency_us} us");
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while !bench.fw.logs().iter().any(|l| l.contains("run limit of")) {
+        assert!(std::time::Instant::now() < deadline);
+        bench.pump(Duration::from_millis(100)).unwrap();
+    }
+    let (status, logs) = bench.fw.wait_exit(Duration::from_secs(30)).unwrap();
+    assert!(status.success());
+    assert!(logs.iter().any(|l| l.contains("planter: Running")));
+    let stopped = first_after(&logs, open_at, "planter: Stopped").expect("planter stopped");
+    assert!(
+        stopped <= open_at + CONTROL_PERIOD_MS,
+        "stopped at {stopped} ms"
+    );
+    // `sim-b:` lines: time, plants, …, feed mHz, plant mHz.
+    let rates: Vec<(u32, f64, f64, f64)> = logs
+        .iter()
+        .filter(|l| l.contains("sim-b: plants"))
+        .filter_map(|l| {
+            Some((
+                log_time_ms(l)?,
+                number_after(l, "plants ")?,
+                number_after(l, "feed ")?,
+                number_after(l, "plant ")?,
+            ))
+        })
+        .collect();
+    let before: Vec<_> = rates.iter().filter(|r| r.0 < open_at).collect();
+    assert!(
+        before.iter().any(|r| r.2 > 0.0 && r.3 > 0.0),
+        "both motors ran before the stop"
+    );
+    let after: Vec<_> = rates
+        .iter()
+        .filter(|r| r.0 > open_at + CONTROL_PERIOD_MS)
+        .collect();
+    assert!(after.len() > 10);
+    assert!(
+        after.iter().all(|r| r.2 == 0.0 && r.3 == 0.0),
+        "rates after the stop"
+    );
+    let plants_then = after.first().map_or(0.0, |r| r.1);
+    assert!(
+        after.iter().all(|r| r.1 <= plants_then + 1.0),
+        "plants kept dropping after the stop"
+    );
+}

@@ -99,7 +99,8 @@ struct CmdLine {
 /// `step=T:+P` / `step=T:-P` sets the travel speed P % off its gear speed at
 /// T ms (`step=T:0` returns to it; up to four); `tau=MS` gives the chassis a
 /// speed time constant;
-/// `stop=T` stops the tractor at T ms; `stall=T`, `hall_loss=T`,
+/// `stop=T` stops the tractor at T ms; `stopgo=MS` drives it stop-and-go
+/// (MS/2 of travel, MS/2 of rest, from boot); `stall=T`, `hall_loss=T`,
 /// `enc_loss=T` inject faults at T ms; `noise=0` makes the model noiseless;
 /// `seed=N` seeds it; `slip=P` scales the track slip of paper A's Table 12
 /// to P % (a machine whose calibration is not the paper's).
@@ -109,6 +110,8 @@ struct Scenario {
     step: [Option<(u32, i32)>; 4],
     tau_ms: Option<u32>,
     stop: Option<u32>,
+    /// Stop-and-go period, ms (`stopgo=MS`).
+    stop_go_ms: Option<u32>,
     stall: Option<u32>,
     hall_loss: Option<u32>,
     enc_loss: Option<u32>,
@@ -163,6 +166,11 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }
     if let Some(tau) = scenario.tau_ms {
         config.track_tau_s = tau as f32 / 1000.0;
+    }
+    if let Some(period) = scenario.stop_go_ms {
+        config.terrain_stop_interval_s = period as f32 / 2000.0;
+        config.terrain_stop_duration_s = period as f32 / 2000.0;
+        config.terrain_stops_regular = true;
     }
     if let Some(pct) = scenario.slip_pct {
         config.track_slip_scale = pct as f32 / 100.0;
@@ -577,6 +585,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
                 }
             }
             b"stop" => s.stop = parse_u32(value),
+            b"stopgo" => s.stop_go_ms = parse_u32(value),
             b"tau" => s.tau_ms = parse_u32(value),
             b"profile" => s.profile_b = value == b"b" || value == b"B",
             b"speed" => s.speed_mm_s = parse_u32(value),

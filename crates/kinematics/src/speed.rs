@@ -356,6 +356,16 @@ impl DecelerationBound {
     }
 }
 
+/// The terms of the Hall silence rule for the newest edge (see
+/// `MtEstimator::silence`).
+struct Silence {
+    t: u64,
+    e: u64,
+    a: u64,
+    s_next: u64,
+    disc: u64,
+}
+
 /// What an update saw.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -556,6 +566,72 @@ impl MtEstimator {
     /// ```
     #[must_use]
     pub fn next_edge_deadline(&self, bound: &DecelerationBound) -> Option<u32> {
+        let Silence {
+            t, e, s_next, disc, ..
+        } = self.silence(bound)?;
+        let root = disc.isqrt();
+        // t = 2s′/(v_e + √…) = T·2s′/(v_e·T + √…·T).
+        let deadline = t
+            .checked_mul(s_next)?
+            .checked_mul(2)?
+            .checked_div(e.checked_add(root)?)?;
+        Some(u32::try_from(deadline).unwrap_or(u32::MAX))
+    }
+
+    /// Whether the next edge, `since_edge_ticks` after the newest one and
+    /// still not there, is later than any machine slowing down no faster
+    /// than `bound` allows: the same rule as
+    /// [`next_edge_deadline`](Self::next_edge_deadline) (`since >
+    /// deadline`), without its square root (≈ 0.5 KB of flash on the MCU):
+    /// the least distance such a machine covers in that time,
+    /// `v_e·t − a·t²/2` (or `v_e²/2a` once it can be at rest), exceeds the
+    /// next gap. `false` whenever there is no deadline.
+    ///
+    /// ```
+    /// use kinematics::speed::{DecelerationBound, EstimatorSettings};
+    /// use kinematics::units::Ticks;
+    /// let bound = DecelerationBound::new(10_500, 25_133, 1_000_000, 5).unwrap();
+    /// let mut est = EstimatorSettings::default().build().unwrap();
+    /// for k in 0..5u32 {
+    ///     est.push_edge(Ticks(k * 24_700)); // High 3
+    /// }
+    /// // The deadline is 43.28 ms (see `next_edge_deadline`).
+    /// assert!(!est.next_edge_overdue(43_200, &bound));
+    /// assert!(est.next_edge_overdue(43_360, &bound));
+    /// ```
+    #[must_use]
+    pub fn next_edge_overdue(&self, since_edge_ticks: u32, bound: &DecelerationBound) -> bool {
+        let Some(Silence {
+            t, e, a, s_next, ..
+        }) = self.silence(bound)
+        else {
+            return false;
+        };
+        // r = τ/T, Q16 (τ < 2^32, so τ·2^16 < 2^48).
+        let Some(r) = (u64::from(since_edge_ticks) << 16).checked_div(t) else {
+            return false;
+        };
+        // Past the moment the machine can be at rest (a·τ ≥ v_e, i.e.
+        // a·T²·r ≥ v_e·T·2^16): it has covered v_e²/2a ≥ s′ (there is a
+        // deadline), so the edge is overdue.
+        let e_q32 = e.saturating_mul(1 << 16);
+        let a_r = a.saturating_mul(r);
+        if a_r >= e_q32 {
+            return true;
+        }
+        // Least distance covered, Q32 gaps: (v_e·T)·r − (a·T²)·r²/2, with
+        // a·T²·r < v_e·T·2^16 < 2^33 here, so every product fits.
+        let covered = e
+            .saturating_mul(r)
+            .saturating_sub(((a_r >> 16).saturating_mul(r)) >> 1);
+        covered > s_next.saturating_mul(1 << 16)
+    }
+
+    /// The terms of the silence rule (module docs), when the silence can
+    /// prove anything: the last gap `t` (ticks), `v_e·T` (`e`), `a·T²`
+    /// (`a`) and the next gap `s′` (`s_next`), all in Q16 nominal gaps, and
+    /// the discriminant `(v_e·T)² − 2·a·T²·s′ ≥ 0`.
+    fn silence(&self, bound: &DecelerationBound) -> Option<Silence> {
         if !self.has_last || self.valid_run < 2 || self.last_gap == 0 {
             return None;
         }
@@ -582,13 +658,13 @@ impl MtEstimator {
         let disc = e
             .checked_mul(e)?
             .checked_sub(a.checked_mul(s_next)?.checked_mul(2)?)?;
-        let root = disc.isqrt();
-        // t = 2s′/(v_e + √…) = T·2s′/(v_e·T + √…·T).
-        let deadline = t
-            .checked_mul(s_next)?
-            .checked_mul(2)?
-            .checked_div(e.checked_add(root)?)?;
-        Some(u32::try_from(deadline).unwrap_or(u32::MAX))
+        Some(Silence {
+            t,
+            e,
+            a,
+            s_next,
+            disc,
+        })
     }
 
     /// Records one Hall edge (call from the capture interrupt). O(1), no division.

@@ -87,9 +87,37 @@ proptest! {
                     if let Some(d) = deadline {
                         prop_assert!(next - t <= d, "edge {i}: next after {} µs, deadline {d}", next - t);
                     }
+                    prop_assert!(!est.next_edge_overdue(next - t, &bound()), "edge {i}");
                 }
-                None => prop_assert_eq!(deadline, None, "the machine is at rest"),
+                None => {
+                    prop_assert_eq!(deadline, None, "the machine is at rest");
+                    // Silent up to the 1.5 s stop timeout: never overdue.
+                    for since in (0..=1_500_000).step_by(10_000) {
+                        prop_assert!(!est.next_edge_overdue(since, &bound()));
+                    }
+                }
             }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2048, ..ProptestConfig::default() })]
+    /// The firmware's square-root-free check is the deadline's rule:
+    /// overdue exactly when the silence is past the deadline (within two
+    /// ticks of rounding), never without a deadline.
+    #[test]
+    fn overdue_is_past_the_deadline(gap in 4_500u32..1_000_000, since in 0u32..1_500_000) {
+        let mut est = EstimatorSettings::default().build().unwrap();
+        for k in 0..30u32 {
+            est.push_edge(Ticks(k * gap));
+        }
+        let overdue = est.next_edge_overdue(since, &bound());
+        match est.next_edge_deadline(&bound()) {
+            None => prop_assert!(!overdue),
+            Some(d) if since > d.saturating_add(2) => prop_assert!(overdue, "deadline {d}"),
+            Some(d) if since.saturating_add(2) < d => prop_assert!(!overdue, "deadline {d}"),
+            Some(_) => {}
         }
     }
 }

@@ -1007,8 +1007,7 @@ impl Supervisor {
             let hall_lost = self.settings.mode == Mode::SpeedAdaptive
                 && self
                     .estimator
-                    .next_edge_deadline(&self.hall_silence)
-                    .is_some_and(|deadline| m.since_edge_ticks > deadline);
+                    .next_edge_overdue(m.since_edge_ticks, &self.hall_silence);
             if self.stall_us > STALL_TIME_US {
                 self.latch(Alarm::DrumStall);
             } else if hall_lost {

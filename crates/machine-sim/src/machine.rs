@@ -161,6 +161,16 @@ pub struct Machine {
     metrics: SpacingAccumulator,
 }
 
+/// When the next stop of the terrain starts: `interval_s` after `from_us`
+/// when the stops are regular (no random draw), else at random.
+fn stop_time_us(rng: &mut Rng, cfg: &Config, from_us: u64) -> u64 {
+    if cfg.terrain_stops_regular && cfg.terrain_stop_interval_s > 0.0 {
+        from_us.saturating_add((f64::from(cfg.terrain_stop_interval_s) * 1.0e6) as u64)
+    } else {
+        event_time_us(rng, cfg.terrain_stop_interval_s, from_us)
+    }
+}
+
 fn event_time_us(rng: &mut Rng, mean_s: f32, now_us: u64) -> u64 {
     if mean_s > 0.0 {
         let dt = (rng.exponential(mean_s) * 1.0e6).max(1000.0);
@@ -175,7 +185,7 @@ impl Machine {
     pub(crate) fn new(cfg: Config) -> Self {
         let mut rng = Rng::new(cfg.seed);
         let next_terrain_step_us = event_time_us(&mut rng, cfg.terrain_step_interval_s, 0);
-        let next_stop_us = event_time_us(&mut rng, cfg.terrain_stop_interval_s, 0);
+        let next_stop_us = stop_time_us(&mut rng, &cfg, 0);
         // The ranges were checked by `Config::validate`.
         let metrics = SpacingAccumulator::new_unchecked(
             f64::from(cfg.target_spacing_m),
@@ -293,8 +303,7 @@ impl Machine {
             self.stop_until_us = self
                 .now_us
                 .saturating_add((c.terrain_stop_duration_s * 1.0e6) as u64);
-            self.next_stop_us =
-                event_time_us(&mut self.rng, c.terrain_stop_interval_s, self.stop_until_us);
+            self.next_stop_us = stop_time_us(&mut self.rng, c, self.stop_until_us);
         }
     }
 
@@ -414,6 +423,7 @@ impl Machine {
 
         // ---- track: command → lag → slip (Table 12) → ground ----
         let cmd = self.wheel_command(hs);
+        let v_prev = self.wheel_m_s;
         self.wheel_m_s = if self.cfg.track_tau_s > 0.0 {
             let a = if full {
                 self.track_alpha_1ms
@@ -424,6 +434,11 @@ impl Machine {
         } else {
             cmd
         };
+        if self.cfg.track_decel_limit_mm_s2 > 0 {
+            // Friction: the track slows by at most the limit × h.
+            let limit = f32::from(self.cfg.track_decel_limit_mm_s2) * 1.0e-3;
+            self.wheel_m_s = self.wheel_m_s.max(v_prev - limit * hs);
+        }
         let v_wheel = self.wheel_m_s;
         let mut slip = self.cfg.track_slip_scale * tables::track_slip_at(v_wheel * 3.6);
         if self.cfg.track_slip_noise > 0.0 {

@@ -664,3 +664,48 @@ mod prop {
         }
     }
 }
+
+#[test]
+fn regular_stops_make_a_stop_and_go_profile_and_the_deceleration_limit_holds() {
+    // Low 2: 0.52 km/h = 0.144 44 m/s of wheel speed. No lag, a 1 m/s²
+    // friction limit: each stop is a constant deceleration, at rest after
+    // v/a = 144.4 ms and v²/2a = 10.43 mm of track (hand-computed); the
+    // stops are regular: 5 s of travel, 5 s of rest, every 10 s; travel
+    // resumes at once (no lag).
+    let v = 0.52 / 3.6;
+    let mut m = Config {
+        initial_gear: Some(Gear::Low2),
+        track_decel_limit_mm_s2: 1000,
+        terrain_stop_interval_s: 5.0,
+        terrain_stop_duration_s: 5.0,
+        terrain_stops_regular: true,
+        track_slip_scale: 0.0,
+        ..Config::noiseless()
+    }
+    .build()
+    .unwrap();
+    let circumference = core::f64::consts::PI * 0.20;
+    for cycle in 0..2u32 {
+        run_ms(&mut m, 4_990, &Inputs::default());
+        assert!((m.wheel_speed_m_s() - v).abs() < 1e-5, "cycle {cycle}");
+        run_ms(&mut m, 10, &Inputs::default());
+        let w0 = m.wheel_turns();
+        run_ms(&mut m, 72, &Inputs::default());
+        // Half-way through the braking: v − a·72 ms.
+        let half = v - 0.072;
+        assert!(
+            (m.wheel_speed_m_s() - half).abs() < 1e-4,
+            "{}",
+            m.wheel_speed_m_s()
+        );
+        run_ms(&mut m, 4_928, &Inputs::default());
+        assert_eq!(m.wheel_speed_m_s(), 0.0);
+        // Track travelled while braking: v²/2a, within the 1 ms rectangle
+        // rule's a·h·t/2 = 0.07 mm.
+        let braked = (m.wheel_turns() - w0) * circumference;
+        let expected = f64::from(v) * f64::from(v) / 2.0;
+        assert!((braked - expected).abs() < 2e-4, "{braked} m vs {expected}");
+    }
+    run_ms(&mut m, 1, &Inputs::default());
+    assert!((m.wheel_speed_m_s() - v).abs() < 1e-5);
+}

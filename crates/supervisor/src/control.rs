@@ -16,15 +16,17 @@
 //! | fault | detected when | action |
 //! |---|---|---|
 //! | drum stall (or encoder lost) | the drum is commanded ≥ 1 r/min and the encoder has not moved for 200 ms | PWM 0, driver off, latched alarm until acknowledged |
-//! | Hall signal lost | Speed-Adaptive, drum running, travel was ≥ 0.25 km/h, and no edge for 2 × the last period (at least 100 ms) | PWM 0, driver off, latched alarm until acknowledged |
+//! | Hall signal lost | Speed-Adaptive, drum running, and the next Hall edge is later than a chassis braking at its physical limit allows ([`HALL_SILENCE_DECEL_MM_S2`]; evidence exists only above ≈ 3.4 km/h) | PWM 0, driver off, latched alarm until acknowledged |
 //! | too fast for the spacing | eq. 7 asks for more than `n_max` | drum held at `n_max`, warning with the allowed maximum (not latched) |
 //!
 //! A stalled drum and a lost encoder look the same from here (commanded, no
-//! counts); the alarm names both. A Hall signal lost at working speed and an
-//! abrupt stop of the tractor also look the same; either way the drum must
-//! stop, and the alarm asks the operator to check the sensor before
-//! restarting. After an acknowledged alarm the machine is stopped: the
-//! operator presses Start again.
+//! counts); the alarm names both. A silent Hall sensor is a lost signal only
+//! when the chassis cannot have stopped before the next tooth: below
+//! ≈ 3.4 km/h it can (1 g stops it within a millimetre at Low 2), so there
+//! the silence is taken for a stop — the travel speed decays to zero, the
+//! drum follows it and runs again with the next edges, without an alarm
+//! (docs/firmware.md, "Faults"). After an acknowledged alarm the machine is
+//! stopped: the operator presses Start again.
 
 use fixed::types::{U12F20, U16F16};
 use fuzzy_pid::{Controller, I16F16};
@@ -32,7 +34,7 @@ use hmi_proto::screen::{self, CalibrationKind, Command, Mode};
 use kinematics::{
     consts,
     drum::{DrumPlan, DrumSettings, DrumTarget},
-    speed::{EstimatorSettings, MotionState, MtEstimator},
+    speed::{DecelerationBound, EstimatorSettings, MotionState, MtEstimator},
     table::{CoeffTable, TablePoint},
     travel,
     units::{Metres, RevPerMin, Ticks},
@@ -93,7 +95,8 @@ pub enum Alarm {
     /// Commanded drum with no encoder motion: jammed drum, or encoder lost.
     /// Latched.
     DrumStall,
-    /// No Hall edges at working speed while the drum was running. Latched.
+    /// The next Hall edge is later than any stop of the chassis allows
+    /// (module docs) while the drum was running. Latched.
     HallLost,
     /// Travel speed too high for the spacing; the drum is held at `n_max`.
     /// Clears by itself. Carries the allowed maximum, km/h × 100.
@@ -256,11 +259,16 @@ pub enum CalibrationRun {
 const STALL_MIN_COMMAND: I16F16 = I16F16::lit("1");
 /// Stall: time without encoder motion, µs.
 const STALL_TIME_US: u32 = 200_000;
-/// Hall loss: the slowest travel speed (km/h × 1000) at which a silent Hall
-/// sensor is a fault rather than the machine stopping.
-const HALL_LOSS_MIN_KMH_X1000: u32 = 250;
-/// Hall loss: floor of the silence timeout, µs.
-const HALL_LOSS_MIN_SILENCE_US: u32 = 100_000;
+/// Hall silence: the fastest the Hall gear's speed can fall when the
+/// tractor stops, mm/s² of monitored track speed: the chassis limit of 1 g
+/// ([`consts::CHASSIS_DECEL_LIMIT_MM_S2`]) seen through a k1 down to 0.934
+/// (9.81 / 0.934 = 10.5; paper A's Table 11 has k1 = 0.966 … 1.031), so
+/// that no stop the chassis can make reads as a lost signal.
+pub const HALL_SILENCE_DECEL_MM_S2: u32 = 10_500;
+/// Hall silence: the tolerance on a gap's length, % — pitch errors of
+/// teeth whose share is not learned yet (±2 % of a pitch per tooth, so
+/// ±4 % per gap) and the capture jitter.
+pub const HALL_SILENCE_GAP_TOLERANCE_PCT: u8 = 5;
 /// Smoothing of the reported drum speed: `Ts / (Ts + τ)` with `τ` = 0.5 s.
 /// The seedlings load the drum once per partition (1.5 Hz at 20 r/min), a
 /// ripple of about ±1 % that the operator need not watch; the mean, which the
@@ -292,9 +300,9 @@ pub struct Supervisor {
     distance_um: u64,
     /// Drum encoder counts since Start.
     drum_counts_since_start: u64,
-    /// Last measured travel speed, km/h × 1000, and the period behind it, µs.
-    last_travel_kmh_x1000: u32,
-    last_period_us: u32,
+    /// The chassis's deceleration limit at the Hall gear, for the silence
+    /// rule.
+    hall_silence: DecelerationBound,
     /// The drum speed the feed-forward alone should produce by now: the
     /// target through a model of the drum's response (see
     /// [`REFERENCE_ALPHA`]). The PID corrects the measurement towards it.
@@ -429,6 +437,13 @@ impl Supervisor {
         let estimator = EstimatorSettings::default()
             .build()
             .map_err(|_| Error::Estimator)?;
+        let hall_silence = DecelerationBound::new(
+            HALL_SILENCE_DECEL_MM_S2,
+            consts::HALL_GAP_UM,
+            estimator.settings().timer_hz,
+            HALL_SILENCE_GAP_TOLERANCE_PCT,
+        )
+        .map_err(|_| Error::Estimator)?;
         let plan = Self::plan_for(&settings, hw)?;
         let controller = controller.build().map_err(|_| Error::Controller)?;
         Ok(Self {
@@ -449,8 +464,7 @@ impl Supervisor {
             edges: 0,
             distance_um: 0,
             drum_counts_since_start: 0,
-            last_travel_kmh_x1000: 0,
-            last_period_us: 0,
+            hall_silence,
             reference: I16F16::ZERO,
             reference_input: I16F16::ZERO,
             predictor: Predictor::default(),
@@ -945,10 +959,6 @@ impl Supervisor {
         let travel_kmh_x1000 = travel
             .and_then(|t| t.travel_speed_kmh().ok())
             .map_or(0, |v| v.to_milli());
-        if matches!(m.state, MotionState::Measured) && m.edges > 0 {
-            self.last_travel_kmh_x1000 = travel_kmh_x1000;
-            self.last_period_us = m.window_ticks.checked_div(m.edges).unwrap_or(0);
-        }
 
         let mut too_fast = None;
         let target = match self.settings.mode {
@@ -990,19 +1000,18 @@ impl Supervisor {
             } else {
                 self.stall_us = 0;
             }
-            // Fault: Hall silent at working speed in Speed-Adaptive mode.
-            let silence_limit = self
-                .last_period_us
-                .saturating_mul(2)
-                .max(HALL_LOSS_MIN_SILENCE_US);
+            // Fault: in Speed-Adaptive mode, the next Hall edge is later
+            // than any stop the chassis can make allows. Without such
+            // evidence the silence is a stop: the estimator's speed decays
+            // to zero and the drum with it.
             let hall_lost = self.settings.mode == Mode::SpeedAdaptive
-                && self.last_travel_kmh_x1000 >= HALL_LOSS_MIN_KMH_X1000
-                && m.since_edge_ticks > silence_limit;
+                && self
+                    .estimator
+                    .next_edge_overdue(m.since_edge_ticks, &self.hall_silence);
             if self.stall_us > STALL_TIME_US {
                 self.latch(Alarm::DrumStall);
             } else if hall_lost {
                 self.latch(Alarm::HallLost);
-                self.last_travel_kmh_x1000 = 0;
             } else {
                 // What the measurement should read from the feed-forward
                 // alone; then advance the model with last period's command.
@@ -1022,7 +1031,6 @@ impl Supervisor {
             }
         }
         if self.run == RunState::Stopped {
-            self.last_travel_kmh_x1000 = travel_kmh_x1000;
             // Restart from the drum's actual speed (it may still coast).
             self.reference = measured;
             self.reference_input = measured;

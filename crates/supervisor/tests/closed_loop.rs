@@ -292,25 +292,8 @@ fn a_stalled_drum_stops_the_pwm_and_latches_an_alarm() {
     assert!(rig.act.ccr > 0);
 }
 
-#[test]
-fn a_lost_hall_signal_at_working_speed_stops_the_drum_with_an_alarm() {
-    let mut rig = Rig::new(low2(Config::noiseless()), adaptive(70));
-    rig.run_ms(8_000);
-    rig.sup.command(Command::Start);
-    rig.run_ms(1_000);
-    rig.m.inject_fault(Fault::HallLoss);
-    let injected = rig.t_ms;
-    while rig.sup.alarm() != Some(Alarm::HallLost) {
-        rig.period();
-        assert!(rig.t_ms - injected <= 600, "no alarm");
-    }
-    assert_eq!(rig.act, Actuation::OFF);
-    // Low 2: one Hall period is 25.13 mm / (0.52 km/h / 1.020) = 177 ms; the
-    // loss is declared after two periods without an edge, counted from the
-    // last edge (at most one period before the injection).
-    let reaction = rig.t_ms - injected;
-    assert!(reaction <= 2 * 178 + 10, "{reaction} ms");
-}
+// A lost Hall signal: tests/hall_stop.rs (at Low 2 a silence cannot be
+// told from a stop any more; the alarm needs evidence, High 3 only).
 
 #[test]
 fn a_normal_stop_of_the_tractor_stops_the_drum_without_an_alarm() {

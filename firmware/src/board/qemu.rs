@@ -143,7 +143,8 @@ const GATE_PATH_MAX: usize = 32;
 /// `step=T:+P` / `step=T:-P` sets the travel speed P % off its gear speed at
 /// T ms (`step=T:0` returns to it; up to four); `tau=MS` gives the chassis a
 /// speed time constant;
-/// `stop=T` stops the tractor at T ms; `stop_input=T` opens the stop
+/// `stop=T` stops the tractor at T ms; `stopgo=MS` drives it stop-and-go
+/// (MS/2 of travel, MS/2 of rest, from boot); `stop_input=T` opens the stop
 /// input's contact at T ms and `stop_input_close=T` closes it; `stall=T`, `hall_loss=T`,
 /// `enc_loss=T` inject faults at T ms; `noise=0` makes the model noiseless;
 /// `seed=N` seeds it; `slip=P` scales the track slip of paper A's Table 12
@@ -156,6 +157,8 @@ struct Scenario {
     stop: Option<u32>,
     stop_input: Option<u32>,
     stop_input_close: Option<u32>,
+    /// Stop-and-go period, ms (`stopgo=MS`).
+    stop_go_ms: Option<u32>,
     stall: Option<u32>,
     hall_loss: Option<u32>,
     enc_loss: Option<u32>,
@@ -225,6 +228,11 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }
     if let Some(tau) = scenario.tau_ms {
         config.track_tau_s = tau as f32 / 1000.0;
+    }
+    if let Some(period) = scenario.stop_go_ms {
+        config.terrain_stop_interval_s = period as f32 / 2000.0;
+        config.terrain_stop_duration_s = period as f32 / 2000.0;
+        config.terrain_stops_regular = true;
     }
     if let Some(pct) = scenario.slip_pct {
         config.track_slip_scale = pct as f32 / 100.0;
@@ -740,6 +748,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"stop" => s.stop = parse_u32(value),
             b"stop_input" => s.stop_input = parse_u32(value),
             b"stop_input_close" => s.stop_input_close = parse_u32(value),
+            b"stopgo" => s.stop_go_ms = parse_u32(value),
             b"tau" => s.tau_ms = parse_u32(value),
             b"profile" => s.profile_b = value == b"b" || value == b"B",
             b"speed" => s.speed_mm_s = parse_u32(value),

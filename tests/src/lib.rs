@@ -185,6 +185,10 @@ impl Default for BootOptions {
 /// lock-step token allows.
 pub const LOCKSTEP_PERIOD: Duration = Duration::from_millis(10);
 
+/// Control periods [`Bench::pump`] allows at once while the screen has
+/// nothing to send.
+const LOCKSTEP_BATCH: usize = 5;
+
 /// Most screen bytes one lock-step period carries (the QEMU board's
 /// `GATE_BYTES`).
 pub const GATE_BYTES: usize = 32;
@@ -741,17 +745,23 @@ impl Bench {
 
     /// Lock-step: `dur` of firmware time (whole control periods, at least
     /// one), with the screen connected (`connected`) or its cable cut. One
-    /// period at a time: what the screen sends in answer to a period's
-    /// output reaches the firmware at the start of the period after the
-    /// next (20 ms, the time a real screen takes to answer is 1–10 ms).
+    /// period at a time while the screen talks: what it sends in answer to
+    /// a period's output reaches the firmware at the start of the period
+    /// after the next (20 ms; a real screen answers in 1–10 ms).
     fn pump_lockstep(&mut self, dur: Duration, connected: bool) -> io::Result<()> {
         let periods = dur.as_micros().div_ceil(LOCKSTEP_PERIOD.as_micros()).max(1);
-        for _ in 0..periods {
+        let mut left = usize::try_from(periods).unwrap_or(usize::MAX);
+        while left > 0 {
             let out = self.screen.take_output();
+            // While the screen has nothing to say, a few periods at a time
+            // (its answers to what the firmware sends then come up to 50 ms
+            // later; the firmware's shortest reply timeout is 200 ms).
+            let n = if out.is_empty() { left.min(LOCKSTEP_BATCH) } else { 1 };
             if connected && !out.is_empty() {
                 self.fw.send(&out)?;
             }
-            self.fw.allow(1)?;
+            left -= n;
+            self.fw.allow(n)?;
             // Taken: the period before has ended, its output is on the line.
             self.fw.wait_taken()?;
             let got = self.fw.read_serial_new(Duration::ZERO)?;

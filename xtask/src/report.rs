@@ -753,8 +753,10 @@ fn timeline(run: &Run) -> String {
             kind.name()
         );
         let _ = writeln!(s, "<g data-series=\"{}\">", kind.name());
-        let mut last_x = f64::NEG_INFINITY;
-        let mut lift = 0.0;
+        // Markers closer than a label's width share one label ("3–6"),
+        // placed above the cluster's first marker, alternating below when
+        // the previous cluster's label is near.
+        let mut clusters: Vec<(f64, Vec<usize>)> = Vec::new();
         for (i, e) in run
             .events
             .iter()
@@ -762,26 +764,45 @@ fn timeline(run: &Run) -> String {
             .filter(|(_, e)| e.kind == *kind)
         {
             let x = px(e.t_s);
-            // Neighbours closer than a label's width alternate above and below.
-            lift = if x - last_x < 16.0 {
-                if lift > 0.0 {
-                    -1.0
-                } else {
-                    1.0
-                }
-            } else {
-                1.0
-            };
-            last_x = x;
             let _ = writeln!(
                 s,
-                "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"4\" fill=\"{}\"><title>{:.3} s: {}</title></circle>\
-                 <text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"middle\" font-size=\"10\">{}</text>",
+                "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"4\" fill=\"{}\"><title>{:.3} s: {}</title></circle>",
                 kind.colour(),
                 e.t_s,
-                esc(&e.text),
-                if lift > 0.0 { y - 7.0 } else { y + 15.0 },
-                i + 1
+                esc(&e.text)
+            );
+            match clusters.last_mut() {
+                Some((x0, members))
+                    if x - *x0 < 16.0
+                        || members
+                            .last()
+                            .is_some_and(|&j| x - px(run.events[j].t_s) < 16.0) =>
+                {
+                    members.push(i);
+                }
+                _ => clusters.push((x, vec![i])),
+            }
+        }
+        let mut last_label_x = f64::NEG_INFINITY;
+        let mut below = false;
+        for (x, members) in &clusters {
+            let contiguous = members.windows(2).all(|w| w[1] == w[0] + 1);
+            let label = match members.as_slice() {
+                [] => continue,
+                [one] => format!("{}", one + 1),
+                [first, .., last] if contiguous => format!("{}–{}", first + 1, last + 1),
+                _ => members
+                    .iter()
+                    .map(|i| (i + 1).to_string())
+                    .collect::<Vec<_>>()
+                    .join(","),
+            };
+            below = x - last_label_x < 30.0 && !below;
+            last_label_x = *x;
+            let _ = writeln!(
+                s,
+                "<text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"start\" font-size=\"10\">{label}</text>",
+                if below { y + 15.0 } else { y - 7.0 }
             );
         }
         s.push_str("</g>\n");

@@ -1340,9 +1340,13 @@ pub fn run(args: &[String]) -> Result {
     let text = String::from_utf8_lossy(&bytes);
     let run = parse(&text).firmware_only();
     if run.status.is_empty() {
+        let why = if text.contains("status: uptime") && text.contains("profile B") {
+            "it is profile B's (the report covers profile A, the drum-belt machine)"
+        } else {
+            "is this a decoded defmt capture (probe-rs run … > capture.txt)?"
+        };
         return Err(format!(
-            "{}: no profile A `status:` line in {} lines: is this a decoded defmt capture \
-             (probe-rs run … > capture.txt)?",
+            "{}: no profile A `status:` line in {} lines: {why}",
             input.display(),
             run.lines
         ));

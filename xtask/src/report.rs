@@ -1483,6 +1483,46 @@ mod tests {
             assert!(!found.iter().any(|(n, _)| n == truth), "{truth}");
         }
         assert!(html.contains("alarm: DrumStall"));
+        // The dropped line breaks the estimated travel speed's line in two:
+        // 100–102 s, then 104–110 s.
+        let path = html
+            .split(&format!("data-series=\"{}\"", esc(names::TRAVEL_EST)))
+            .nth(1)
+            .and_then(|rest| rest.split(" d=\"").nth(1))
+            .and_then(|rest| rest.split('"').next())
+            .unwrap();
+        assert_eq!(path.matches('M').count(), 2, "{path}");
+        assert_eq!(path.matches('L').count(), 8, "{path}");
+    }
+
+    #[test]
+    fn probe_rs_formats_are_read() {
+        // probe-rs's default "{t} {L} {s}" (level padded), a bracketed level,
+        // a bracketed time, colour codes; lines without a time are not
+        // defmt lines.
+        let log = "0.500 INFO  drum: Running\n\
+                   └─ firmware::app::control @ firmware/src/main.rs:553\n\
+                   0.600 [WARN ] alarm: HallLost\n\
+                   [0.700] ERROR HardFault at pc 0x8000123\n\
+                   \u{1b}[2m0.800\u{1b}[0m \u{1b}[1;32mINFO \u{1b}[0m screen: Start\n\
+                   INFO  drum: Stopped\n\
+                   0.900 NOTE  drum: Stopped\n";
+        let run = parse(log);
+        let events: Vec<(f64, Kind, &str)> = run
+            .events
+            .iter()
+            .map(|e| (e.t_s, e.kind, e.text.as_str()))
+            .collect();
+        assert_eq!(
+            events,
+            [
+                (0.5, Kind::State, "drum: Running"),
+                (0.6, Kind::Alarm, "alarm: HallLost"),
+                (0.7, Kind::Alarm, "HardFault at pc 0x8000123"),
+                (0.8, Kind::Operator, "screen: Start"),
+            ]
+        );
+        assert_eq!((run.lines, run.unknown), (6, 2));
     }
 
     #[test]

@@ -818,17 +818,23 @@ mod app {
         }
     }
 
-    /// The 1 Hz summary line of the log.
+    /// The 1 Hz summary line of the log: everything `cargo xtask report`
+    /// plots from a field capture (state, spacing setting, travel, drum
+    /// target and actual, compare value, plants, distance, alarm) and the
+    /// health counters. Under 80 bytes a second on RTT (defmt sends the
+    /// arguments, not the text); alarms and state changes have their own
+    /// lines when they happen.
     fn log_status(machine: &Machine, uptime: u32) {
         match machine {
             #[cfg(feature = "profile-a")]
             Machine::DrumBelt(sup) => {
                 let snapshot = sup.snapshot();
                 defmt::info!(
-                    "status: uptime {=u32} ms, {} {}, travel {=u32} m/h, drum target {=u32} actual {=u32} mr/min, ccr {=u16}, plants {=u32}, distance {=u32} mm, alarm {}, loops {=u32} (overruns {=u32}), hall edges {=u32}, hmi rx {=u32} B",
+                    "status: uptime {=u32} ms, {} {}, spacing {=u16} mm, travel {=u32} m/h, drum target {=u32} actual {=u32} mr/min, ccr {=u16}, plants {=u32}, distance {=u32} mm, alarm {}, loops {=u32} (overruns {=u32}), hall edges {=u32}, hmi rx {=u32} B",
                     uptime,
                     sup.settings().mode,
                     sup.run_state(),
+                    sup.settings().spacing.raw(),
                     snapshot.travel_speed_kmh_x1000,
                     snapshot.target_drum_rpm_x1000,
                     snapshot.actual_drum_rpm_x1000,

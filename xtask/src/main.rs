@@ -2,6 +2,8 @@
 //!
 //! ```text
 //! cargo xtask qemu [--seconds N]   the firmware in QEMU against the simulated machine, with its logs
+//!                                  and a run report (target/report/qemu-run.html)
+//! cargo xtask report CAPTURE.txt   a field capture (probe-rs run's decoded defmt) into a run report
 //! cargo xtask test                 all host tests, then the firmware in QEMU driven from tests/
 //! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
 //! cargo xtask size                 flash and RAM of both boards against their budgets
@@ -19,6 +21,7 @@ use qemu_tests::{workspace_root, BootOptions};
 
 mod bench;
 mod plan;
+mod report;
 
 type Result<T = ()> = std::result::Result<T, String>;
 
@@ -49,6 +52,7 @@ fn main() -> ExitCode {
         "size" => size(),
         "flash" => flash(),
         "plan" => plan::run(rest),
+        "report" => report::run(rest),
         "bench" => bench::run(),
         "help" | "--help" | "-h" => {
             println!("{}", include_str!("usage.txt"));
@@ -285,6 +289,8 @@ fn qemu(args: &[String]) -> Result {
         scenario: vec![
             "gear=2".into(),
             format!("step={}:+10", seconds.saturating_mul(500)),
+            // One `sim: plant` line per plant, for the report's spacings.
+            "plant_log=1".into(),
         ],
         // Lock-step (firmware time paced by the virtual screen,
         // deterministic whatever the host's load).
@@ -337,12 +343,71 @@ fn qemu(args: &[String]) -> Result {
         .fw
         .wait_exit(Duration::from_secs(30))
         .map_err(|e| e.to_string())?;
+    let report = write_qemu_report(&logs, seconds)?;
     if status.success() && logs.iter().any(|l| l.contains("drum: Running")) {
         eprintln!("xtask: the firmware ended its run: {status}");
+        eprintln!("xtask: run report (open it in a browser):");
+        println!("{}", report.display());
         Ok(())
     } else {
         Err(format!("QEMU exited with {status}, or the drum never ran"))
     }
+}
+
+/// Where the main job leaves its log and its report.
+fn report_dir() -> PathBuf {
+    root().join("target").join("report")
+}
+
+/// Saves the main job's decoded log as `target/report/qemu-run.log` and its
+/// report as `target/report/qemu-run.html`; returns the report's path.
+fn write_qemu_report(logs: &[String], seconds: u32) -> Result<PathBuf> {
+    let dir = report_dir();
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let log_path = dir.join("qemu-run.log");
+    let mut text = logs.join("\n");
+    text.push('\n');
+    std::fs::write(&log_path, &text).map_err(|e| format!("{}: {e}", log_path.display()))?;
+    let run = report::parse(&text);
+    let html = report::render(
+        &run,
+        "Transplanter run report (QEMU main job)",
+        &format!(
+            "cargo xtask qemu --seconds {seconds}: the firmware (QEMU board) against the \
+             simulated machine, Speed-Adaptive, Low 2, a +10 % travel-speed step at {} s; \
+             log: {}",
+            seconds / 2,
+            log_path.display()
+        ),
+    );
+    // The main job's report must hold every series (the run plants for
+    // more than 3 s, so each has points).
+    let lacking = report::missing(
+        &report::check(&html)?,
+        &[
+            report::names::TRAVEL_TRUE,
+            report::names::TRAVEL_EST,
+            report::names::DRUM_TARGET,
+            report::names::DRUM_TRUE,
+            report::names::DRUM_MEASURED,
+            report::names::CCR_APPLIED,
+            report::names::CCR_STATUS,
+            report::names::PLANTS_TRUE,
+            report::names::PLANTS_FW,
+            report::names::SPACING_PLANT,
+            report::names::HIST_PLANT,
+            "operator",
+            "state",
+        ],
+    );
+    if !lacking.is_empty() {
+        return Err(format!(
+            "the run report lacks {} (log: {})",
+            lacking.join(", "),
+            log_path.display()
+        ));
+    }
+    report::write(&dir.join("qemu-run.html"), &html)
 }
 
 /// Test totals parsed from the runners' `test result:` lines.
@@ -532,6 +597,15 @@ fn ci() -> Result {
     size()?;
     eprintln!("xtask: QEMU smoke run (the main job, 6 s)");
     qemu(&["--seconds".into(), "6".into()])?;
+    // The field report on the smoke run's fresh log (its firmware lines).
+    report::run(&[
+        report_dir().join("qemu-run.log").display().to_string(),
+        "--out".into(),
+        report_dir()
+            .join("qemu-run-field.html")
+            .display()
+            .to_string(),
+    ])?;
     eprintln!("xtask ci: all green in {:.0?}", started.elapsed());
     println!(
         "ci: {} passed, {} failed, {} skipped",

@@ -440,7 +440,7 @@ pub struct HallCapture;
 
 impl HallCapture {
     /// TIM2 never interrupts under QEMU.
-    pub fn on_interrupt(&mut self) -> Option<u32> {
+    pub fn on_interrupt(&mut self) -> Option<super::HallEdge> {
         None
     }
 

@@ -180,6 +180,42 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }
 }
 
+// Timer register bits (RM0008 §14.4 for TIM1, §15.4 for TIM2–TIM4; the
+// bits used here sit at the same places in both).
+/// TIMx_CR1 CEN (bit 0): counter enable.
+const CR1_CEN: u32 = 1;
+/// TIMx_CR1 UDIS (bit 1): update events disabled, the shadow registers
+/// (PSC, ARR, CCRx) keep their values (§15.4.1).
+#[cfg(feature = "profile-b")]
+const CR1_UDIS: u32 = 1 << 1;
+/// TIMx_CR1 ARPE (bit 7): ARR preloaded.
+const CR1_ARPE: u32 = 1 << 7;
+/// TIMx_EGR UG (bit 0): update generation (shadows loaded, counter 0).
+const EGR_UG: u32 = 1;
+/// TIMx_CCMR1 (output) OC1PE (bit 3): CCR1 preloaded.
+const CCMR1_OC1PE: u32 = 1 << 3;
+/// TIMx_CCMR1 OC1M (bits 6:4) = 110: PWM mode 1 (OC1REF high while CNT < CCR1).
+const CCMR1_OC1M_PWM1: u32 = 0b110 << 4;
+/// TIMx_CCMR1 OC1M = 100: force inactive level, OC1REF low at once
+/// (§15.4.7: the mode bits are not preloaded).
+const CCMR1_OC1M_FORCE_INACTIVE: u32 = 0b100 << 4;
+/// TIMx_CCMR1 OC1M field mask.
+#[cfg(feature = "profile-b")]
+const CCMR1_OC1M_MASK: u32 = 0b111 << 4;
+/// TIMx_CCER CC1E (bit 0): OC1 output enabled, CC1P = 0 (active high).
+const CCER_CC1E: u32 = 1;
+/// TIM1_BDTR MOE (bit 15): main output enable.
+const BDTR_MOE: u32 = 1 << 15;
+/// TIM1_BDTR OSSR (bit 11) and OSSI (bit 10): with MOE = 0 the output stays
+/// enabled at its idle level OIS1 (TIM1_CR2 bit 8, left 0: low) instead of
+/// being released (RM0008 §14.4.18 and Table 83). MOE is cleared by the
+/// debug halt (DBG_TIM1_STOP) and by [`safe_state`].
+const BDTR_OSSR_OSSI: u32 = (1 << 11) | (1 << 10);
+/// TIMx_SR UIF (bit 0), CC1IF (bit 1), CC1OF (bit 9) (§15.4.5).
+const SR_UIF: u32 = 1;
+const SR_CC1IF: u32 = 1 << 1;
+const SR_CC1OF: u32 = 1 << 9;
+
 /// Drum motor PWM (TIM1 CH1) with the driver's enable and direction pins.
 pub struct DrumDrive {
     tim: TIM1,
@@ -386,18 +422,21 @@ pub struct HallCapture {
 impl HallCapture {
     fn new(tim2: TIM2) -> Self {
         let psc = (TIMER_CLOCK_HZ / HALL_TIMER_HZ - 1) as u16;
+        // PSC = 71 (1 MHz) and ARR = 0xFFFF, non-zero before UG and CEN
+        // (RM0008 §15.4.11, §15.4.12).
         tim2.psc().write(|w| w.psc().set(psc));
         tim2.arr().write(|w| w.arr().set(u16::MAX));
-        // SAFETY: raw register values (RM0008 §15.4): CCMR1 CC1S = 01 (IC1 on
-        // TI1), IC1F = 1111 (fDTS/32, N = 8: 3.6 µs of debounce); CCER CC1E,
-        // CC1P (falling edge); DIER CC1IE and UIE.
+        // SAFETY: raw register values (RM0008 §15.4): CCMR1 (§15.4.7) CC1S =
+        // 01 (IC1 on TI1), IC1F = 1111 (fDTS/32 with fDTS = fCK_INT = 72 MHz,
+        // N = 8: a level must hold 8 × 0.44 µs = 3.6 µs); CCER (§15.4.9) CC1E,
+        // CC1P (falling edge); DIER (§15.4.4) CC1IE and UIE.
         tim2.ccmr1_input()
             .write(|w| unsafe { w.bits((0b1111 << 4) | 0b01) });
         tim2.ccer().write(|w| unsafe { w.bits(0b11) });
-        tim2.egr().write(|w| w.ug().set_bit());
+        tim2.egr().write(|w| unsafe { w.bits(EGR_UG) });
         tim2.sr().write(|w| unsafe { w.bits(0) });
         tim2.dier().write(|w| unsafe { w.bits(0b11) });
-        tim2.cr1().write(|w| unsafe { w.bits(1) });
+        tim2.cr1().write(|w| unsafe { w.bits(CR1_CEN) });
         Self {
             tim2,
             extender: CaptureExtender::new(),
@@ -405,31 +444,60 @@ impl HallCapture {
     }
 
     /// Handles the TIM2 interrupt: returns the edge captured, if any, as a
-    /// 32-bit timestamp in 1 µs ticks. The capture is extended *before* the
-    /// pending overflow is accounted (see `kinematics::speed::CaptureExtender`).
-    pub fn on_interrupt(&mut self) -> Option<u32> {
+    /// 32-bit timestamp in 1 µs ticks, and whether edges were lost before it.
+    ///
+    /// Reads, in this order (RM0008 §15.4.5 TIMx_SR, §15.4.13 TIMx_CCR1):
+    /// SR; CCR1 if CC1IF (the read clears CC1IF, so the flag is never
+    /// written: a capture landing between the read and a write would be
+    /// lost); SR again (UIF and CC1OF as they stand after the capture
+    /// read); CNT. The capture is extended with UIF and the counter read
+    /// after it (`CaptureExtender::extend_at`: exact up to a whole wrap,
+    /// 65.5 ms, of interrupt delay — a 40 ms flash erase stall included);
+    /// then UIF and CC1OF are cleared (rc_w0: only the bits seen are written
+    /// 0, the others 1) and the overflow is accounted.
+    ///
+    /// CC1OF set means a capture came while the previous one was unread: at
+    /// least one Hall edge was lost, and CCR1 holds the newest capture, so
+    /// the edge read here follows the loss (`after_lost`) and the estimator
+    /// must not measure the interval ending at it. If CC1IF is set again at
+    /// the second SR read, the loss may instead lie after the edge just read
+    /// (two captures since): CC1OF is then left set, so that the next edge
+    /// (its interrupt is already pending) is marked too — one window too
+    /// many discarded rather than one measured wrong.
+    pub fn on_interrupt(&mut self) -> Option<super::HallEdge> {
         let sr = self.tim2.sr().read().bits();
-        let overflowed = sr & 1 != 0;
-        let edge = (sr & 0b10 != 0).then(|| {
-            let ccr = self.tim2.ccr1().read().bits() as u16;
-            self.extender.extend(ccr, overflowed).0
+        let ccr = (sr & SR_CC1IF != 0).then(|| self.tim2.ccr1().read().bits() as u16);
+        let sr = self.tim2.sr().read().bits();
+        let counter = self.tim2.cnt().read().bits() as u16;
+        let overflowed = sr & SR_UIF != 0;
+        let lost = sr & SR_CC1OF != 0;
+        let clear = if sr & SR_CC1IF == 0 {
+            sr & (SR_UIF | SR_CC1OF)
+        } else {
+            sr & SR_UIF
+        };
+        if clear != 0 {
+            // SAFETY: rc_w0 flags: 0 clears exactly the flags seen, 1 leaves
+            // the others (CC1IF included) untouched.
+            self.tim2.sr().write(|w| unsafe { w.bits(!clear & 0xFFFF) });
+        }
+        let edge = ccr.map(|ccr| super::HallEdge {
+            stamp: self.extender.extend_at(ccr, overflowed, counter).0,
+            after_lost: lost,
         });
-        // Clear what we saw (rc_w0 bits: write 0 to clear, 1 to keep).
-        // SAFETY: only the flags read above are cleared.
-        self.tim2
-            .sr()
-            .write(|w| unsafe { w.bits(!(sr & 0b11) & 0xFFFF) });
         if overflowed {
             self.extender.on_overflow();
         }
         edge
     }
 
-    /// The capture timer's time, 1 MHz, extended to 32 bits.
+    /// The capture timer's time, 1 MHz, extended to 32 bits: the counter
+    /// read between two reads of UIF (`CaptureExtender::now_between`).
     pub fn now(&self) -> u32 {
+        let before = self.tim2.sr().read().bits() & SR_UIF != 0;
         let counter = self.tim2.cnt().read().bits() as u16;
-        let pending = self.tim2.sr().read().bits() & 1 != 0;
-        self.extender.now(counter, pending).0
+        let after = self.tim2.sr().read().bits() & SR_UIF != 0;
+        self.extender.now_between(before, counter, after).0
     }
 }
 

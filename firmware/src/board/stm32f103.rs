@@ -234,21 +234,25 @@ impl DrumDrive {
     ) -> Self {
         enable.set_low();
         direction.set_low();
-        // SAFETY: raw register values for PWM mode 1 on CH1, all documented in
-        // RM0008 §14.4; TIM1 is owned by this struct.
+        // SAFETY: raw register values for PWM mode 1 on CH1 (RM0008 §14.4);
+        // TIM1 is owned by this struct. ARR (§14.4.12) is non-zero before
+        // the update and the counter start: a null ARR blocks the counter.
         tim.psc().write(|w| w.psc().set(0));
         tim.arr().write(|w| w.arr().set(DRUM_ARR));
         tim.ccr1().write(|w| w.ccr().set(0));
-        // CCMR1: OC1M = 110 (PWM mode 1), OC1PE = 1 (preload).
+        // CCMR1 (§14.4.7): OC1M = 110 (PWM mode 1), OC1PE = 1 (preload).
         tim.ccmr1_output()
-            .write(|w| unsafe { w.bits((0b110 << 4) | (1 << 3)) });
-        // CCER: CC1E = 1, active high.
-        tim.ccer().write(|w| unsafe { w.bits(1) });
-        // BDTR: MOE = 1 (advanced timer main output enable).
-        tim.bdtr().write(|w| unsafe { w.bits(1 << 15) });
-        tim.egr().write(|w| w.ug().set_bit());
-        // CR1: ARPE = 1, CEN = 1.
-        tim.cr1().write(|w| unsafe { w.bits((1 << 7) | 1) });
+            .write(|w| unsafe { w.bits(CCMR1_OC1M_PWM1 | CCMR1_OC1PE) });
+        // CCER (§14.4.9): CC1E = 1, active high.
+        tim.ccer().write(|w| unsafe { w.bits(CCER_CC1E) });
+        // BDTR (§14.4.18): MOE = 1, OSSI = OSSR = 1 (off state = driven to
+        // OIS1 = low, not released), no break, no lock.
+        tim.bdtr()
+            .write(|w| unsafe { w.bits(BDTR_MOE | BDTR_OSSR_OSSI) });
+        // EGR UG (§14.4.6): PSC, ARR and CCR1 into their shadows.
+        tim.egr().write(|w| unsafe { w.bits(EGR_UG) });
+        // CR1 (§14.4.1): ARPE = 1, CEN = 1.
+        tim.cr1().write(|w| unsafe { w.bits(CR1_ARPE | CR1_CEN) });
         Self {
             tim,
             enable,
@@ -297,20 +301,53 @@ fn step_timing(rate_bits: u32) -> Option<(u16, u16)> {
 }
 
 /// Programs a timer's CH1 for step pulses at `rate` (50 % duty), or off.
+///
+/// - Off: OC1M = 100, forced inactive: the output goes low at once (RM0008
+///   §14.4.7 / §15.4.7: OC1M is not preloaded), not at the next update,
+///   which at a slow step rate can be seconds away.
+/// - From off: PSC, ARR and CCR1, PWM mode 1, then UG (§15.4.6): the
+///   shadows load together, the counter restarts at 0 and the first pulse
+///   starts now.
+/// - A change while pulsing: PSC, ARR (ARPE = 1) and CCR1 (OC1PE = 1) are
+///   all preloaded, but an update between two of the three writes would
+///   start a period with some old and some new values. UDIS = 1 while
+///   writing (§15.4.1: no update event, the shadows keep their values; the
+///   counter still wraps on the old ARR), then UDIS = 0: the first update
+///   after that loads all three together. The current pulse finishes on the
+///   old values, so a change takes effect within one old period.
 #[cfg(feature = "profile-b")]
 macro_rules! set_step_rate {
-    ($tim:expr, $rate_bits:expr) => {
+    ($tim:expr, $rate_bits:expr) => {{
+        let tim = &$tim;
         match step_timing($rate_bits) {
             Some((psc, arr)) => {
-                $tim.psc().write(|w| w.psc().set(psc));
-                $tim.arr().write(|w| w.arr().set(arr));
-                $tim.ccr1().write(|w| w.ccr().set(arr / 2 + 1));
+                let mode = tim.ccmr1_output().read().bits() & CCMR1_OC1M_MASK;
+                // SAFETY: register values from RM0008 §15.4 (see above); the
+                // timer is owned by the caller.
+                unsafe {
+                    if mode == CCMR1_OC1M_PWM1 {
+                        tim.cr1().write(|w| w.bits(CR1_ARPE | CR1_UDIS | CR1_CEN));
+                        tim.psc().write(|w| w.psc().set(psc));
+                        tim.arr().write(|w| w.arr().set(arr));
+                        tim.ccr1().write(|w| w.ccr().set(arr / 2 + 1));
+                        tim.cr1().write(|w| w.bits(CR1_ARPE | CR1_CEN));
+                    } else {
+                        tim.psc().write(|w| w.psc().set(psc));
+                        tim.arr().write(|w| w.arr().set(arr));
+                        tim.ccr1().write(|w| w.ccr().set(arr / 2 + 1));
+                        tim.ccmr1_output()
+                            .write(|w| w.bits(CCMR1_OC1M_PWM1 | CCMR1_OC1PE));
+                        tim.egr().write(|w| w.bits(EGR_UG));
+                    }
+                }
             }
             None => {
-                $tim.ccr1().write(|w| w.ccr().set(0));
+                // SAFETY: as above.
+                tim.ccmr1_output()
+                    .write(|w| unsafe { w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE) });
             }
         }
-    };
+    }};
 }
 
 /// Profile B's feeding-motor step output, TIM4 CH1 on PB6, with both
@@ -331,14 +368,23 @@ impl FeedStep {
     ) -> Self {
         feed_dir.set_low();
         plant_dir.set_low();
-        // SAFETY: raw register values for PWM mode 1 on CH1 with preload
-        // (RM0008 §15.4), as for TIM1; TIM4 is owned by this struct.
+        // SAFETY: raw register values from RM0008 §15.4; TIM4 is owned by
+        // this struct. ARR (§15.4.12) must be non-zero before the update and
+        // the counter start: "the counter is blocked while the auto-reload
+        // value is null", and with it every later preload (PSC, ARR, CCR1)
+        // would wait for an update that never comes. The idle values (PSC 0,
+        // ARR 0xFFFF) are replaced by `set_step_rate!` when pulses start.
+        tim.psc().write(|w| w.psc().set(0));
+        tim.arr().write(|w| w.arr().set(u16::MAX));
         tim.ccr1().write(|w| w.ccr().set(0));
+        // CCMR1 (§15.4.7): OC1M = 100 (forced inactive: no pulses), OC1PE = 1.
         tim.ccmr1_output()
-            .write(|w| unsafe { w.bits((0b110 << 4) | (1 << 3)) });
-        tim.ccer().write(|w| unsafe { w.bits(1) });
-        tim.egr().write(|w| w.ug().set_bit());
-        tim.cr1().write(|w| unsafe { w.bits((1 << 7) | 1) });
+            .write(|w| unsafe { w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE) });
+        // CCER (§15.4.9): CC1E = 1, active high.
+        tim.ccer().write(|w| unsafe { w.bits(CCER_CC1E) });
+        // EGR UG (§15.4.6), then CR1 (§15.4.1): ARPE = 1, CEN = 1.
+        tim.egr().write(|w| unsafe { w.bits(EGR_UG) });
+        tim.cr1().write(|w| unsafe { w.bits(CR1_ARPE | CR1_CEN) });
         Self {
             tim,
             _feed_dir: feed_dir,
@@ -358,8 +404,10 @@ pub struct Steppers {
 
 #[cfg(feature = "profile-b")]
 impl Steppers {
-    /// Takes over the drum PWM's timer for step pulses (profile B).
+    /// Takes over the drum PWM's timer for step pulses (profile B), forced
+    /// inactive (no pulses) until a rate is set.
     pub fn new(drum: DrumDrive, feed: FeedStep) -> Self {
+        set_step_rate!(drum.tim, 0);
         Self { drum, feed }
     }
 

@@ -13,7 +13,7 @@
 //!
 //! The control code above this module sees only [`Board`], [`DrumDrive`],
 //! [`Sensors`], [`HallCapture`] and the free functions [`safe_state`],
-//! [`fatal`] and [`run_limit_ms`].
+//! [`drivers_enabled`], [`fatal`] and [`run_limit_ms`].
 
 #[cfg(feature = "board-qemu")]
 mod qemu;

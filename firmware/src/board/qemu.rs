@@ -466,6 +466,18 @@ impl Watchdog {
     pub fn feed(&mut self) {}
 }
 
+/// Whether the drivers' enable stand-in is on (the settings task erases
+/// flash only while it is off).
+pub fn drivers_enabled() -> bool {
+    DRIVER_ENABLE.load(Relaxed)
+}
+
+/// Whether the clock security system saw the HSE fail: QEMU runs on the
+/// HSI and has no CSS.
+pub fn clock_failed() -> bool {
+    false
+}
+
 /// Zeroes the PWM and step stand-ins and the enable (the model coasts the
 /// drum down; the steppers stop).
 pub fn safe_state() {

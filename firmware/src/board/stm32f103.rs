@@ -88,10 +88,47 @@ pub struct Rs485 {
     pub de: PA1<Output<PushPull>>,
 }
 
+/// HSE start-up bound, in cycles of the 8 MHz HSI the core runs on until
+/// the PLL is up: 100 ms. The datasheet gives tSU(HSE) = 2 ms typical for an
+/// 8 MHz crystal (STM32F103xB, "High-speed external user clock generated from
+/// a crystal/ceramic resonator"); ST's own HAL waits 100 ms
+/// (`HSE_STARTUP_TIMEOUT`). It must stay well below the watchdog's shortest
+/// timeout (166 ms) so that the error is logged before the reset.
+const HSE_TIMEOUT_CYCLES: u32 = 800_000;
+/// Cycles between two reads of HSERDY while waiting (125 µs at 8 MHz).
+const HSE_POLL_CYCLES: u32 = 1_000;
+
 /// Brings up clocks and peripherals. Called once from `init`, interrupts off.
+///
+/// Order (docs/firmware.md, "Boards"): the watchdog first, the outputs
+/// driven safe (PA8, PB12 and profile B's PB6 push-pull low) before any
+/// clock work, then the HSE with a bounded wait; a crystal that never
+/// starts ends in [`fatal`] (outputs safe, the watchdog resets and the boot
+/// tries again). Then the PLL, the clock security system and the
+/// peripherals, each output pin switched to its timer only after the timer
+/// drives it low.
 #[inline(never)]
 pub fn init(dp: pac::Peripherals) -> Board {
+    let mut watchdog = Watchdog::start(dp.IWDG);
+    safe_state();
+    // RM0008 §7.3.10 RCC_CSR: IWDGRSTF (bit 29) says the last reset came
+    // from the watchdog; RMVF (bit 24) clears the reset flags.
+    if dp.RCC.csr().read().iwdgrstf().bit_is_set() {
+        defmt::warn!("boot: reset by the independent watchdog");
+    }
+    dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
+    debug_freeze(&dp.DBGMCU);
+    if !start_hse(&dp.RCC) {
+        defmt::error!(
+            "clock: the 8 MHz crystal (HSE) did not start within 100 ms: outputs off, waiting for the watchdog reset"
+        );
+        fatal();
+    }
     let mut flash = dp.FLASH.constrain();
+    // The HSE is running: the HAL's own (unbounded) wait on HSERDY returns
+    // at once; it then starts the PLL (×9), sets two flash wait states
+    // (RM0008 §3.3.3, FLASH_ACR LATENCY = 010 for 48 < SYSCLK ≤ 72 MHz) and
+    // switches SYSCLK to the PLL.
     let mut rcc = dp.RCC.freeze(
         rcc::Config::hse(8.MHz())
             .sysclk(SYSCLK_HZ.Hz())
@@ -99,11 +136,22 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .pclk2(72.MHz()),
         &mut flash.acr,
     );
-    // Keep the debug connection (RTT) alive while the core sleeps in `wfi`.
-    dp.DBGMCU.cr().modify(|_, w| w.dbg_sleep().set_bit());
+    // RM0008 §7.2.7 and §7.3.1 RCC_CR CSSON (bit 19): the clock security
+    // system watches the HSE; a failure switches SYSCLK to the HSI and
+    // raises the NMI (CSSF), whose handler drives the outputs safe and ends
+    // in `fatal`. (The CSS also signals TIM1's break input, but only with
+    // BKE = 1, and TIM1_BKIN is PB12, the driver enable output: the break
+    // stays off and the NMI does the job.)
+    rcc.cr().modify(|_, w| w.csson().set_bit());
+    watchdog.feed();
 
-    let mut gpioa = dp.GPIOA.split(&mut rcc);
-    let mut gpiob = dp.GPIOB.split(&mut rcc);
+    // The pins configured by `safe_state` (PA8, PB12, PB6) are each
+    // reconfigured below before use, every mode bit rewritten by the HAL;
+    // resetting the ports (`split`) would let them float meanwhile.
+    // SAFETY: the other pins of ports A and B are in their reset state.
+    let mut gpioa = unsafe { dp.GPIOA.split_without_reset(&mut rcc) };
+    // SAFETY: as above.
+    let mut gpiob = unsafe { dp.GPIOB.split_without_reset(&mut rcc) };
     let mut gpioc = dp.GPIOC.split(&mut rcc);
 
     // Touchscreen, USART1 on PA9/PA10.
@@ -132,21 +180,24 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let (tx, rx) = rs.split();
     let de = gpioa.pa1.into_push_pull_output(&mut gpioa.crl);
 
-    // Drum PWM, TIM1 CH1 on PA8; driver enable and direction.
-    let _pwm_pin = gpioa.pa8.into_alternate_push_pull(&mut gpioa.crh);
+    // Drum PWM, TIM1 CH1 on PA8; driver enable and direction. PA8 is handed
+    // to the timer only once the timer drives it low (PA8 stays a GPIO
+    // output low until then).
     let enable = gpiob.pb12.into_push_pull_output(&mut gpiob.crh);
     let direction = gpiob.pb13.into_push_pull_output(&mut gpiob.crh);
     let tim1 = Timer::new(dp.TIM1, &mut rcc).release();
     let drum = DrumDrive::new(tim1, enable, direction);
+    let _pwm_pin = gpioa.pa8.into_alternate_push_pull(&mut gpioa.crh);
 
     // Profile B: feeding STEP on PB6 (TIM4 CH1), directions on PB14/PB15.
     #[cfg(feature = "profile-b")]
     let feed_step = {
-        let _feed_pin = gpiob.pb6.into_alternate_push_pull(&mut gpiob.crl);
         let feed_dir = gpiob.pb14.into_push_pull_output(&mut gpiob.crh);
         let plant_dir = gpiob.pb15.into_push_pull_output(&mut gpiob.crh);
         let tim4 = Timer::new(dp.TIM4, &mut rcc).release();
-        FeedStep::new(tim4, feed_dir, plant_dir)
+        let feed_step = FeedStep::new(tim4, feed_dir, plant_dir);
+        let _feed_pin = gpiob.pb6.into_alternate_push_pull(&mut gpiob.crl);
+        feed_step
     };
 
     // Hall input capture, TIM2 CH1 on PA0 (NPN switch: pull-up, falling edge).
@@ -161,7 +212,6 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let sensors = Sensors::new(tim3);
 
     let led = StatusLed(gpioc.pc13.into_push_pull_output(&mut gpioc.crh));
-    let watchdog = Watchdog::start(dp.IWDG);
 
     Board {
         hmi_tx,
@@ -549,21 +599,50 @@ impl HallCapture {
     }
 }
 
-/// The independent watchdog: 250 ms from the 40 kHz LSI (prescaler /32,
-/// reload 312). Fed only by the control task when it ran on time; a flash
-/// page erase (≤ 40 ms) fits well inside.
+/// IWDG prescaler: PR = 011, LSI / 32 (RM0008 §19.4.2).
+const IWDG_PR_DIV32: u16 = 0b011;
+/// IWDG reload: 313 counts of LSI / 32, i.e. 10 016 LSI cycles.
+const IWDG_RELOAD: u16 = 312;
+/// Bound on the wait for the prescaler and reload to reach the LSI domain
+/// (PVU, RVU: "up to 5 RC 40 kHz oscillator cycles", RM0008 §19.4.4: 167 µs
+/// at the LSI's slowest 30 kHz); each poll is a few cycles of the 8 MHz HSI.
+const IWDG_UPDATE_POLLS: u32 = 20_000;
+
+/// The independent watchdog: 313 × 32 = 10 016 LSI cycles, 250 ms at the
+/// LSI's nominal 40 kHz, 166.9–333.9 ms over its 30–60 kHz spread
+/// (datasheet STM32F103xB, "LSI oscillator characteristics"). Fed only by
+/// the control task when it ran on time (every 10 ms). The longest time the
+/// CPU cannot feed it is a flash page erase: tERASE ≤ 40 ms (datasheet,
+/// "Flash memory characteristics"), far inside the shortest 166.9 ms.
 pub struct Watchdog {
     iwdg: IWDG,
 }
 
 impl Watchdog {
+    /// Starts the watchdog first thing at boot (RM0008 §19.3.2), the
+    /// sequence of ST's reference driver: 0xCCCC starts it (LSI on; it
+    /// counts from 0xFFF at the reset prescaler /4, 273–546 ms) and cannot
+    /// be stopped again; 0x5555 unlocks PR and RLR; once PVU and RVU clear,
+    /// 0xAAAA reloads the counter with the new timeout.
     fn start(iwdg: IWDG) -> Self {
-        // SAFETY: the IWDG key sequence of RM0008 §19.3: 0x5555 unlocks PR
-        // and RLR, 0xCCCC starts the watchdog (it cannot be stopped again).
-        iwdg.kr().write(|w| unsafe { w.bits(0x5555) });
-        iwdg.pr().write(|w| unsafe { w.bits(0b011) });
-        iwdg.rlr().write(|w| unsafe { w.bits(312) });
+        // SAFETY: the key values and register fields of RM0008 §19.4.1–§19.4.4.
         iwdg.kr().write(|w| unsafe { w.bits(0xCCCC) });
+        iwdg.kr().write(|w| unsafe { w.bits(0x5555) });
+        iwdg.pr().write(|w| unsafe { w.bits(IWDG_PR_DIV32) });
+        iwdg.rlr().write(|w| unsafe { w.bits(IWDG_RELOAD) });
+        let mut polls = 0;
+        while iwdg.sr().read().bits() & 0b11 != 0 {
+            polls += 1;
+            if polls >= IWDG_UPDATE_POLLS {
+                // The LSI does not run: the watchdog cannot either. Said
+                // once; the machine still works.
+                defmt::error!(
+                    "watchdog: prescaler/reload update did not complete (LSI not running?)"
+                );
+                break;
+            }
+        }
+        iwdg.kr().write(|w| unsafe { w.bits(0xAAAA) });
         Self { iwdg }
     }
 
@@ -639,34 +718,146 @@ impl StatusLed {
     }
 }
 
-/// Drives the outputs to their safe state with raw register writes, from any
-/// context (panic, HardFault): drum PWM compare 0, TIM1 outputs off, driver
-/// enable low.
+/// GPIOx_CRL/CRH nibble (RM0008 §9.2.1, §9.2.2) for a general-purpose
+/// push-pull output at 2 MHz: CNF = 00, MODE = 10.
+const GPIO_OUT_PP_2MHZ: u32 = 0b0010;
+/// RCC_APB2ENR IOPAEN (bit 2) and IOPBEN (bit 3) (RM0008 §7.3.7).
+const APB2ENR_IOPA_IOPB: u32 = (1 << 2) | (1 << 3);
+
+/// Drives the outputs to their safe state at once, with raw register writes
+/// and no stack of its own to speak of, from any context (boot before the
+/// clocks, panic, HardFault after a stack overflow, NMI, an unexpected
+/// interrupt):
+///
+/// 1. PA8 (drum PWM / profile B planting STEP), PB12 (drivers' enable) and
+///    profile B's PB6 (feeding STEP) become general-purpose push-pull
+///    outputs driven low: ODR bits cleared through BRR (RM0008 §9.2.6), then
+///    the pins' CRH/CRL nibbles = 0010 (§9.2.1, §9.2.2), the port clocks
+///    switched on first (§7.3.7). This holds whatever state the timers are
+///    in (unconfigured, clock off, stopped by a debug halt).
+/// 2. The timers agree: TIM1 CH1 (and TIM4 CH1 on profile B) forced
+///    inactive, OC1M = 100 (§14.4.7, §15.4.7: takes effect immediately,
+///    unlike CCR1, which is preloaded and would wait for the next update —
+///    up to a whole step period on TIM4); CCR1 = 0; TIM1's MOE cleared with
+///    OSSI = OSSR = 1 so that its output stays driven at OIS1 = low
+///    (§14.4.18, Table 83) rather than released (Hi-Z) as with OSSI = 0.
+///    Writes to a timer whose clock is off are ignored, harmlessly.
+///
+/// Either step alone holds the pins low; the GPIO one does not depend on
+/// any timer setting and the timer one keeps the pins low if a pin is ever
+/// handed back to its timer.
+#[inline(always)]
 pub fn safe_state() {
-    // SAFETY: single writes to TIM1 and GPIOB registers from a context that
-    // will never return to the application; stealing is sound because the
-    // owners are never used again.
+    // SAFETY: single writes (and read-modify-writes of registers no
+    // interrupt handler touches) of documented values; every caller either
+    // never returns to the application or runs before it exists (boot).
     unsafe {
-        let tim1 = &*TIM1::ptr();
-        tim1.ccr1().write(|w| w.ccr().set(0));
-        tim1.bdtr().write(|w| w.bits(0));
-        let tim4 = &*pac::TIM4::ptr();
-        tim4.ccr1().write(|w| w.ccr().set(0));
+        let rcc = &*pac::RCC::ptr();
+        rcc.apb2enr()
+            .modify(|r, w| w.bits(r.bits() | APB2ENR_IOPA_IOPB));
+        let gpioa = &*pac::GPIOA::ptr();
         let gpiob = &*pac::GPIOB::ptr();
-        gpiob.bsrr().write(|w| w.bits(1 << (12 + 16)));
+        gpioa.brr().write(|w| w.bits(1 << 8));
+        gpiob.brr().write(|w| w.bits((1 << 12) | (1 << 6)));
+        gpioa
+            .crh()
+            .modify(|r, w| w.bits((r.bits() & !0xF) | GPIO_OUT_PP_2MHZ));
+        gpiob
+            .crh()
+            .modify(|r, w| w.bits((r.bits() & !(0xF << 16)) | (GPIO_OUT_PP_2MHZ << 16)));
+        #[cfg(feature = "profile-b")]
+        gpiob
+            .crl()
+            .modify(|r, w| w.bits((r.bits() & !(0xF << 24)) | (GPIO_OUT_PP_2MHZ << 24)));
+        let tim1 = &*TIM1::ptr();
+        tim1.ccmr1_output()
+            .write(|w| w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE));
+        tim1.ccr1().write(|w| w.ccr().set(0));
+        tim1.bdtr().write(|w| w.bits(BDTR_OSSR_OSSI));
+        #[cfg(feature = "profile-b")]
+        {
+            let tim4 = &*pac::TIM4::ptr();
+            tim4.ccmr1_output()
+                .write(|w| w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE));
+            tim4.ccr1().write(|w| w.ccr().set(0));
+        }
     }
 }
 
-/// The end state after a fatal error (called from the HardFault handler):
-/// outputs safe, then spin until the independent watchdog resets the MCU. At
-/// boot the drum stays stopped until the operator presses Start, so the reset
-/// cannot restart the machine by itself. (A probe attached with `probe-rs run`
-/// has already halted the core on the HardFault and printed a backtrace.)
+/// Whether the motor drivers' enable (PB12) is high, read back from its
+/// output data register (RM0008 §9.2.4): the settings task erases flash only
+/// while it is low.
+pub fn drivers_enabled() -> bool {
+    // SAFETY: a read of GPIOB_ODR, no side effect.
+    unsafe { (*pac::GPIOB::ptr()).odr().read().bits() & (1 << 12) != 0 }
+}
+
+/// The end state after a fatal error (panic, HardFault, NMI, an unexpected
+/// interrupt, no crystal): interrupts off, outputs safe, then spin without
+/// feeding the independent watchdog until it resets the MCU (166–333 ms
+/// after its last feed). At boot the outputs are driven safe again and the
+/// drum stays stopped until the operator presses Start, so the reset cannot
+/// restart the machine by itself. (A probe attached with `probe-rs run` has
+/// already halted the core on the HardFault and printed a backtrace; with
+/// DBG_IWDG_STOP the watchdog then waits too.)
 pub fn fatal() -> ! {
+    cortex_m::interrupt::disable();
     safe_state();
     loop {
         cortex_m::asm::nop();
     }
+}
+
+/// DBGMCU_CR (RM0008 §31.16.3), for a debug probe halting the core:
+///
+/// - DBG_SLEEP: the debug connection (RTT) stays alive in `wfi`.
+/// - DBG_TIM1_STOP, DBG_TIM4_STOP: the step/PWM timers stop with the core.
+///   TIM1 has complementary outputs, so stopping it also disables its
+///   outputs "as if the MOE bit was reset" (§31.16.2), which with OSSI = 1
+///   drives PA8 low; TIM4's PB6 holds its level, and no further step pulse
+///   comes. Without these bits a halted core would leave the drum PWM (and
+///   the steppers) running under no control.
+/// - DBG_IWDG_STOP: the watchdog stops too, so that a breakpoint (or the
+///   probe's halt on a HardFault) does not reset the board under the
+///   debugger. The bits act only while a debugger holds the core halted; in
+///   the field nothing halts it, so the watchdog keeps its full effect.
+/// - TIM2 and TIM3 keep counting: TIM3 follows the machine's real motion,
+///   and TIM2's time stays the machine's; a halt breaks the Hall
+///   measurement either way (its overflows go unserviced).
+fn debug_freeze(dbgmcu: &pac::DBGMCU) {
+    dbgmcu.cr().modify(|_, w| {
+        w.dbg_sleep()
+            .set_bit()
+            .dbg_tim1_stop()
+            .set_bit()
+            .dbg_tim4_stop()
+            .set_bit()
+            .dbg_iwdg_stop()
+            .set_bit()
+    });
+}
+
+/// Switches the HSE on (RM0008 §7.3.1 RCC_CR HSEON, bit 16) and waits for
+/// HSERDY (bit 17) at most [`HSE_TIMEOUT_CYCLES`]; false if it never came.
+fn start_hse(rcc: &pac::RCC) -> bool {
+    rcc.cr().modify(|_, w| w.hseon().set_bit());
+    let mut waited = 0;
+    while rcc.cr().read().hserdy().bit_is_clear() {
+        if waited >= HSE_TIMEOUT_CYCLES {
+            rcc.cr().modify(|_, w| w.hseon().clear_bit());
+            return false;
+        }
+        cortex_m::asm::delay(HSE_POLL_CYCLES);
+        waited += HSE_POLL_CYCLES;
+    }
+    true
+}
+
+/// Whether the clock security system saw the HSE fail (RM0008 §7.3.3
+/// RCC_CIR CSSF, bit 7): the cause of an NMI.
+pub fn clock_failed() -> bool {
+    // SAFETY: a read of RCC_CIR, no side effect.
+    unsafe { (*pac::RCC::ptr()).cir().read().cssf().bit_is_set() }
 }
 
 /// Ends a run that reached its limit (never on the real board).

@@ -934,19 +934,19 @@ core::arch::global_asm!(
     ".type HardFault,%function",
     ".thumb_func",
     "HardFault:",
-    "    movs r1, #0",
+    "    movs r1, #{hard}",
     "    b 1f",
     ".global NonMaskableInt",
     ".type NonMaskableInt,%function",
     ".thumb_func",
     "NonMaskableInt:",
-    "    movs r1, #1",
+    "    movs r1, #{nmi}",
     "    b 1f",
     ".global DefaultHandler",
     ".type DefaultHandler,%function",
     ".thumb_func",
     "DefaultHandler:",
-    "    movs r1, #2",
+    "    movs r1, #{other}",
     "1:",
     "    mov r0, lr",
     "    tst r0, #4",
@@ -958,12 +958,18 @@ core::arch::global_asm!(
     "    msr msp, r2",
     "    b {entry}",
     ".ltorg",
+    hard = const FAULT_HARD,
+    nmi = const FAULT_NMI,
+    other = const FAULT_OTHER,
     entry = sym fatal_exception,
 );
 
-/// Which entry of the asm above was taken.
+/// Which entry of the asm above was taken: HardFault.
 const FAULT_HARD: u32 = 0;
+/// NonMaskableInt.
 const FAULT_NMI: u32 = 1;
+/// DefaultHandler (an unused interrupt or core exception).
+const FAULT_OTHER: u32 = 2;
 
 /// The fatal exceptions, on a fresh stack: outputs safe first, then one log
 /// line, then the board's end state (the real board waits for the

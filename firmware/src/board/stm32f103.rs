@@ -12,6 +12,14 @@
 //! | PA9 / PA10 | USART1 TX/RX, touchscreen, 115200 8N1 |
 //! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable, RS-485 to the motor driver, 9600 8N1 |
 //! | PC13 | status LED (low = on) |
+//!
+//! PA0–PA7 are not 5 V tolerant (datasheet STM32F103xB, Table 5, "FT"
+//! column): the Hall switch and the encoders must reach them at 3.3 V (see
+//! README.md, pin map).
+//!
+//! Every register value written here is taken from RM0008 (reference
+//! manual of the STM32F101/102/103/105/107, rev. 21) and the STM32F103xB
+//! datasheet; each write names its section.
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use kinematics::speed::CaptureExtender;
@@ -490,14 +498,21 @@ pub struct Sensors {
 
 impl Sensors {
     fn new(tim3: TIM3) -> Self {
-        // SAFETY: raw register values for encoder mode 3 (RM0008 §15.3.12):
-        // CC1S = CC2S = 01 (TI1, TI2), input filter N = 8 at fDTS/4.
+        // SAFETY: raw register values for encoder mode 3 (RM0008 §15.3.12).
+        // CCMR1 (§15.4.7, input): CC1S = 01 (IC1 on TI1), CC2S = 01 (IC2 on
+        // TI2), IC1F = IC2F = 0011: sampled at fCK_INT (72 MHz), N = 8, i.e.
+        // a level must hold 8 samples = 111 ns to count. (The encoder's
+        // fastest edges, 23.6 kHz per channel at 7080 motor r/min, are 21 µs
+        // apart.)
         tim3.ccmr1_input()
             .write(|w| unsafe { w.bits((0b0011 << 12) | (0b01 << 8) | (0b0011 << 4) | 0b01) });
+        // CCER (§15.4.9): both polarities non-inverted, captures off.
         tim3.ccer().write(|w| unsafe { w.bits(0) });
+        // SMCR (§15.4.3): SMS = 011, encoder mode 3 (both edges of both inputs).
         tim3.smcr().write(|w| unsafe { w.bits(0b011) });
+        // ARR (§15.4.12) non-zero before CEN: the counter wraps at 2^16.
         tim3.arr().write(|w| w.arr().set(u16::MAX));
-        tim3.cr1().write(|w| unsafe { w.bits(1) });
+        tim3.cr1().write(|w| unsafe { w.bits(CR1_CEN) });
         Self { tim3 }
     }
 

@@ -776,7 +776,7 @@ mod app {
             Machine::SeedlingBelt(belt) => {
                 let s = belt.planter().snapshot();
                 defmt::info!(
-                    "status: uptime {=u32} ms, profile B {}, travel {=u32} mm/s, n1 {=u32} n2 {=u32} mr/min, j {=u32}, radius {=u32} um, {}, alarm {}, loops {=u32} (overruns {=u32}), hmi rx {=u32} B",
+                    "status: uptime {=u32} ms, profile B {}, travel {=u32} mm/s, n1 {=u32} n2 {=u32} mr/min, j {=u32}, radius {=u32} um, {}, alarm {}, loops {=u32} (overruns {=u32}), hmi rx {=u32} B, roller pulses after lost {=u32}",
                     uptime,
                     s.state,
                     s.travel_speed.to_milli(),
@@ -788,7 +788,8 @@ mod app {
                     s.alarm,
                     stats::CONTROL_LOOPS.get(),
                     stats::CONTROL_OVERRUNS.get(),
-                    stats::HMI_RX_BYTES.get()
+                    stats::HMI_RX_BYTES.get(),
+                    stats::HALL_EDGES_LOST.get()
                 );
             }
         }

@@ -756,7 +756,11 @@ impl Bench {
             // While the screen has nothing to say, a few periods at a time
             // (its answers to what the firmware sends then come up to 50 ms
             // later; the firmware's shortest reply timeout is 200 ms).
-            let n = if out.is_empty() { left.min(LOCKSTEP_BATCH) } else { 1 };
+            let n = if out.is_empty() {
+                left.min(LOCKSTEP_BATCH)
+            } else {
+                1
+            };
             if connected && !out.is_empty() {
                 self.fw.send(&out)?;
             }

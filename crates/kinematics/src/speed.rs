@@ -156,6 +156,62 @@ impl CaptureExtender {
     pub fn now(&self, counter: u16, overflow_pending: bool) -> Ticks {
         self.extend(counter, overflow_pending)
     }
+
+    /// Extends a capture with the counter read *after* the update flag:
+    /// exact as long as the capture and the pending update are less than one
+    /// whole wrap old (65.5 ms at 1 MHz), where [`extend`](Self::extend)'s
+    /// half-range rule needs the interrupt within half a wrap.
+    ///
+    /// Read in this order in the timer interrupt: the capture register, then
+    /// the status register (`overflow_pending` = its UIF, not yet passed to
+    /// [`on_overflow`](Self::on_overflow)), then the counter
+    /// (`counter_after`). With an update pending, the counter has wrapped
+    /// since the last accounted period and only counted up from 0 since: a
+    /// capture taken after the wrap is at most the counter read later, one
+    /// taken before it (less than a wrap ago) is above it. Without one, no
+    /// wrap came before the status read, so the capture (read earlier) is in
+    /// the accounted period.
+    ///
+    /// This is what a CPU stall needs: a flash page erase holds the bus for
+    /// up to 40 ms, and a capture made 35 ms after an overflow that could not
+    /// be serviced reads 35 000 (above half the range): the half-range rule
+    /// stamps it a whole wrap early, this one does not.
+    ///
+    /// ```
+    /// use kinematics::speed::CaptureExtender;
+    /// let x = CaptureExtender::new();
+    /// // Overflow at 65 536 µs, unserviced; edge at 65 536 + 35 000; the
+    /// // interrupt runs at 65 536 + 38 000 (counter 38 000).
+    /// assert_eq!(x.extend_at(35_000, true, 38_000).0, 65_536 + 35_000);
+    /// // Edge at 60 000 (before the wrap), read at 65 536 + 30 000.
+    /// assert_eq!(x.extend_at(60_000, true, 30_000).0, 60_000);
+    /// // No update pending: the capture is in the accounted period.
+    /// assert_eq!(x.extend_at(65_000, false, 65_100).0, 65_000);
+    /// ```
+    #[must_use]
+    pub fn extend_at(&self, capture: u16, overflow_pending: bool, counter_after: u16) -> Ticks {
+        let high = if overflow_pending && capture <= counter_after {
+            self.high.wrapping_add(1)
+        } else {
+            self.high
+        };
+        Ticks((u32::from(high) << 16) | u32::from(capture))
+    }
+
+    /// The current time from the counter read between two reads of the
+    /// update flag (`pending_before`, `counter`, `pending_after`): exact while
+    /// the pending update is less than a whole wrap old. An update already
+    /// pending before the read means the counter is past the wrap; one that
+    /// appeared between the reads happened next to the counter read (the
+    /// counter is then near 0 or near 2^16, and the half-range rule decides).
+    #[must_use]
+    pub fn now_between(&self, pending_before: bool, counter: u16, pending_after: bool) -> Ticks {
+        if pending_before {
+            Ticks((u32::from(self.high.wrapping_add(1)) << 16) | u32::from(counter))
+        } else {
+            self.extend(counter, pending_after)
+        }
+    }
 }
 
 /// Estimator settings; [`EstimatorSettings::build`] validates them.
@@ -262,6 +318,7 @@ impl EstimatorSettings {
             history: [0; 3],
             history_len: 0,
             glitches: 0,
+            lost: false,
         })
     }
 }
@@ -469,6 +526,8 @@ pub struct MtEstimator {
     history: [u32; 3],
     history_len: u8,
     glitches: u32,
+    /// Edges were lost before the next one (see [`MtEstimator::edges_lost`]).
+    lost: bool,
 }
 
 #[cfg(feature = "defmt")]
@@ -686,7 +745,8 @@ impl MtEstimator {
             if dt > self.cfg.stop_timeout_ticks {
                 self.restart();
                 verdict = EdgeVerdict::Restart;
-            } else {
+            } else if !self.lost {
+                // (A gap with lost edges in it is not a tooth period.)
                 self.last_gap = dt;
             }
         } else {
@@ -706,8 +766,40 @@ impl MtEstimator {
         self.has_last = true;
         self.edges_total = self.edges_total.wrapping_add(1);
         self.valid_run = self.valid_run.saturating_add(1);
+        if core::mem::take(&mut self.lost) && verdict == EdgeVerdict::Accepted {
+            self.resync();
+        }
         self.track_steadiness(t);
         verdict
+    }
+
+    /// Says that the capture hardware lost one or more edges before the next
+    /// one pushed (the F103's overcapture flag CC1OF: a capture came while
+    /// the previous one was unread). The interval that ends at the next edge
+    /// spans an unknown number of teeth, so it is not measured: the next
+    /// edge starts a new window (the speed held until then is kept, and
+    /// decays as usual), and the tooth-pitch table, whose tooth index is
+    /// now off by the lost count, is dropped and learnt again from whole
+    /// revolutions.
+    pub fn edges_lost(&mut self) {
+        self.lost = true;
+    }
+
+    /// Restarts the window and the pitch table at the newest edge after lost
+    /// edges, keeping the held speed.
+    fn resync(&mut self) {
+        self.ref_stamp = self.newest();
+        self.ref_edges = self.edges_total;
+        self.ref_valid = true;
+        self.valid_run = 1;
+        self.rev_min = u32::MAX;
+        self.rev_max = 0;
+        self.rev_count = 0;
+        self.rev_steady = false;
+        self.weights = [0; MAX_TEETH];
+        self.weight_sum = u32::try_from(self.z).unwrap_or(0).saturating_mul(ONE_Q16);
+        self.learned_mask = 0;
+        self.learned_upto = self.edges_total;
     }
 
     /// Keeps the spread of the rolling revolution time over groups of z

@@ -534,6 +534,13 @@ impl Supervisor {
         }
     }
 
+    /// Says that Hall edges were lost before the next one (the capture
+    /// timer's overcapture flag): the interval ending at the next edge is not
+    /// measured ([`kinematics::speed::MtEstimator::edges_lost`]).
+    pub fn hall_edges_lost(&mut self) {
+        self.estimator.edges_lost();
+    }
+
     /// Stops the drum (no alarm).
     pub fn stop(&mut self) {
         self.run = RunState::Stopped;

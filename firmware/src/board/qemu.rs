@@ -590,7 +590,7 @@ pub struct HallCapture;
 
 impl HallCapture {
     /// TIM2 never interrupts under QEMU.
-    pub fn on_interrupt(&mut self) -> Option<u32> {
+    pub fn on_interrupt(&mut self) -> Option<super::HallEdge> {
         None
     }
 
@@ -653,6 +653,18 @@ fn now_us() -> u32 {
 pub fn stop_outputs() {
     safe_state();
     STOP_SAFE_US.store(now_us(), Relaxed);
+}
+
+/// Whether the drivers' enable stand-in is on (the settings task erases
+/// flash only while it is off).
+pub fn drivers_enabled() -> bool {
+    DRIVER_ENABLE.load(Relaxed)
+}
+
+/// Whether the clock security system saw the HSE fail: QEMU runs on the
+/// HSI and has no CSS.
+pub fn clock_failed() -> bool {
+    false
 }
 
 /// Zeroes the PWM and step stand-ins and the enable (the model coasts the

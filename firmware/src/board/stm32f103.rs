@@ -341,6 +341,9 @@ impl DrumDrive {
     /// Sets the compare value (duty = `ccr / period()`), clamped to the period.
     pub fn set_compare(&mut self, ccr: u16) {
         let ccr = ccr.min(self.period());
+        // TIM1_CCR1 (RM0008 §14.4.14), preloaded (OC1PE): applies at the
+        // next update, within one 50 µs PWM period. (Stopping does not rely
+        // on it: `set_enabled(false)` drops PB12 at once.)
         self.tim.ccr1().write(|w| w.ccr().set(ccr));
     }
 
@@ -678,7 +681,7 @@ impl Watchdog {
 
     /// Reloads the watchdog counter.
     pub fn feed(&mut self) {
-        // SAFETY: 0xAAAA is the reload key.
+        // SAFETY: 0xAAAA is the reload key (RM0008 §19.4.1 IWDG_KR).
         self.iwdg.kr().write(|w| unsafe { w.bits(0xAAAA) });
     }
 }

@@ -686,9 +686,9 @@ impl Watchdog {
     }
 }
 
-/// Offset of the settings pages from the start of flash (0x0801E000, see
+/// Offset of the settings pages from the start of flash (0x0800E000, see
 /// memory-stm32f103.x).
-const SETTINGS_OFFSET: u32 = 0x1E000;
+const SETTINGS_OFFSET: u32 = 0xE000;
 /// The settings pages of the MCU's own flash as a NOR flash.
 pub struct SettingsFlash {
     flash: flash::Parts,
@@ -703,7 +703,7 @@ impl ReadNorFlash for SettingsFlash {
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
         check_flash_access(offset, bytes.len(), 1)?;
-        let writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
+        let writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz64K);
         let data = writer
             .read(SETTINGS_OFFSET + offset, bytes.len())
             .map_err(|_| FlashError::Device)?;
@@ -722,7 +722,7 @@ impl NorFlash for SettingsFlash {
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         check_flash_erase(from, to)?;
-        let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
+        let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz64K);
         writer
             .erase(SETTINGS_OFFSET + from, (to - from) as usize)
             .map_err(|_| FlashError::Device)
@@ -730,7 +730,7 @@ impl NorFlash for SettingsFlash {
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
         check_flash_access(offset, bytes.len(), 2)?;
-        let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz128K);
+        let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz64K);
         writer
             .write(SETTINGS_OFFSET + offset, bytes)
             .map_err(|_| FlashError::Device)

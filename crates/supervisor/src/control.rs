@@ -290,8 +290,11 @@ pub struct Supervisor {
     edges: u32,
     /// Ground distance since Start (∫ V1 dt), µm.
     distance_um: u64,
-    /// Drum encoder counts since Start.
-    drum_counts_since_start: u64,
+    /// Drum encoder counts since Start, each weighted by the belt slip k3
+    /// (× 1000) at the drum speed measured when it was counted: Σ Δcounts ·
+    /// k3(n) · 1000. The plant count follows from it
+    /// ([`Supervisor::plants_since_start`]).
+    belt_counts_k3_milli: u64,
     /// Last measured travel speed, km/h × 1000, and the period behind it, µs.
     last_travel_kmh_x1000: u32,
     last_period_us: u32,
@@ -405,8 +408,30 @@ fn fix_to_rpm(x: I16F16) -> RevPerMin {
     RevPerMin::from_fixed(U12F20::saturating_from_num(x))
 }
 
-fn milli(x: I16F16) -> u32 {
-    x.saturating_mul_int(1000).saturating_to_num::<u32>()
+/// `x × 1000`, rounded to nearest (halves up), negative values as 0:
+/// computed from the raw bits in `i64`, so every `I16F16` (up to
+/// 32 767.99 r/min) is reported exactly. Multiplying in `I16F16` itself
+/// saturated at 32.767 r/min (issue 16 item 4). Rounding (not flooring)
+/// gives back the decimal a speed was set from: 25.21 r/min is
+/// 1 652 163 / 65 536 = 25.210 005 in I16F16, and 25.209 995 when truncated.
+pub fn milli(x: I16F16) -> u32 {
+    // |bits| < 2^31, × 1000 < 2^41: no overflow; `>>` floors.
+    let v = i64::from(x.to_bits())
+        .saturating_mul(1000)
+        .saturating_add(1 << 15)
+        >> 16;
+    u32::try_from(v.max(0)).unwrap_or(u32::MAX)
+}
+
+/// A speed in r/min × 100 (the screen's unit) as the nearest `I16F16`.
+fn centi_to_fix(raw: u16) -> I16F16 {
+    // raw · 65 536 / 100, rounded: ≤ 65 535 · 65 536 < 2^32, fits i64.
+    let bits = i64::from(raw)
+        .saturating_mul(65_536)
+        .saturating_add(50)
+        .checked_div(100)
+        .unwrap_or(0);
+    I16F16::from_bits(i32::try_from(bits).unwrap_or(i32::MAX))
 }
 
 impl Supervisor {
@@ -448,7 +473,7 @@ impl Supervisor {
             reported: I16F16::ZERO,
             edges: 0,
             distance_um: 0,
-            drum_counts_since_start: 0,
+            belt_counts_k3_milli: 0,
             last_travel_kmh_x1000: 0,
             last_period_us: 0,
             reference: I16F16::ZERO,
@@ -538,7 +563,7 @@ impl Supervisor {
             self.controller.start();
             self.stall_us = 0;
             self.distance_um = 0;
-            self.drum_counts_since_start = 0;
+            self.belt_counts_k3_milli = 0;
         }
         Effect::None
     }
@@ -952,9 +977,7 @@ impl Supervisor {
 
         let mut too_fast = None;
         let target = match self.settings.mode {
-            Mode::Fixed => I16F16::saturating_from_num(self.settings.fixed_drum_speed.raw())
-                .checked_div_int(100)
-                .unwrap_or(I16F16::ZERO),
+            Mode::Fixed => centi_to_fix(self.settings.fixed_drum_speed.raw()),
             Mode::SpeedAdaptive => {
                 match travel.map(|t| self.plan.target(&t, &self.settings.calibration)) {
                     Some(Ok(target)) => {
@@ -1028,9 +1051,18 @@ impl Supervisor {
             self.reference_input = measured;
         }
 
-        self.drum_counts_since_start = self
-            .drum_counts_since_start
-            .saturating_add(u64::from(delta));
+        // k3 at the drum speed these counts were turned at (this period's
+        // measurement, exact over the whole range: `milli`), not at the
+        // target: the belt slips at the speed it turns, and after a Stop
+        // the counts still coasting in keep the k3 of their own speed.
+        let k3_x1000 = self
+            .settings
+            .calibration
+            .k3_at(RevPerMin::from_ratio(milli(measured), 1000).unwrap_or(RevPerMin::ZERO))
+            .to_milli();
+        self.belt_counts_k3_milli = self
+            .belt_counts_k3_milli
+            .saturating_add(u64::from(delta).saturating_mul(u64::from(k3_x1000)));
         self.drum_counts_total = self.drum_counts_total.saturating_add(u64::from(delta));
         self.snapshot.travel_speed_kmh_x1000 = travel_kmh_x1000;
         self.snapshot.target_drum_rpm_x1000 = if self.run == RunState::Running {
@@ -1052,23 +1084,18 @@ impl Supervisor {
         actuation
     }
 
-    /// Belt partitions passed since Start: drum turns · π·(D2+2H2) · k3 / Lclap.
+    /// Belt partitions passed since Start: Σ drum turns · k3(n) · π·(D2+2H2)
+    /// / Lclap, each turn with the belt slip k3 at the drum speed it was
+    /// turned at.
     fn plants_since_start(&self) -> u32 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
-        let k3_x1000 = u64::from(
-            self.settings
-                .calibration
-                .k3_at(
-                    RevPerMin::from_ratio(self.snapshot.target_drum_rpm_x1000, 1000)
-                        .unwrap_or(RevPerMin::ZERO),
-                )
-                .to_milli(),
-        );
-        self.drum_counts_since_start
-            .saturating_mul(PARTITIONS_PER_TURN_X1E6)
+        // Σ Δcounts·k3·1000 / counts per turn = turns · k3 · 1000.
+        self.belt_counts_k3_milli
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .map(|v| v.saturating_mul(k3_x1000) / 1_000_000_000)
+            .map(|turns_k3_x1000| {
+                turns_k3_x1000.saturating_mul(PARTITIONS_PER_TURN_X1E6) / 1_000_000_000
+            })
             .and_then(|v| u32::try_from(v).ok())
             .unwrap_or(u32::MAX)
     }
@@ -1181,4 +1208,68 @@ pub fn drum_controller_config() -> fuzzy_pid::Config {
         fuzzy.range.kp = PRODUCT_DELTA_KP_RANGE;
     }
     config
+}
+
+#[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_precision_loss
+)]
+mod tests {
+    use super::*;
+    use hmi_proto::screen::DrumSpeed;
+    use proptest::prelude::*;
+
+    /// Reference: `floor(x · 1000 + 0.5)` in f64 (exact: `bits / 65536 ·
+    /// 1000` has at most 41 significant bits), negative values as 0.
+    fn milli_f64(bits: i32) -> u32 {
+        let v = (f64::from(bits) / 65_536.0 * 1000.0 + 0.5).floor();
+        if v < 0.0 {
+            0
+        } else {
+            v as u32
+        }
+    }
+
+    #[test]
+    fn milli_above_32_767_r_min_is_exact() {
+        // Failed before the fix: I16F16 × 1000 saturated to 32 767.99…, so
+        // 40 r/min read 32 767 (issue 16 item 4).
+        assert_eq!(milli(I16F16::from_num(40)), 40_000);
+        assert_eq!(
+            milli(I16F16::from_num(44.7)),
+            milli_f64(I16F16::from_num(44.7).to_bits())
+        );
+        // The largest I16F16, 32 767 + 65 535/65 536 r/min, rounds up.
+        assert_eq!(milli(I16F16::MAX), 32_768_000);
+        assert_eq!(milli(I16F16::from_num(-1)), 0);
+    }
+
+    proptest! {
+        /// Every `I16F16` the supervisor can hold (the whole type, so any
+        /// drum speed up to any `n_max`) against the f64 reference.
+        #[test]
+        fn milli_matches_f64_over_the_whole_type(bits in any::<i32>()) {
+            prop_assert_eq!(milli(I16F16::from_bits(bits)), milli_f64(bits));
+        }
+
+        /// Fixed mode, every drum speed the screen accepts (0–44.70 r/min):
+        /// the target in the snapshot (log) and on the screen is the set
+        /// speed itself (r/min × 100 from the screen, × 10 for the log).
+        #[test]
+        fn every_fixed_drum_speed_is_reported_as_set(raw in DrumSpeed::MIN..=DrumSpeed::MAX) {
+            let settings = Settings {
+                mode: Mode::Fixed,
+                fixed_drum_speed: DrumSpeed::new(i32::from(raw)).unwrap(),
+                ..Settings::default()
+            };
+            let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+            sup.command(Command::Start);
+            sup.control_step(Ticks(0), 0);
+            prop_assert_eq!(sup.snapshot().target_drum_rpm_x1000, u32::from(raw) * 10);
+            prop_assert_eq!(sup.screen_status().target_drum_rpm_x100, raw);
+        }
+    }
 }

@@ -601,3 +601,76 @@ fn k2_then_k1_make_the_shown_travel_speed_true_on_a_machine_that_slips_twice_the
         "shown {shown} m/h, truth {truth:.1} (before {before})"
     );
 }
+
+#[test]
+fn a_drum_at_40_r_min_is_reported_as_40_and_counts_plants_with_k3_at_40() {
+    // Issue 16 item 4. Failed before the fix: the target read 32.767 r/min
+    // (32 767 in the log, 32.76 on the screen) and the plant count used k3
+    // interpolated at 32.767 r/min (0.98 + 7.767 · 0.12/15 = 1.042) instead
+    // of the hand-set 1.100 at 40 r/min: 5 % too few plants.
+    use hmi_proto::screen::{CalibrationCoefficient, CalibrationKind};
+    let settings = Settings {
+        mode: Mode::Fixed,
+        fixed_drum_speed: DrumSpeed::new(4000).unwrap(),
+        ..Settings::default()
+    };
+    let mut rig = Rig::new(Config::noiseless(), settings);
+    // k3 = 1.100 by hand at the Fixed-mode drum speed (40 r/min), page 4.
+    rig.sup
+        .command(Command::SelectCalibration(CalibrationKind::BeltK3));
+    rig.sup.command(Command::SetCalibrationCoefficient(
+        CalibrationCoefficient::new(1100).unwrap(),
+    ));
+    // The k3 table as an f64 reference: Table 13 (kinematics PAPER_K3) and
+    // the point set above, linear between points, constant beyond the ends.
+    let points = [
+        (5.0, 0.993),
+        (10.0, 0.982),
+        (15.0, 0.986),
+        (20.0, 0.994),
+        (25.0, 0.980),
+        (40.0, 1.100),
+    ];
+    let k3 = |n: f64| -> f64 {
+        if n <= points[0].0 {
+            return points[0].1;
+        }
+        for w in points.windows(2) {
+            let ((x0, y0), (x1, y1)) = (w[0], w[1]);
+            if n <= x1 {
+                return y0 + (y1 - y0) * (n - x0) / (x1 - x0);
+            }
+        }
+        points[points.len() - 1].1
+    };
+    rig.sup.command(Command::Start);
+    // Plants as the firmware's formula gives them on the simulator's true
+    // drum speed: Σ Δturns · k3(n) · π·0.070 m / 0.05 m.
+    let mut expected = 0.0;
+    let mut turns = rig.m.drum_turns();
+    for _ in 0..2_000 {
+        rig.period();
+        let now = rig.m.drum_turns();
+        expected += (now - turns) * k3(f64::from(rig.m.drum_speed_rpm()));
+        turns = now;
+    }
+    expected *= std::f64::consts::PI * 0.070 / 0.05;
+    let snap = rig.sup.snapshot();
+    assert_eq!(snap.target_drum_rpm_x1000, 40_000);
+    assert_eq!(rig.sup.screen_status().target_drum_rpm_x100, 4000);
+    // Actual: the smoothed measurement against the simulator's drum.
+    let truth = f64::from(rig.m.drum_speed_rpm());
+    let actual = f64::from(snap.actual_drum_rpm_x1000) / 1000.0;
+    assert!(
+        (actual - truth).abs() <= 0.005 * truth,
+        "{actual} vs {truth}"
+    );
+    assert!(actual > 39.5, "{actual}");
+    // 20 s at 40 r/min: 13.3 turns · 4.398 · 1.1 ≈ 64.5 plants; the count
+    // is floored, and the measured speed smooths over 0.5 s: within 1.
+    let plants = f64::from(snap.plants);
+    assert!(
+        (plants - expected).abs() <= 1.0,
+        "{plants} plants vs {expected:.2}"
+    );
+}

@@ -601,6 +601,12 @@ impl Hmi {
                 Some(Command::AcknowledgeAlarm)
             }
             Action::SaveSettings => Some(Command::SaveSettings),
+            Action::ToggleEncoderDirection => {
+                let mut s = self.settings;
+                s.drum_encoder_reversed = !s.drum_encoder_reversed;
+                let _ = self.set_settings(s);
+                Some(Command::SetDrumEncoderReversed(s.drum_encoder_reversed))
+            }
         };
         if let Some(c) = cmd {
             self.event(Event::Command(c));

@@ -589,6 +589,9 @@ pub enum Command {
     SetBeltThickness(BeltThickness),
     /// Profile B: new speed-change threshold Y.
     SetSpeedThreshold(SpeedThreshold),
+    /// The drum encoder counts backwards (`true`: A/B swapped on the
+    /// machine); page 6 `benc` toggles it. Persisted with *Save settings*.
+    SetDrumEncoderReversed(bool),
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -637,6 +640,17 @@ pub struct Settings {
     pub profile: MachineProfile,
     /// Profile B's parameters.
     pub belt: BeltSettings,
+    /// The drum encoder's direction is reversed (page 6 `tenc`).
+    pub drum_encoder_reversed: bool,
+}
+
+/// The label of the drum encoder direction (page 6 `tenc`).
+pub const fn encoder_direction_label(reversed: bool) -> &'static str {
+    if reversed {
+        "reversed (A/B)"
+    } else {
+        "normal"
+    }
 }
 
 /// Live values written to the screen; each goes to the components showing it
@@ -757,6 +771,8 @@ pub enum Action {
     AcknowledgeAlarm,
     /// [`Command::SaveSettings`].
     SaveSettings,
+    /// [`Command::SetDrumEncoderReversed`] with the other direction.
+    ToggleEncoderDirection,
 }
 
 /// The role of a component in the contract.
@@ -777,6 +793,8 @@ pub enum Role {
     ProfileLabel,
     /// The firmware version, written with `tver.txt=`.
     Version,
+    /// The drum encoder direction's label, written with `tenc.txt=`.
+    EncoderDirectionLabel,
     /// The alarm text, written with `talarm.txt=`.
     AlarmText,
     /// The page's message box for validation errors and notices.
@@ -1147,6 +1165,14 @@ pub const COMPONENTS: &[Component] = &[
         R::Action(A::NextProfile),
     ),
     c(P::Settings, 8, "tprofile", K::Text, R::ProfileLabel),
+    c(
+        P::Settings,
+        9,
+        "benc",
+        K::Button,
+        R::Action(A::ToggleEncoderDirection),
+    ),
+    c(P::Settings, 10, "tenc", K::Text, R::EncoderDirectionLabel),
     // 7 belt (profile B home)
     c(P::Belt, 1, "bstart", K::Button, R::Action(A::Start)),
     c(P::Belt, 2, "bstop", K::Button, R::Action(A::Stop)),
@@ -1343,6 +1369,11 @@ pub fn page_instructions(
                 ScreenText::new(settings.profile.label()).unwrap_or(version),
             ),
             Role::Version => Instruction::SetText(comp.obj(), version),
+            Role::EncoderDirectionLabel => Instruction::SetText(
+                comp.obj(),
+                ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
+                    .unwrap_or(version),
+            ),
             _ => continue,
         };
         // Capacity is checked by a test for every page.
@@ -1399,6 +1430,7 @@ mod tests {
                                 | Role::GearLabel
                                 | Role::CalibrationLabel
                                 | Role::ProfileLabel
+                                | Role::EncoderDirectionLabel
                                 | Role::Version
                         )
                     })
@@ -1422,6 +1454,10 @@ mod tests {
         }
         for p in MachineProfile::ALL {
             let l = p.label();
+            assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
+        }
+        for r in [false, true] {
+            let l = encoder_direction_label(r);
             assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
         }
         let m = PROFILE_RESTART_MESSAGE;

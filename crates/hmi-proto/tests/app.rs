@@ -382,6 +382,21 @@ fn calibration_and_settings_pages() {
         ]
     );
     assert_eq!(screen.brightness(), 40);
+
+    // The drum encoder direction toggles on page 6 and its label follows.
+    assert_eq!(screen.text("tenc"), Some("normal"));
+    screen.release("benc").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetDrumEncoderReversed(true))]
+    );
+    assert_eq!(screen.text("tenc"), Some("reversed (A/B)"));
+    screen.release("benc").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetDrumEncoderReversed(false))]
+    );
+    assert_eq!(screen.text("tenc"), Some("normal"));
 }
 
 #[test]

@@ -677,6 +677,12 @@ impl Supervisor {
                 self.settings.brightness = b;
                 Effect::SettingsChanged
             }
+            // Applies from the next control step (the counter's raw value
+            // is kept, only the sign of its delta changes).
+            Command::SetDrumEncoderReversed(reversed) => {
+                self.settings.drum_encoder_reversed = reversed;
+                Effect::SettingsChanged
+            }
             // The machine profile applies after Save and a restart
             // (crate::machine).
             Command::SelectProfile(p) => {
@@ -940,9 +946,16 @@ impl Supervisor {
     pub fn control_step(&mut self, now: Ticks, drum_encoder: u16) -> Actuation {
         self.snapshot.steps = self.snapshot.steps.wrapping_add(1);
         let delta = match self.last_encoder {
-            // Forward only: a backwards jitter reads as standstill.
+            // Forward only: a backwards jitter reads as standstill. With the
+            // encoder reversed (A/B swapped, `Settings::drum_encoder_reversed`)
+            // the delta is negated first, so that the drum turning forward
+            // counts forward.
             Some(prev) => {
-                let d = drum_encoder.wrapping_sub(prev);
+                let d = if self.settings.drum_encoder_reversed {
+                    prev.wrapping_sub(drum_encoder)
+                } else {
+                    drum_encoder.wrapping_sub(prev)
+                };
                 if d > u16::MAX / 2 {
                     0
                 } else {
@@ -1171,6 +1184,7 @@ impl Supervisor {
             calibration_kind: self.calibration_kind,
             profile: crate::machine::screen_profile(settings.profile),
             belt: crate::machine::belt_to_screen(&settings.belt),
+            drum_encoder_reversed: settings.drum_encoder_reversed,
         }
     }
 }

@@ -674,3 +674,55 @@ fn a_drum_at_40_r_min_is_reported_as_40_and_counts_plants_with_k3_at_40() {
         "{plants} plants vs {expected:.2}"
     );
 }
+
+#[test]
+fn a_drum_encoder_wired_backwards_runs_once_reversed_on_the_screen() {
+    // Issue 15 item 5. A/B swapped: TIM3 counts down while the drum turns
+    // forward (the simulator's counter, negated).
+    let settings = Settings {
+        mode: Mode::Fixed,
+        fixed_drum_speed: DrumSpeed::new(2000).unwrap(),
+        ..Settings::default()
+    };
+    let run = |reversed: bool| {
+        let mut rig = Rig::new(Config::noiseless(), settings.clone());
+        if reversed {
+            // Page 6 `benc`.
+            rig.sup.command(Command::SetDrumEncoderReversed(true));
+        }
+        rig.sup.command(Command::Start);
+        let mut stalled_at = None;
+        for step in 1..=400u32 {
+            let inputs = Inputs {
+                drum_duty: f32::from(rig.act.ccr) / f32::from(HW.pwm_arr + 1),
+                driver_enabled: rig.act.driver_enabled,
+                ..Inputs::default()
+            };
+            let sup = &mut rig.sup;
+            rig.m
+                .step(10_000, &inputs, &mut |t| sup.hall_edge(Ticks(t)));
+            let swapped = 0u16.wrapping_sub(rig.m.drum_encoder_count());
+            rig.act = rig.sup.control_step(Ticks(rig.m.capture_ticks()), swapped);
+            if stalled_at.is_none() && rig.sup.alarm() == Some(Alarm::DrumStall) {
+                stalled_at = Some(step * 10);
+            }
+        }
+        (stalled_at, rig.m.drum_speed_rpm(), rig.sup.snapshot())
+    };
+    // Before (the setting off, as every machine was before it existed): the
+    // drum turns, the supervisor reads standstill, stall alarm after the
+    // documented 200 ms (the first period past it: 210 ms).
+    let (stalled_at, _, _) = run(false);
+    assert_eq!(stalled_at, Some(210));
+    // Reversed on the screen: the drum runs and holds 20 r/min (±0.5 %,
+    // the simulator's true speed) and the screen shows it after 4 s (the
+    // shown speed is smoothed with τ = 0.5 s: e^-8 of the step is left).
+    let (stalled_at, drum, snap) = run(true);
+    assert_eq!(stalled_at, None);
+    assert!((f64::from(drum) - 20.0).abs() <= 0.1, "{drum} r/min");
+    assert!(
+        (f64::from(snap.actual_drum_rpm_x1000) - 20_000.0).abs() <= 100.0,
+        "{} shown",
+        snap.actual_drum_rpm_x1000
+    );
+}

@@ -6,7 +6,7 @@ use kinematics::consts::{self, Gear};
 use crate::machine::Machine;
 
 /// Longest transport delay the delay line holds, milliseconds.
-pub const MAX_TRANSPORT_DELAY_MS: u8 = 15;
+pub const MAX_TRANSPORT_DELAY_MS: u8 = 100;
 
 /// Which machine the plants come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

@@ -7,8 +7,13 @@ use crate::metrics::{FieldMetrics, MetricsError, SpacingAccumulator};
 use crate::rng::{hash_signed_unit, splitmix64, Rng};
 use crate::tables;
 
-/// Slots of the transport-delay line (one per millisecond).
-const RING: usize = 16;
+/// Slots of the transport-delay line (one per millisecond): up to
+/// [`crate::MAX_TRANSPORT_DELAY_MS`] = 100 ms.
+const RING: usize = 128;
+/// Duty in a delay-line slot: `u16` fractions of 1 (1/65 535, far finer
+/// than the PWM's 1/3600), so that 128 slots cost 256 bytes of the QEMU
+/// board's RAM rather than 512.
+const DUTY_SCALE: f32 = 65_535.0;
 /// The model's internal grid: sub-steps never cross a millisecond boundary.
 const GRID_US: u32 = 1000;
 const TWO_PI: f32 = core::f32::consts::TAU;
@@ -116,7 +121,7 @@ pub struct Machine {
     faults: u8,
     // Drum motor.
     delay_head: u8,
-    delay_line: [f32; RING],
+    delay_line: [u16; RING],
     motor_alpha_1ms: f32,
     drum_rpm: f32,
     speed_noise: LpNoise,
@@ -187,7 +192,7 @@ impl Machine {
             now_us: 0,
             faults: 0,
             delay_head: 0,
-            delay_line: [0.0; RING],
+            delay_line: [0; RING],
             motor_alpha_1ms: lag_alpha(1.0e-3, cfg.motor_tau_s),
             drum_rpm: 0.0,
             speed_noise: LpNoise::default(),
@@ -272,7 +277,8 @@ impl Machine {
         };
         self.delay_head = (self.delay_head + 1) % RING as u8;
         if let Some(slot) = self.delay_line.get_mut(usize::from(self.delay_head)) {
-            *slot = duty;
+            // `duty` is sanitised to 0 … 1: the product fits u16.
+            *slot = libm::roundf(duty * DUTY_SCALE) as u16;
         }
         let c = &self.cfg;
         if c.speed_noise > 0.0 {
@@ -309,7 +315,9 @@ impl Machine {
             };
         }
         let idx = (usize::from(self.delay_head) + RING - d) % RING;
-        self.delay_line.get(idx).copied().unwrap_or(0.0)
+        self.delay_line
+            .get(idx)
+            .map_or(0.0, |&d| f32::from(d) / DUTY_SCALE)
     }
 
     /// Speed the driver steers towards for duty `d` (dead band, droop, ripple, saturation).

@@ -601,6 +601,8 @@ impl Hmi {
                 Some(Command::AcknowledgeAlarm)
             }
             Action::SaveSettings => Some(Command::SaveSettings),
+            Action::IdentifyDrive => Some(Command::IdentifyDrive),
+            Action::AcceptDriveModel => Some(Command::AcceptDriveModel),
             Action::ToggleEncoderDirection => {
                 let mut s = self.settings;
                 s.drum_encoder_reversed = !s.drum_encoder_reversed;

@@ -66,11 +66,13 @@ pub enum Page {
     Belt = 7,
     /// 8 `beltpar`: profile B parameters (X, B, β, N, r, h, Y).
     BeltParameters = 8,
+    /// 9 `drive`: drum drive identification (profile A).
+    Drive = 9,
 }
 
 impl Page {
     /// All pages in id order.
-    pub const ALL: [Page; 9] = [
+    pub const ALL: [Page; 10] = [
         Self::Boot,
         Self::Mode,
         Self::Fixed,
@@ -80,6 +82,7 @@ impl Page {
         Self::Settings,
         Self::Belt,
         Self::BeltParameters,
+        Self::Drive,
     ];
 
     /// The page id.
@@ -104,6 +107,7 @@ impl Page {
             Self::Settings => "settings",
             Self::Belt => "belt",
             Self::BeltParameters => "beltpar",
+            Self::Drive => "drive",
         }
     }
 
@@ -592,6 +596,10 @@ pub enum Command {
     /// The drum encoder counts backwards (`true`: A/B swapped on the
     /// machine); page 6 `benc` toggles it. Persisted with *Save settings*.
     SetDrumEncoderReversed(bool),
+    /// Page 9: start the drive identification (drum stopped, belt empty).
+    IdentifyDrive,
+    /// Page 9: use and save the drive model just identified.
+    AcceptDriveModel,
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -683,6 +691,14 @@ pub struct Status {
     pub roller_turns: u32,
     /// Profile B: effective roller radius r' = r + h·j, 0.1 mm (saturating).
     pub roller_radius_dmm: u16,
+    /// Drum drive `n_max` (identified, or in force), r/min × 100.
+    pub drive_n_max_x100: u16,
+    /// Drum drive time constant τ, 0.1 ms.
+    pub drive_tau_x10_ms: u16,
+    /// Drum drive dead time, 0.1 ms.
+    pub drive_dead_time_x10_ms: u16,
+    /// Drive identification: 0 idle, 1 running, 2 done (press Save), 3 failed.
+    pub drive_identification: u8,
 }
 
 /// Live values shown by display-only components.
@@ -713,6 +729,14 @@ pub enum StatusField {
     RollerTurns,
     /// [`Status::roller_radius_dmm`].
     RollerRadius,
+    /// [`Status::drive_n_max_x100`].
+    DriveNMax,
+    /// [`Status::drive_tau_x10_ms`].
+    DriveTau,
+    /// [`Status::drive_dead_time_x10_ms`].
+    DriveDeadTime,
+    /// [`Status::drive_identification`].
+    DriveIdentification,
 }
 
 impl StatusField {
@@ -732,6 +756,10 @@ impl StatusField {
             Self::FeedMotorSpeed => i32::from(s.feed_motor_rpm_x100),
             Self::RollerTurns => sat(s.roller_turns),
             Self::RollerRadius => i32::from(s.roller_radius_dmm),
+            Self::DriveNMax => i32::from(s.drive_n_max_x100),
+            Self::DriveTau => i32::from(s.drive_tau_x10_ms),
+            Self::DriveDeadTime => i32::from(s.drive_dead_time_x10_ms),
+            Self::DriveIdentification => i32::from(s.drive_identification),
         }
     }
 }
@@ -773,6 +801,10 @@ pub enum Action {
     SaveSettings,
     /// [`Command::SetDrumEncoderReversed`] with the other direction.
     ToggleEncoderDirection,
+    /// [`Command::IdentifyDrive`].
+    IdentifyDrive,
+    /// [`Command::AcceptDriveModel`].
+    AcceptDriveModel,
 }
 
 /// The role of a component in the contract.
@@ -1173,6 +1205,13 @@ pub const COMPONENTS: &[Component] = &[
         R::Action(A::ToggleEncoderDirection),
     ),
     c(P::Settings, 10, "tenc", K::Text, R::EncoderDirectionLabel),
+    c(
+        P::Settings,
+        11,
+        "bdrive",
+        K::Button,
+        R::Action(A::ShowPage(P::Drive)),
+    ),
     // 7 belt (profile B home)
     c(P::Belt, 1, "bstart", K::Button, R::Action(A::Start)),
     c(P::Belt, 2, "bstop", K::Button, R::Action(A::Stop)),
@@ -1340,6 +1379,58 @@ pub const COMPONENTS: &[Component] = &[
         R::Action(A::ShowPage(P::Belt)),
     ),
     c(P::BeltParameters, 16, "tmsg", K::Text, R::Message),
+    // 9 drive (profile A: drum drive identification)
+    c(
+        P::Drive,
+        1,
+        "bident",
+        K::Button,
+        R::Action(A::IdentifyDrive),
+    ),
+    c(
+        P::Drive,
+        2,
+        "bidsave",
+        K::Button,
+        R::Action(A::AcceptDriveModel),
+    ),
+    c(
+        P::Drive,
+        3,
+        "bback",
+        K::Button,
+        R::Action(A::ShowPage(P::Settings)),
+    ),
+    c(
+        P::Drive,
+        4,
+        "xnmax",
+        K::Xfloat(2),
+        R::Status(StatusField::DriveNMax),
+    ),
+    c(
+        P::Drive,
+        5,
+        "xtau",
+        K::Xfloat(1),
+        R::Status(StatusField::DriveTau),
+    ),
+    c(
+        P::Drive,
+        6,
+        "xdead",
+        K::Xfloat(1),
+        R::Status(StatusField::DriveDeadTime),
+    ),
+    c(
+        P::Drive,
+        7,
+        "nidstate",
+        K::Number,
+        R::Status(StatusField::DriveIdentification),
+    ),
+    c(P::Drive, 8, "bstop", K::Button, R::Action(A::Stop)),
+    c(P::Drive, 9, "tmsg", K::Text, R::Message),
 ];
 
 /// Most instructions one page refresh needs ([`page_instructions`]).

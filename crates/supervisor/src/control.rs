@@ -26,7 +26,7 @@
 //! restarting. After an acknowledged alarm the machine is stopped: the
 //! operator presses Start again.
 
-use fixed::types::{U12F20, U16F16};
+use fixed::types::U16F16;
 use fuzzy_pid::{Controller, I16F16};
 use hmi_proto::screen::{self, CalibrationKind, Command, Mode};
 use kinematics::{
@@ -38,6 +38,7 @@ use kinematics::{
     units::{Metres, RevPerMin, Ticks},
 };
 
+use crate::drive::{exp_neg_q30, DriveModel, Identifier, IdentifyError, IdentifyState};
 use crate::settings::{self, Settings};
 
 /// Fixed facts of the board the supervisor runs on.
@@ -101,6 +102,13 @@ pub enum Alarm {
         /// The highest travel speed this spacing allows, km/h × 100.
         max_kmh_x100: u16,
     },
+    /// The drum speed oscillated, or missed the drive model's response by
+    /// more than 5 % for more than 1 s: the controller switched to its
+    /// conservative mode (see [`Supervisor`]'s instability supervisor). A
+    /// warning: the drum keeps running. Run the drive identification again.
+    DrumUnstable,
+    /// The drive identification ended without a model (a warning).
+    IdentifyFailed(IdentifyError),
 }
 
 impl Alarm {
@@ -114,6 +122,8 @@ impl Alarm {
         match self {
             Self::DrumStall => w.write_str("Drum stalled or encoder lost"),
             Self::HallLost => w.write_str("Hall speed signal lost"),
+            Self::DrumUnstable => w.write_str(DRUM_UNSTABLE_TEXT),
+            Self::IdentifyFailed(e) => w.write_str(e.text()),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
                 // `core::fmt`'s number formatting (~2 KB of flash), and
@@ -146,6 +156,12 @@ impl Alarm {
     }
 }
 
+/// The message shown when the drive identification starts.
+pub const IDENTIFY_MESSAGE: &str = "Identifying drive: keep belt empty";
+
+/// The warning text of [`Alarm::DrumUnstable`].
+pub const DRUM_UNSTABLE_TEXT: &str = "Drum unstable: safe mode, identify";
+
 /// Whether the drum is running.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -154,6 +170,8 @@ pub enum RunState {
     Stopped,
     /// Drum under control in the current mode.
     Running,
+    /// The drive identification steps the drum (page 9, belt empty).
+    Identifying,
 }
 
 /// What the board must apply after a control step.
@@ -302,8 +320,19 @@ pub struct Supervisor {
     /// target through a model of the drum's response (see
     /// [`REFERENCE_ALPHA`]). The PID corrects the measurement towards it.
     reference: I16F16,
-    /// The target of the previous period (the model's input, one period late).
-    reference_input: I16F16,
+    /// The targets of the last periods, newest at `ref_head`: the reference
+    /// model's input, delayed by the drive's dead time.
+    ref_history: [I16F16; REF_HISTORY],
+    ref_head: usize,
+    /// What follows from the drive model in force.
+    law: DriveLaw,
+    /// Whether the controller is scheduled from the drive model
+    /// ([`Supervisor::new`]) or was given ([`Supervisor::with_controller`]).
+    scheduled: bool,
+    /// The conservative mode after an instability (until a new drive model).
+    fallback: bool,
+    monitor: Monitor,
+    identifier: Identifier,
     predictor: Predictor,
     snapshot: Snapshot,
 }
@@ -380,8 +409,11 @@ impl Predictor {
     }
 }
 
-/// Smoothing factor of the reference model of the drum, `1 − e^(−Ts/τ)` with
-/// `Ts` = 10 ms and the motor's `τ` = 25 ms.
+/// Smoothing factor of the reference model of the drum on the default drive,
+/// `1 − e^(−Ts/τ)` with `Ts` = 10 ms and the motor's `τ` = 25 ms. With a
+/// drive model ([`DriveModel`], identified on page 9) the factor is computed
+/// from its τ and the model's input is delayed by its dead time
+/// ([`DriveLaw`]); on the default model that is this value and two periods.
 ///
 /// The model predicts what the *measurement* (encoder counts over the period
 /// that just ended) should read if the feed-forward alone drove the drum:
@@ -398,14 +430,204 @@ impl Predictor {
 /// overshoot. Comparing it with the modelled response leaves the PID only the
 /// part of the error the feed-forward cannot explain (load, slip, model
 /// mismatch): a two-degree-of-freedom structure.
-const REFERENCE_ALPHA: I16F16 = I16F16::lit("0.3297");
+pub const REFERENCE_ALPHA: I16F16 = I16F16::lit("0.3297");
+
+/// Targets the reference model remembers: a dead time up to 200 ms
+/// ([`DriveModel::DEAD_TIME_MAX`]) is 1 + 21 periods of 10 ms.
+const REF_HISTORY: usize = 24;
+
+/// What the controller takes from the drive model: the feed-forward gain
+/// (`n_max`), the reference model's smoothing and delay.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct DriveLaw {
+    /// Drum speed at 100 % duty, r/min × 100.
+    n_max_x100: u16,
+    /// `n_max` in r/min.
+    n_max: I16F16,
+    /// `1 − e^(−T/τ)`.
+    ref_alpha: I16F16,
+    /// Periods from a target to the reference model's lag input:
+    /// `1 + round((L + T/2)/T)` (the command acts after the dead time `L`
+    /// and is seen in the mean of the period it falls in, half a period
+    /// later on average). 2 on the default drive, as before the model.
+    ref_delay: usize,
+}
+
+impl DriveLaw {
+    fn of(model: &DriveModel, period_us: u32) -> Self {
+        let t_x10 = i64::from(period_us / 100).max(1);
+        let tau_x10 = i64::from(model.tau_x10_ms()).max(1);
+        let dead_x10 = i64::from(model.dead_time_x10_ms());
+        // T/τ in Q30 (T ≤ 6553.5 ms, τ ≥ 1 ms: ≤ 2^16 · 2^30).
+        let x = (t_x10 << 30).checked_div(tau_x10).unwrap_or(0);
+        let alpha_q30 = (1i64 << 30).saturating_sub(exp_neg_q30(x));
+        let ref_alpha = I16F16::from_bits(i32::try_from(alpha_q30 >> 14).unwrap_or(i32::MAX));
+        let periods = dead_x10
+            .saturating_add(t_x10 / 2)
+            .saturating_add(t_x10 / 2)
+            .checked_div(t_x10)
+            .unwrap_or(0);
+        let ref_delay = usize::try_from(periods.saturating_add(1))
+            .unwrap_or(REF_HISTORY)
+            .clamp(2, REF_HISTORY);
+        Self {
+            n_max_x100: model.n_max_x100(),
+            n_max: centi_to_fix(model.n_max_x100()),
+            ref_alpha,
+            ref_delay,
+        }
+    }
+}
+
+/// The controller scheduled from the drive model: [`drum_controller_config`]
+/// with every gain (base gains, fuzzy ranges, floors) scaled by
+/// `s = min(1, (τ/θ) / (τ₀/θ₀))`, output limited to the model's `n_max`.
+///
+/// `θ = L + T` is the loop's effective dead time (the drive's dead time
+/// plus half a period of PWM hold and half a period of measurement mean),
+/// `τ₀/θ₀ = 25/15` the drive the fuzzy PID was tuned on. The proportional
+/// gain SIMC gives a first-order-plus-dead-time plant, `Kc = τ/(K·2θ)`
+/// (τc = θ), scales with `τ/θ`; so does the integral gain at a fixed
+/// `τI = τ` and the ultimate gain when θ ≫ τ. Keeping the product's
+/// proven gains where the drive is as fast as or slower than the design
+/// (`s = 1`) and shrinking all of them in the SIMC ratio where the dead time
+/// grows or τ shrinks keeps the fuzzy tuner's shape and the nominal
+/// behaviour (bench §1) unchanged. docs/fuzzy-pid.md has the table.
+pub fn scheduled_config(model: &DriveModel, period_us: u32) -> fuzzy_pid::Config {
+    let mut config = drum_controller_config();
+    let s = schedule_scale(model, period_us);
+    let scale = |g: fuzzy_pid::Gains| fuzzy_pid::Gains {
+        kp: g.kp.saturating_mul(s),
+        ki: g.ki.saturating_mul(s),
+        kd: g.kd.saturating_mul(s),
+    };
+    config.base = scale(config.base);
+    config.min_gains = scale(config.min_gains);
+    if let fuzzy_pid::Schedule::Fuzzy(fuzzy) = &mut config.schedule {
+        fuzzy.range = scale(fuzzy.range);
+    }
+    config.output_max = centi_to_fix(model.n_max_x100());
+    config
+}
+
+/// The scale `s` of [`scheduled_config`], in (0, 1].
+pub fn schedule_scale(model: &DriveModel, period_us: u32) -> I16F16 {
+    // In 0.1 ms: τ₀ = 250, θ₀ = 50 + 100 (5 ms dead time + 10 ms period).
+    let t_x10 = i64::from(period_us / 100);
+    let theta = i64::from(model.dead_time_x10_ms())
+        .saturating_add(t_x10)
+        .max(1);
+    let theta0 = 50i64.saturating_add(t_x10);
+    let s = i64::from(model.tau_x10_ms())
+        .saturating_mul(theta0)
+        .saturating_mul(1 << 16)
+        .checked_div(theta.saturating_mul(250))
+        .unwrap_or(0)
+        .clamp(1, 1 << 16);
+    I16F16::from_bits(i32::try_from(s).unwrap_or(1 << 16))
+}
+
+/// The conservative mode after an instability: no proportional or
+/// derivative action, integral only with `Ki` = [`FALLBACK_KI`] per period,
+/// on top of the feed-forward and the reference model.
+///
+/// An integrator with gain `Ki/T` behind a delay θ has its crossover at
+/// `Ki/T` rad/s and a phase margin of `90° − Ki·θ/T`: with `Ki` = 0.02 and
+/// up to 200 ms of effective dead time (the longest a drive model holds)
+/// that is ≥ 67°, and ≥ 44° with a drive twice as strong as its model. The
+/// price: load changes are corrected in about `T/Ki` = 0.5 s.
+pub fn fallback_config(model: &DriveModel) -> fuzzy_pid::Config {
+    let mut config = fuzzy_pid::Config::conventional(fuzzy_pid::Gains {
+        kp: I16F16::ZERO,
+        ki: FALLBACK_KI,
+        kd: I16F16::ZERO,
+    });
+    config.output_max = centi_to_fix(model.n_max_x100());
+    config
+}
+
+/// Integral gain per period of the conservative mode ([`fallback_config`]).
+pub const FALLBACK_KI: I16F16 = I16F16::lit("0.02");
+
+/// Instability supervisor: the tracking error (measurement against the
+/// reference model) smoothed over 0.25 s beyond 5 % of the target for more
+/// than 1 s, or the unsmoothed error swinging by more than 25 % of the
+/// target within each of two consecutive 0.5 s windows.
+#[derive(Clone, Copy, Debug, Default)]
+struct Monitor {
+    /// Smoothed tracking error, r/min.
+    error: I16F16,
+    /// Time the smoothed error has been beyond the band, µs.
+    beyond_us: u32,
+    /// Extremes of the error in the current window, and its length.
+    low: I16F16,
+    high: I16F16,
+    periods: u8,
+    /// Consecutive windows with a swing beyond the limit.
+    swinging: u8,
+}
+
+/// Smoothing of the monitored tracking error: `1 − e^(−10 ms / 0.25 s)`. The
+/// seedlings' load (up to ±5 % at 1.5–3 Hz) is damped to about a third, so
+/// it does not count as a tracking error.
+const MONITOR_ALPHA: I16F16 = I16F16::lit("0.0392");
+/// Band of the smoothed tracking error: 5 % of the target.
+const MONITOR_BAND: I16F16 = I16F16::lit("0.05");
+/// Time beyond the band that is an instability, µs.
+const MONITOR_TIME_US: u32 = 1_000_000;
+/// Swing (max − min) of the error in a window that counts as an
+/// oscillation: 25 % of the target. The seedlings' load swings the speed by
+/// up to 10 %; the limit cycle of issue 16 (a 20 ms drive on the 5 ms
+/// tuning) by 80 %.
+const MONITOR_SWING: I16F16 = I16F16::lit("0.25");
+/// Window of the swing, periods (0.5 s at 10 ms), and how many windows in a
+/// row make an oscillation (1 s).
+const MONITOR_WINDOW: u8 = 50;
+const MONITOR_WINDOWS: u8 = 2;
+
+impl Monitor {
+    /// One running period; `true` when the drum is unstable.
+    fn step(
+        &mut self,
+        expected: I16F16,
+        measured: I16F16,
+        target: I16F16,
+        elapsed_us: u32,
+    ) -> bool {
+        if target < STALL_MIN_COMMAND {
+            *self = Self::default();
+            return false;
+        }
+        let dev = expected.saturating_sub(measured);
+        self.error = self
+            .error
+            .saturating_add(dev.saturating_sub(self.error).saturating_mul(MONITOR_ALPHA));
+        if self.error.saturating_abs() > target.saturating_mul(MONITOR_BAND) {
+            self.beyond_us = self.beyond_us.saturating_add(elapsed_us);
+        } else {
+            self.beyond_us = 0;
+        }
+        if self.periods == 0 {
+            self.low = dev;
+            self.high = dev;
+        }
+        self.low = self.low.min(dev);
+        self.high = self.high.max(dev);
+        self.periods = self.periods.saturating_add(1);
+        if self.periods >= MONITOR_WINDOW {
+            if self.high.saturating_sub(self.low) > target.saturating_mul(MONITOR_SWING) {
+                self.swinging = self.swinging.saturating_add(1);
+            } else {
+                self.swinging = 0;
+            }
+            self.periods = 0;
+        }
+        self.beyond_us > MONITOR_TIME_US || self.swinging >= MONITOR_WINDOWS
+    }
+}
 
 fn rpm_to_fix(n: RevPerMin) -> I16F16 {
     I16F16::saturating_from_num(n.to_fixed())
-}
-
-fn fix_to_rpm(x: I16F16) -> RevPerMin {
-    RevPerMin::from_fixed(U12F20::saturating_from_num(x))
 }
 
 /// `x × 1000`, rounded to nearest (halves up), negative values as 0:
@@ -438,7 +660,8 @@ impl Supervisor {
     /// Builds the supervisor from validated settings, stopped, with the
     /// drum controller tuned for this machine ([`drum_controller_config`]).
     pub fn new(hw: Hardware, settings: Settings) -> Result<Self, Error> {
-        Self::with_controller(hw, settings, &drum_controller_config())
+        let config = scheduled_config(&settings.drive, hw.control_period_us);
+        Self::build(hw, settings, &config, true)
     }
 
     /// As [`Supervisor::new`] with another drum controller (for comparisons:
@@ -448,6 +671,15 @@ impl Supervisor {
         settings: Settings,
         controller: &fuzzy_pid::Config,
     ) -> Result<Self, Error> {
+        Self::build(hw, settings, controller, false)
+    }
+
+    fn build(
+        hw: Hardware,
+        settings: Settings,
+        controller: &fuzzy_pid::Config,
+        scheduled: bool,
+    ) -> Result<Self, Error> {
         if hw.encoder_counts_per_drum_rev == 0 || hw.control_period_us == 0 {
             return Err(Error::Hardware);
         }
@@ -456,6 +688,7 @@ impl Supervisor {
             .map_err(|_| Error::Estimator)?;
         let plan = Self::plan_for(&settings, hw)?;
         let controller = controller.build().map_err(|_| Error::Controller)?;
+        let law = DriveLaw::of(&settings.drive, hw.control_period_us);
         Ok(Self {
             hw,
             settings,
@@ -477,7 +710,13 @@ impl Supervisor {
             last_travel_kmh_x1000: 0,
             last_period_us: 0,
             reference: I16F16::ZERO,
-            reference_input: I16F16::ZERO,
+            ref_history: [I16F16::ZERO; REF_HISTORY],
+            ref_head: 0,
+            law,
+            scheduled,
+            fallback: false,
+            monitor: Monitor::default(),
+            identifier: Identifier::new(hw.control_period_us),
             predictor: Predictor::default(),
             snapshot: Snapshot::default(),
         })
@@ -549,6 +788,7 @@ impl Supervisor {
     pub fn stop(&mut self) {
         self.run = RunState::Stopped;
         self.controller.stop();
+        self.identifier.abort();
         self.stall_us = 0;
     }
 
@@ -677,6 +917,36 @@ impl Supervisor {
                 self.settings.brightness = b;
                 Effect::SettingsChanged
             }
+            Command::IdentifyDrive => {
+                if self.run != RunState::Stopped {
+                    return Effect::Message("Stop the drum first");
+                }
+                if self.alarm.is_some_and(|a| a.is_latched()) {
+                    return Effect::Message("Acknowledge the alarm first");
+                }
+                if matches!(self.alarm, Some(Alarm::IdentifyFailed(_))) {
+                    self.alarm = None;
+                }
+                self.identifier.start();
+                self.run = RunState::Identifying;
+                self.stall_us = 0;
+                self.belt_counts_k3_milli = 0;
+                Effect::Message(IDENTIFY_MESSAGE)
+            }
+            Command::AcceptDriveModel => match self.identifier.state() {
+                IdentifyState::Done(model) => match self.use_drive(model) {
+                    Ok(()) => {
+                        self.identifier.clear();
+                        if self.alarm == Some(Alarm::DrumUnstable) {
+                            self.alarm = None;
+                        }
+                        // Persisted at once (the drum is stopped).
+                        Effect::Save
+                    }
+                    Err(_) => Effect::Message("Drive model rejected"),
+                },
+                _ => Effect::Message("Identify the drive first"),
+            },
             // Applies from the next control step (the counter's raw value
             // is kept, only the sign of its delta changes).
             Command::SetDrumEncoderReversed(reversed) => {
@@ -714,8 +984,13 @@ impl Supervisor {
     /// run state; rejected settings change nothing.
     pub fn apply_settings(&mut self, settings: Settings) -> Result<(), Error> {
         let plan = Self::plan_for(&settings, self.hw)?;
+        let drive = settings.drive;
+        let old = self.settings.drive;
         self.plan = plan;
         self.settings = settings;
+        if drive != old {
+            self.use_drive(drive)?;
+        }
         Ok(())
     }
 
@@ -990,7 +1265,9 @@ impl Supervisor {
 
         let mut too_fast = None;
         let target = match self.settings.mode {
-            Mode::Fixed => centi_to_fix(self.settings.fixed_drum_speed.raw()),
+            // Capped at the drive's n_max (a drive slower than the screen's
+            // 44.70 r/min range cannot do more).
+            Mode::Fixed => centi_to_fix(self.settings.fixed_drum_speed.raw()).min(self.law.n_max),
             Mode::SpeedAdaptive => {
                 match travel.map(|t| self.plan.target(&t, &self.settings.calibration)) {
                     Some(Ok(target)) => {
@@ -999,26 +1276,38 @@ impl Supervisor {
                                 max_kmh_x100: self.max_travel_kmh_x100(),
                             });
                         }
-                        let n = rpm_to_fix(target.command().drum_speed);
-                        n.saturating_mul_int(i32::from(self.settings.motor_coefficient.raw()))
+                        let n = rpm_to_fix(target.command().drum_speed)
+                            .saturating_mul_int(i32::from(self.settings.motor_coefficient.raw()))
                             .checked_div_int(100)
-                            .unwrap_or(I16F16::ZERO)
-                            .min(rpm_to_fix(kinematics::consts::N_MAX))
+                            .unwrap_or(I16F16::ZERO);
+                        // The plan saturates at the paper's 44.7 r/min; a
+                        // drive identified slower saturates at its own.
+                        let cap = rpm_to_fix(kinematics::consts::N_MAX).min(self.law.n_max);
+                        if n > cap && too_fast.is_none() {
+                            too_fast = Some(Alarm::TooFast {
+                                max_kmh_x100: self.max_travel_kmh_x100(),
+                            });
+                        }
+                        n.min(cap)
                     }
                     _ => I16F16::ZERO,
                 }
             }
         };
 
-        // The too-fast warning follows the speed; latched alarms stay.
+        // The too-fast warning follows the speed; latched alarms and the
+        // instability warning stay.
         match (self.alarm, too_fast) {
-            (Some(a), _) if a.is_latched() => {}
+            (Some(a), _) if a.is_latched() || a == Alarm::DrumUnstable => {}
             (_, Some(w)) if self.run == RunState::Running => self.alarm = Some(w),
             (Some(Alarm::TooFast { .. }), _) => self.alarm = None,
             _ => {}
         }
 
         let mut actuation = Actuation::OFF;
+        if self.run == RunState::Identifying {
+            actuation = self.identify_step(measured, delta, elapsed_us);
+        }
         if self.run == RunState::Running {
             // Fault: drum commanded but not turning.
             if target >= STALL_MIN_COMMAND && delta == 0 {
@@ -1041,27 +1330,43 @@ impl Supervisor {
                 self.last_travel_kmh_x1000 = 0;
             } else {
                 // What the measurement should read from the feed-forward
-                // alone; then advance the model with last period's command.
+                // alone; then advance the model with the target of
+                // `ref_delay − 1` periods ago (the drive's dead time).
                 let expected = self.reference;
+                let back = self.law.ref_delay.saturating_sub(2);
+                let delayed = self
+                    .ref_history
+                    .get(
+                        self.ref_head
+                            .wrapping_add(REF_HISTORY)
+                            .wrapping_sub(back)
+                            .checked_rem(REF_HISTORY)
+                            .unwrap_or(0),
+                    )
+                    .copied()
+                    .unwrap_or(target);
                 self.reference = self.reference.saturating_add(
-                    self.reference_input
+                    delayed
                         .saturating_sub(self.reference)
-                        .saturating_mul(REFERENCE_ALPHA),
+                        .saturating_mul(self.law.ref_alpha),
                 );
-                self.reference_input = target;
+                self.push_reference_input(target);
+                if !self.fallback && self.monitor.step(expected, measured, target, elapsed_us) {
+                    self.fall_back();
+                }
                 let out = self.controller.step(expected, measured, target);
-                let ccr = self.plan.ccr(fix_to_rpm(out)).unwrap_or(0);
                 actuation = Actuation {
-                    ccr,
+                    ccr: self.ccr_of(out),
                     driver_enabled: true,
                 };
             }
         }
-        if self.run == RunState::Stopped {
+        if self.run != RunState::Running {
             self.last_travel_kmh_x1000 = travel_kmh_x1000;
             // Restart from the drum's actual speed (it may still coast).
             self.reference = measured;
-            self.reference_input = measured;
+            self.ref_history = [measured; REF_HISTORY];
+            self.monitor = Monitor::default();
         }
 
         // k3 at the drum speed these counts were turned at (this period's
@@ -1095,6 +1400,108 @@ impl Supervisor {
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
         actuation
+    }
+
+    fn push_reference_input(&mut self, target: I16F16) {
+        self.ref_head = self
+            .ref_head
+            .wrapping_add(1)
+            .checked_rem(REF_HISTORY)
+            .unwrap_or(0);
+        if let Some(slot) = self.ref_history.get_mut(self.ref_head) {
+            *slot = target;
+        }
+    }
+
+    /// Eq. 10 with the drive model's gain: the compare value for `out`
+    /// r/min, `out / n_max · (ARR + 1)`, rounded, within 0 … ARR + 1.
+    fn ccr_of(&self, out: I16F16) -> u16 {
+        let arr1 = i64::from(self.hw.pwm_arr).saturating_add(1);
+        let ccr = i64::from(out.to_bits())
+            .max(0)
+            .saturating_mul(arr1)
+            .saturating_mul(100)
+            .checked_div(i64::from(self.law.n_max_x100))
+            .unwrap_or(0)
+            .saturating_add(1 << 15)
+            >> 16;
+        u16::try_from(ccr.min(arr1)).unwrap_or(0)
+    }
+
+    /// The instability supervisor fired: the conservative controller takes
+    /// over (bumpless from the feed-forward), the warning goes up.
+    fn fall_back(&mut self) {
+        self.fallback = true;
+        if let Ok(c) = fallback_config(&self.settings.drive).build() {
+            self.controller = c;
+            self.controller.start();
+        }
+        if !self.alarm.is_some_and(|a| a.is_latched()) {
+            self.alarm = Some(Alarm::DrumUnstable);
+        }
+    }
+
+    /// Whether the conservative mode is on ([`fallback_config`]).
+    pub fn in_fallback(&self) -> bool {
+        self.fallback
+    }
+
+    /// The drive model in force, with the controller scheduled from it (or
+    /// the given controller kept, for [`Supervisor::with_controller`]).
+    fn use_drive(&mut self, model: DriveModel) -> Result<(), Error> {
+        if self.scheduled {
+            let c = scheduled_config(&model, self.hw.control_period_us)
+                .build()
+                .map_err(|_| Error::Controller)?;
+            self.controller = c;
+            if self.run == RunState::Running {
+                self.controller.start();
+            }
+        }
+        self.law = DriveLaw::of(&model, self.hw.control_period_us);
+        self.settings.drive = model;
+        self.fallback = false;
+        self.monitor = Monitor::default();
+        Ok(())
+    }
+
+    /// One period of the drive identification.
+    fn identify_step(&mut self, measured: I16F16, delta: u16, elapsed_us: u32) -> Actuation {
+        match self.identifier.step(measured.to_bits()) {
+            Some(permille) => {
+                // Stall: the drum does not move under a 25 % or 75 % duty.
+                if delta == 0 {
+                    self.stall_us = self.stall_us.saturating_add(elapsed_us);
+                } else {
+                    self.stall_us = 0;
+                }
+                if self.stall_us > STALL_TIME_US {
+                    self.latch(Alarm::DrumStall);
+                    return Actuation::OFF;
+                }
+                let arr1 = u32::from(self.hw.pwm_arr).saturating_add(1);
+                let ccr = arr1.saturating_mul(u32::from(permille)) / 1000;
+                Actuation {
+                    ccr: u16::try_from(ccr).unwrap_or(0),
+                    driver_enabled: true,
+                }
+            }
+            None => {
+                self.run = RunState::Stopped;
+                self.stall_us = 0;
+                if let IdentifyState::Failed(e) = self.identifier.state() {
+                    if !self.alarm.is_some_and(|a| a.is_latched()) {
+                        self.alarm = Some(Alarm::IdentifyFailed(e));
+                    }
+                }
+                Actuation::OFF
+            }
+        }
+    }
+
+    /// The drive identification's state (page 9).
+    pub fn identify_state(&self) -> IdentifyState {
+        self.identifier.state()
     }
 
     /// Belt partitions passed since Start: Σ drum turns · k3(n) · π·(D2+2H2)
@@ -1140,6 +1547,11 @@ impl Supervisor {
             }
             _ => (0, 0),
         };
+        // The model measured (until saved) or the one in force.
+        let shown_drive = match self.identifier.state() {
+            IdentifyState::Done(model) => model,
+            _ => self.settings.drive,
+        };
         screen::Status {
             travel_speed_kmh_x100: x100(s.travel_speed_kmh_x1000),
             target_drum_rpm_x100: x100(s.target_drum_rpm_x1000),
@@ -1148,6 +1560,15 @@ impl Supervisor {
             distance_dm: s.distance_mm / 100,
             measured_distance_cm,
             calibration_result_x1000,
+            drive_n_max_x100: shown_drive.n_max_x100(),
+            drive_tau_x10_ms: shown_drive.tau_x10_ms(),
+            drive_dead_time_x10_ms: shown_drive.dead_time_x10_ms(),
+            drive_identification: match self.identifier.state() {
+                IdentifyState::Idle => 0,
+                IdentifyState::Running => 1,
+                IdentifyState::Done(_) => 2,
+                IdentifyState::Failed(_) => 3,
+            },
             // Profile B's live values: not this machine's.
             ..screen::Status::default()
         }

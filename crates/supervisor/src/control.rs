@@ -1682,6 +1682,42 @@ mod tests {
         assert_eq!(milli(I16F16::from_num(-1)), 0);
     }
 
+    #[test]
+    fn the_default_drive_model_reproduces_the_design_controller() {
+        // The default model (44.70 r/min, 25 ms, 5 ms) is the drive the
+        // controller was tuned on: scale 1, the same configuration, the
+        // reference model's 2 periods and α = 1 − e^(−10/25) = 0.329 680.
+        let model = DriveModel::DEFAULT;
+        assert_eq!(schedule_scale(&model, 10_000), I16F16::ONE);
+        let mut design = drum_controller_config();
+        design.output_max = I16F16::from_num(44.7);
+        let scheduled = scheduled_config(&model, 10_000);
+        assert_eq!(scheduled.base, design.base);
+        assert_eq!(scheduled.schedule, design.schedule);
+        assert_eq!(scheduled.min_gains, design.min_gains);
+        assert!((scheduled.output_max - design.output_max).abs() < I16F16::from_num(0.0001));
+        let law = DriveLaw::of(&model, 10_000);
+        assert_eq!(law.ref_delay, 2);
+        let alpha = 1.0 - (-0.4f64).exp();
+        assert!((law.ref_alpha.to_num::<f64>() - alpha).abs() < 2e-5);
+        assert!((REFERENCE_ALPHA.to_num::<f64>() - alpha).abs() < 1e-4);
+    }
+
+    #[test]
+    fn the_schedule_shrinks_with_dead_time_and_a_faster_drive() {
+        // s = min(1, (τ/θ)/(25/15)), θ = L + 10 ms (hand-computed).
+        let s = |tau_x10, dead_x10| {
+            schedule_scale(&DriveModel::new(4470, tau_x10, dead_x10).unwrap(), 10_000)
+                .to_num::<f64>()
+        };
+        assert!((s(250, 200) - 0.5).abs() < 1e-4); // 25/30 / (25/15)
+        assert!((s(88, 600) - 8.8 / 70.0 * 15.0 / 25.0).abs() < 1e-4);
+        assert_eq!(s(750, 0), 1.0); // slower drive: the design gains
+                                    // Reference delay 1 + round((L + 5 ms)/10 ms): 60 ms → 7 + 1 = 8.
+        let law = DriveLaw::of(&DriveModel::new(4470, 250, 600).unwrap(), 10_000);
+        assert_eq!(law.ref_delay, 8);
+    }
+
     proptest! {
         /// Every `I16F16` the supervisor can hold (the whole type, so any
         /// drum speed up to any `n_max`) against the f64 reference.

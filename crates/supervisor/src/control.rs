@@ -291,7 +291,13 @@ pub struct Supervisor {
     settings: Settings,
     plan: DrumPlan,
     estimator: MtEstimator,
-    controller: Controller,
+    /// The drum controller, or, while the drive is identified, the
+    /// identification in its place (they are never needed together; sharing
+    /// the space keeps the supervisor small enough for the QEMU board's
+    /// 8 KB of RAM).
+    drum: Drum,
+    /// The last identification's outcome (its model until saved).
+    identified: IdentifyState,
     run: RunState,
     alarm: Option<Alarm>,
     calibration_run: CalibrationRun,
@@ -321,8 +327,9 @@ pub struct Supervisor {
     /// [`REFERENCE_ALPHA`]). The PID corrects the measurement towards it.
     reference: I16F16,
     /// The targets of the last periods, newest at `ref_head`: the reference
-    /// model's input, delayed by the drive's dead time.
-    ref_history: [I16F16; REF_HISTORY],
+    /// model's input, delayed by the drive's dead time. In r/min × 256
+    /// (±127 r/min: every accepted `n_max`), to keep the supervisor small.
+    ref_history: [i16; REF_HISTORY],
     ref_head: usize,
     /// What follows from the drive model in force.
     law: DriveLaw,
@@ -332,7 +339,6 @@ pub struct Supervisor {
     /// The conservative mode after an instability (until a new drive model).
     fallback: bool,
     monitor: Monitor,
-    identifier: Identifier,
     predictor: Predictor,
     snapshot: Snapshot,
 }
@@ -436,6 +442,17 @@ pub const REFERENCE_ALPHA: I16F16 = I16F16::lit("0.3297");
 /// ([`DriveModel::DEAD_TIME_MAX`]) is 1 + 21 periods of 10 ms.
 const REF_HISTORY: usize = 24;
 
+/// The drum controller, or the drive identification in its place.
+// The variants differ in size by design: the point is sharing the space
+// (no heap to box into).
+#[allow(clippy::large_enum_variant)]
+enum Drum {
+    /// Not built yet ([`Supervisor::new`]): built at the first control step.
+    Unbuilt,
+    Control(Controller),
+    Identify(Identifier),
+}
+
 /// What the controller takes from the drive model: the feed-forward gain
 /// (`n_max`), the reference model's smoothing and delay.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -508,6 +525,15 @@ pub fn scheduled_config(model: &DriveModel, period_us: u32) -> fuzzy_pid::Config
     }
     config.output_max = centi_to_fix(model.n_max_x100());
     config
+}
+
+/// [`scheduled_config`], built. Not inlined: the configuration and the
+/// controller it builds (≈ 1 KB of stack) stay in this frame.
+#[inline(never)]
+fn scheduled_controller(model: &DriveModel, period_us: u32) -> Result<Controller, Error> {
+    scheduled_config(model, period_us)
+        .build()
+        .map_err(|_| Error::Controller)
 }
 
 /// The scale `s` of [`scheduled_config`], in (0, 1].
@@ -645,6 +671,12 @@ pub fn milli(x: I16F16) -> u32 {
     u32::try_from(v.max(0)).unwrap_or(u32::MAX)
 }
 
+/// A speed as r/min × 256 in an `i16` (saturating at ±127.99 r/min).
+fn to_i16_x256(x: I16F16) -> i16 {
+    let v = x.to_bits() >> 8;
+    i16::try_from(v).unwrap_or(if v < 0 { i16::MIN } else { i16::MAX })
+}
+
 /// A speed in r/min × 100 (the screen's unit) as the nearest `I16F16`.
 fn centi_to_fix(raw: u16) -> I16F16 {
     // raw · 65 536 / 100, rounded: ≤ 65 535 · 65 536 < 2^32, fits i64.
@@ -659,9 +691,16 @@ fn centi_to_fix(raw: u16) -> I16F16 {
 impl Supervisor {
     /// Builds the supervisor from validated settings, stopped, with the
     /// drum controller tuned for this machine ([`drum_controller_config`]).
+    ///
+    /// The controller itself is built at the first control step (or Start),
+    /// not here: building the fuzzy tuner takes 1.3 KB of stack, which at
+    /// boot would sit on top of the supervisor's own 1.5 KB being built —
+    /// more than the QEMU board's 4.7 KB of stack holds with the rest of
+    /// `init`. The scheduled configuration is valid for every valid drive
+    /// model (its gains are scaled by `s ∈ (0, 1]`, test
+    /// `scheduled_configs_build_for_extreme_models`).
     pub fn new(hw: Hardware, settings: Settings) -> Result<Self, Error> {
-        let config = scheduled_config(&settings.drive, hw.control_period_us);
-        Self::build(hw, settings, &config, true)
+        Self::build(hw, settings, Drum::Unbuilt, true)
     }
 
     /// As [`Supervisor::new`] with another drum controller (for comparisons:
@@ -671,15 +710,11 @@ impl Supervisor {
         settings: Settings,
         controller: &fuzzy_pid::Config,
     ) -> Result<Self, Error> {
-        Self::build(hw, settings, controller, false)
+        let controller = controller.build().map_err(|_| Error::Controller)?;
+        Self::build(hw, settings, Drum::Control(controller), false)
     }
 
-    fn build(
-        hw: Hardware,
-        settings: Settings,
-        controller: &fuzzy_pid::Config,
-        scheduled: bool,
-    ) -> Result<Self, Error> {
+    fn build(hw: Hardware, settings: Settings, drum: Drum, scheduled: bool) -> Result<Self, Error> {
         if hw.encoder_counts_per_drum_rev == 0 || hw.control_period_us == 0 {
             return Err(Error::Hardware);
         }
@@ -687,14 +722,14 @@ impl Supervisor {
             .build()
             .map_err(|_| Error::Estimator)?;
         let plan = Self::plan_for(&settings, hw)?;
-        let controller = controller.build().map_err(|_| Error::Controller)?;
         let law = DriveLaw::of(&settings.drive, hw.control_period_us);
         Ok(Self {
             hw,
             settings,
             plan,
             estimator,
-            controller,
+            drum,
+            identified: IdentifyState::Idle,
             run: RunState::Stopped,
             alarm: None,
             calibration_run: CalibrationRun::Idle,
@@ -710,13 +745,12 @@ impl Supervisor {
             last_travel_kmh_x1000: 0,
             last_period_us: 0,
             reference: I16F16::ZERO,
-            ref_history: [I16F16::ZERO; REF_HISTORY],
+            ref_history: [0; REF_HISTORY],
             ref_head: 0,
             law,
             scheduled,
             fallback: false,
             monitor: Monitor::default(),
-            identifier: Identifier::new(hw.control_period_us),
             predictor: Predictor::default(),
             snapshot: Snapshot::default(),
         })
@@ -757,8 +791,11 @@ impl Supervisor {
 
     /// The drum controller's state (gains, error terms, output) after the
     /// last step, for logs and comparisons.
-    pub fn controller_status(&self) -> &fuzzy_pid::Status {
-        self.controller.status()
+    pub fn controller_status(&self) -> fuzzy_pid::Status {
+        match &self.drum {
+            Drum::Control(c) => *c.status(),
+            Drum::Unbuilt | Drum::Identify(_) => fuzzy_pid::Status::default(),
+        }
     }
 
     /// Live values after the last step.
@@ -787,8 +824,14 @@ impl Supervisor {
     /// Stops the drum (no alarm).
     pub fn stop(&mut self) {
         self.run = RunState::Stopped;
-        self.controller.stop();
-        self.identifier.abort();
+        match &mut self.drum {
+            Drum::Control(c) => c.stop(),
+            Drum::Unbuilt => {}
+            Drum::Identify(_) => {
+                self.identified = IdentifyState::Failed(IdentifyError::Aborted);
+                self.restore_controller();
+            }
+        }
         self.stall_us = 0;
     }
 
@@ -799,8 +842,12 @@ impl Supervisor {
             }
         }
         if self.run == RunState::Stopped {
+            self.ensure_controller();
+            let Drum::Control(c) = &mut self.drum else {
+                return Effect::Message("Drive identification running");
+            };
             self.run = RunState::Running;
-            self.controller.start();
+            c.start();
             self.stall_us = 0;
             self.distance_um = 0;
             self.belt_counts_k3_milli = 0;
@@ -827,8 +874,8 @@ impl Supervisor {
                 if mode != self.settings.mode {
                     // Bumpless: the controller restarts from its output.
                     self.settings.mode = mode;
-                    if self.run == RunState::Running {
-                        self.controller.start();
+                    if let (RunState::Running, Drum::Control(c)) = (self.run, &mut self.drum) {
+                        c.start();
                     }
                 }
                 Effect::SettingsChanged
@@ -927,24 +974,29 @@ impl Supervisor {
                 if matches!(self.alarm, Some(Alarm::IdentifyFailed(_))) {
                     self.alarm = None;
                 }
-                self.identifier.start();
+                let mut id = Identifier::new(self.hw.control_period_us);
+                id.start();
+                self.drum = Drum::Identify(id);
+                self.identified = IdentifyState::Running;
                 self.run = RunState::Identifying;
                 self.stall_us = 0;
                 self.belt_counts_k3_milli = 0;
                 Effect::Message(IDENTIFY_MESSAGE)
             }
-            Command::AcceptDriveModel => match self.identifier.state() {
-                IdentifyState::Done(model) => match self.use_drive(model) {
-                    Ok(()) => {
-                        self.identifier.clear();
-                        if self.alarm == Some(Alarm::DrumUnstable) {
-                            self.alarm = None;
+            Command::AcceptDriveModel => match self.identify_state() {
+                IdentifyState::Done(model) if self.run == RunState::Stopped => {
+                    match self.use_drive(model) {
+                        Ok(()) => {
+                            self.identified = IdentifyState::Idle;
+                            if self.alarm == Some(Alarm::DrumUnstable) {
+                                self.alarm = None;
+                            }
+                            // Persisted at once (the drum is stopped).
+                            Effect::Save
                         }
-                        // Persisted at once (the drum is stopped).
-                        Effect::Save
+                        Err(_) => Effect::Message("Drive model rejected"),
                     }
-                    Err(_) => Effect::Message("Drive model rejected"),
-                },
+                }
                 _ => Effect::Message("Identify the drive first"),
             },
             // Applies from the next control step (the counter's raw value
@@ -1219,6 +1271,7 @@ impl Supervisor {
     /// ```
     #[inline(never)]
     pub fn control_step(&mut self, now: Ticks, drum_encoder: u16) -> Actuation {
+        self.ensure_controller();
         self.snapshot.steps = self.snapshot.steps.wrapping_add(1);
         let delta = match self.last_encoder {
             // Forward only: a backwards jitter reads as standstill. With the
@@ -1343,8 +1396,7 @@ impl Supervisor {
                             .checked_rem(REF_HISTORY)
                             .unwrap_or(0),
                     )
-                    .copied()
-                    .unwrap_or(target);
+                    .map_or(target, |&v| I16F16::from_bits(i32::from(v) << 8));
                 self.reference = self.reference.saturating_add(
                     delayed
                         .saturating_sub(self.reference)
@@ -1354,7 +1406,10 @@ impl Supervisor {
                 if !self.fallback && self.monitor.step(expected, measured, target, elapsed_us) {
                     self.fall_back();
                 }
-                let out = self.controller.step(expected, measured, target);
+                let out = match &mut self.drum {
+                    Drum::Control(c) => c.step(expected, measured, target),
+                    Drum::Unbuilt | Drum::Identify(_) => I16F16::ZERO,
+                };
                 actuation = Actuation {
                     ccr: self.ccr_of(out),
                     driver_enabled: true,
@@ -1365,7 +1420,7 @@ impl Supervisor {
             self.last_travel_kmh_x1000 = travel_kmh_x1000;
             // Restart from the drum's actual speed (it may still coast).
             self.reference = measured;
-            self.ref_history = [measured; REF_HISTORY];
+            self.ref_history = [to_i16_x256(measured); REF_HISTORY];
             self.monitor = Monitor::default();
         }
 
@@ -1409,7 +1464,7 @@ impl Supervisor {
             .checked_rem(REF_HISTORY)
             .unwrap_or(0);
         if let Some(slot) = self.ref_history.get_mut(self.ref_head) {
-            *slot = target;
+            *slot = to_i16_x256(target);
         }
     }
 
@@ -1429,12 +1484,15 @@ impl Supervisor {
     }
 
     /// The instability supervisor fired: the conservative controller takes
-    /// over (bumpless from the feed-forward), the warning goes up.
+    /// over (bumpless from the feed-forward), the warning goes up. Not
+    /// inlined: the controller it builds (≈ 0.6 KB with its configuration)
+    /// must not widen `control_step`'s own stack frame on every period.
+    #[inline(never)]
     fn fall_back(&mut self) {
         self.fallback = true;
-        if let Ok(c) = fallback_config(&self.settings.drive).build() {
-            self.controller = c;
-            self.controller.start();
+        if let Ok(mut c) = fallback_config(&self.settings.drive).build() {
+            c.start();
+            self.drum = Drum::Control(c);
         }
         if !self.alarm.is_some_and(|a| a.is_latched()) {
             self.alarm = Some(Alarm::DrumUnstable);
@@ -1448,15 +1506,14 @@ impl Supervisor {
 
     /// The drive model in force, with the controller scheduled from it (or
     /// the given controller kept, for [`Supervisor::with_controller`]).
+    #[inline(never)]
     fn use_drive(&mut self, model: DriveModel) -> Result<(), Error> {
         if self.scheduled {
-            let c = scheduled_config(&model, self.hw.control_period_us)
-                .build()
-                .map_err(|_| Error::Controller)?;
-            self.controller = c;
+            let mut c = scheduled_controller(&model, self.hw.control_period_us)?;
             if self.run == RunState::Running {
-                self.controller.start();
+                c.start();
             }
+            self.drum = Drum::Control(c);
         }
         self.law = DriveLaw::of(&model, self.hw.control_period_us);
         self.settings.drive = model;
@@ -1465,9 +1522,43 @@ impl Supervisor {
         Ok(())
     }
 
+    /// Builds the controller if it is not yet ([`Supervisor::new`]).
+    fn ensure_controller(&mut self) {
+        if matches!(self.drum, Drum::Unbuilt) {
+            self.restore_controller();
+        }
+    }
+
+    /// The controller back in place of an identification that ended: the
+    /// one scheduled from the drive model in force (a controller given to
+    /// [`Supervisor::with_controller`] is not kept across an
+    /// identification).
+    #[inline(never)]
+    fn restore_controller(&mut self) {
+        let config = if self.fallback {
+            fallback_config(&self.settings.drive)
+        } else {
+            scheduled_config(&self.settings.drive, self.hw.control_period_us)
+        };
+        if let Ok(c) = config.build() {
+            self.drum = Drum::Control(c);
+        }
+    }
+
     /// One period of the drive identification.
+    #[inline(never)]
     fn identify_step(&mut self, measured: I16F16, delta: u16, elapsed_us: u32) -> Actuation {
-        match self.identifier.step(measured.to_bits()) {
+        let duty = match &mut self.drum {
+            Drum::Identify(id) => {
+                let duty = id.step(measured.to_bits());
+                if duty.is_none() {
+                    self.identified = id.state();
+                }
+                duty
+            }
+            Drum::Unbuilt | Drum::Control(_) => None,
+        };
+        match duty {
             Some(permille) => {
                 // Stall: the drum does not move under a 25 % or 75 % duty.
                 if delta == 0 {
@@ -1489,7 +1580,8 @@ impl Supervisor {
             None => {
                 self.run = RunState::Stopped;
                 self.stall_us = 0;
-                if let IdentifyState::Failed(e) = self.identifier.state() {
+                self.restore_controller();
+                if let IdentifyState::Failed(e) = self.identified {
                     if !self.alarm.is_some_and(|a| a.is_latched()) {
                         self.alarm = Some(Alarm::IdentifyFailed(e));
                     }
@@ -1501,7 +1593,10 @@ impl Supervisor {
 
     /// The drive identification's state (page 9).
     pub fn identify_state(&self) -> IdentifyState {
-        self.identifier.state()
+        match &self.drum {
+            Drum::Identify(id) => id.state(),
+            Drum::Unbuilt | Drum::Control(_) => self.identified,
+        }
     }
 
     /// Belt partitions passed since Start: Σ drum turns · k3(n) · π·(D2+2H2)
@@ -1548,7 +1643,7 @@ impl Supervisor {
             _ => (0, 0),
         };
         // The model measured (until saved) or the one in force.
-        let shown_drive = match self.identifier.state() {
+        let shown_drive = match self.identify_state() {
             IdentifyState::Done(model) => model,
             _ => self.settings.drive,
         };
@@ -1563,7 +1658,7 @@ impl Supervisor {
             drive_n_max_x100: shown_drive.n_max_x100(),
             drive_tau_x10_ms: shown_drive.tau_x10_ms(),
             drive_dead_time_x10_ms: shown_drive.dead_time_x10_ms(),
-            drive_identification: match self.identifier.state() {
+            drive_identification: match self.identify_state() {
                 IdentifyState::Idle => 0,
                 IdentifyState::Running => 1,
                 IdentifyState::Done(_) => 2,
@@ -1701,6 +1796,22 @@ mod tests {
         let alpha = 1.0 - (-0.4f64).exp();
         assert!((law.ref_alpha.to_num::<f64>() - alpha).abs() < 2e-5);
         assert!((REFERENCE_ALPHA.to_num::<f64>() - alpha).abs() < 1e-4);
+    }
+
+    #[test]
+    fn scheduled_configs_build_for_extreme_models() {
+        // The corners of DriveModel's ranges: every scheduled configuration
+        // (and the fallback) builds, so the controller `new` defers can
+        // always be built.
+        for n in [1000u16, 9000] {
+            for tau in [10u16, 5000] {
+                for dead in [0u16, 2000] {
+                    let m = DriveModel::new(n, tau, dead).unwrap();
+                    assert!(scheduled_config(&m, 10_000).build().is_ok(), "{m:?}");
+                    assert!(fallback_config(&m).build().is_ok(), "{m:?}");
+                }
+            }
+        }
     }
 
     #[test]

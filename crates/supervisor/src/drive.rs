@@ -293,8 +293,13 @@ pub struct Identifier {
     state: IdentifyState,
     /// Control steps since the start.
     calls: u16,
-    /// Speeds measured in the hold being recorded, I16F16 bits.
-    samples: [i32; HOLD_PERIODS],
+    /// Speeds measured in the first half of the hold being recorded, r/min
+    /// × 256 (1/256 r/min is 30 times finer than one encoder count per
+    /// period; ±127 r/min covers every accepted `n_max`). Kept small: the
+    /// supervisor lives in the board's RAM.
+    samples: [i16; HALF],
+    /// Sums of the second half's two quarters, r/min × 256.
+    quarter: [i64; 2],
     /// Σ of the second half of the previous hold (its level × `HALF`).
     prev_level: i64,
     /// Pooled deficit areas and level changes (× `HALF`), sign-corrected.
@@ -313,7 +318,8 @@ impl Identifier {
         Self {
             state: IdentifyState::Idle,
             calls: 0,
-            samples: [0; HOLD_PERIODS],
+            samples: [0; HALF],
+            quarter: [0; 2],
             prev_level: 0,
             sum_area: 0,
             sum_delta: 0,
@@ -359,8 +365,21 @@ impl Identifier {
             // call: hold (calls − 1) / H, index (calls − 1) % H.
             let i = self.calls.saturating_sub(1);
             let j = usize::from(i.checked_rem(hold_len).unwrap_or(0));
+            let v = i16::try_from(measured >> 8).unwrap_or(if measured < 0 {
+                i16::MIN
+            } else {
+                i16::MAX
+            });
+            if j == 0 {
+                self.quarter = [0; 2];
+            }
             if let Some(s) = self.samples.get_mut(j) {
-                *s = measured;
+                *s = v;
+            } else if let Some(q) = self
+                .quarter
+                .get_mut(usize::from(j >= HALF.saturating_add(HALF / 2)))
+            {
+                *q = q.saturating_add(i64::from(v));
             }
             if j == HOLD_PERIODS - 1 {
                 let hold = i.checked_div(hold_len).unwrap_or(0);
@@ -388,20 +407,15 @@ impl Identifier {
 
     fn end_of_hold(&mut self, hold: u16) -> Result<(), IdentifyError> {
         let s = &self.samples;
-        let sum = |r: core::ops::Range<usize>| -> i64 {
-            s.get(r)
-                .map_or(0, |w| w.iter().map(|&v| i64::from(v)).sum())
-        };
-        let level = sum(HALF..HOLD_PERIODS);
+        let [q1, q2] = self.quarter;
+        let level = q1.saturating_add(q2);
         // Settled: the two quarters of the second half agree within 2 % of
         // the level (they are means of 25 periods each).
-        let q1 = sum(HALF..HALF + HALF / 2);
-        let q2 = sum(HALF + HALF / 2..HOLD_PERIODS);
         if q2.abs_diff(q1).saturating_mul(100) > level.unsigned_abs().saturating_mul(2) / 2 {
             return Err(IdentifyError::NotSettled);
         }
-        // 1 r/min in I16F16 bits.
-        let one_rpm: i64 = 1 << 16;
+        // 1 r/min in the samples' unit.
+        let one_rpm: i64 = 1 << 8;
         let half = i64::try_from(HALF).unwrap_or(1);
         if hold == 0 {
             if level < one_rpm.saturating_mul(half) {
@@ -505,7 +519,7 @@ impl Identifier {
             .checked_div(self.sum_delta.saturating_mul(100))
             .unwrap_or(0);
         let dead_x10 = total_x10.saturating_sub(tau_x10).max(0);
-        // Gain: mean |Δn| per step / Δduty (0.5), I16F16 → r/min × 100.
+        // Gain: mean |Δn| per step / Δduty (0.5), r/min × 256 → × 100.
         let steps = i64::from(IDENTIFY_STEPS);
         let half = i64::try_from(HALF).unwrap_or(1);
         let dduty_permille =
@@ -514,7 +528,7 @@ impl Identifier {
             .sum_delta
             .saturating_mul(100 * 1000)
             .checked_div(steps.saturating_mul(half).saturating_mul(dduty_permille))
-            .map(|v| v.saturating_add(1 << 15) >> 16)
+            .map(|v| v.saturating_add(1 << 7) >> 8)
             .unwrap_or(0);
         let narrow = |v: i64| u16::try_from(v).map_err(|_| IdentifyError::OutOfRange);
         DriveModel::new(narrow(n_max_x100)?, narrow(tau_x10)?, narrow(dead_x10)?)

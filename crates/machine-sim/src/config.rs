@@ -5,7 +5,14 @@ use kinematics::consts::{self, Gear};
 
 use crate::machine::Machine;
 
-/// Longest transport delay the delay line holds, milliseconds.
+/// Longest transport delay the delay line holds, milliseconds: 63 on the
+/// host (feature `std`: drives with their own speed loop, ramp or RS-485
+/// read-back, 20–60 ms, issue 16 item 3), 15 without `std` (the QEMU
+/// board's RAM).
+#[cfg(feature = "std")]
+pub const MAX_TRANSPORT_DELAY_MS: u8 = 63;
+/// See above.
+#[cfg(not(feature = "std"))]
 pub const MAX_TRANSPORT_DELAY_MS: u8 = 15;
 
 /// Which machine the plants come from.

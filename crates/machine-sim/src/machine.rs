@@ -7,8 +7,17 @@ use crate::metrics::{FieldMetrics, MetricsError, SpacingAccumulator};
 use crate::rng::{hash_signed_unit, splitmix64, Rng};
 use crate::tables;
 
-/// Slots of the transport-delay line (one per millisecond).
+/// Slots of the transport-delay line (one per millisecond): up to
+/// [`crate::MAX_TRANSPORT_DELAY_MS`] (63 ms on the host with `std`, 15 ms
+/// without it, i.e. on the QEMU board, whose 8 KB of RAM has no room to
+/// spare). Each slot holds the duty in `u16` fractions of 1 (1/65 535, far
+/// finer than the PWM's 1/3600).
+#[cfg(feature = "std")]
+const RING: usize = 64;
+#[cfg(not(feature = "std"))]
 const RING: usize = 16;
+/// Scale of a delay-line slot (see [`RING`]).
+const DUTY_SCALE: f32 = 65_535.0;
 /// The model's internal grid: sub-steps never cross a millisecond boundary.
 const GRID_US: u32 = 1000;
 const TWO_PI: f32 = core::f32::consts::TAU;
@@ -116,7 +125,7 @@ pub struct Machine {
     faults: u8,
     // Drum motor.
     delay_head: u8,
-    delay_line: [f32; RING],
+    delay_line: [u16; RING],
     motor_alpha_1ms: f32,
     drum_rpm: f32,
     speed_noise: LpNoise,
@@ -197,7 +206,7 @@ impl Machine {
             now_us: 0,
             faults: 0,
             delay_head: 0,
-            delay_line: [0.0; RING],
+            delay_line: [0; RING],
             motor_alpha_1ms: lag_alpha(1.0e-3, cfg.motor_tau_s),
             drum_rpm: 0.0,
             speed_noise: LpNoise::default(),
@@ -282,7 +291,8 @@ impl Machine {
         };
         self.delay_head = (self.delay_head + 1) % RING as u8;
         if let Some(slot) = self.delay_line.get_mut(usize::from(self.delay_head)) {
-            *slot = duty;
+            // `duty` is sanitised to 0 … 1: the product fits u16.
+            *slot = libm::roundf(duty * DUTY_SCALE) as u16;
         }
         let c = &self.cfg;
         if c.speed_noise > 0.0 {
@@ -318,7 +328,9 @@ impl Machine {
             };
         }
         let idx = (usize::from(self.delay_head) + RING - d) % RING;
-        self.delay_line.get(idx).copied().unwrap_or(0.0)
+        self.delay_line
+            .get(idx)
+            .map_or(0.0, |&d| f32::from(d) / DUTY_SCALE)
     }
 
     /// Speed the driver steers towards for duty `d` (dead band, droop, ripple, saturation).

@@ -419,7 +419,8 @@ impl Predictor {
 /// `1 − e^(−Ts/τ)` with `Ts` = 10 ms and the motor's `τ` = 25 ms. With a
 /// drive model ([`DriveModel`], identified on page 9) the factor is computed
 /// from its τ and the model's input is delayed by its dead time
-/// ([`DriveLaw`]); on the default model that is this value and two periods.
+/// (docs/firmware.md, "The drum drive model"); on the default model that
+/// is this value and two periods.
 ///
 /// The model predicts what the *measurement* (encoder counts over the period
 /// that just ended) should read if the feed-forward alone drove the drum:

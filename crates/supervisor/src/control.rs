@@ -427,7 +427,8 @@ impl Predictor {
 /// `1 − e^(−Ts/τ)` with `Ts` = 10 ms and the motor's `τ` = 25 ms. With a
 /// drive model ([`DriveModel`], identified on page 9) the factor is computed
 /// from its τ and the model's input is delayed by its dead time
-/// ([`DriveLaw`]); on the default model that is this value and two periods.
+/// (docs/firmware.md, "The drum drive model"); on the default model that
+/// is this value and two periods.
 ///
 /// The model predicts what the *measurement* (encoder counts over the period
 /// that just ended) should read if the feed-forward alone drove the drum:
@@ -605,6 +606,13 @@ struct Monitor {
 /// seedlings' load (up to ±5 % at 1.5–3 Hz) is damped to about a third, so
 /// it does not count as a tracking error.
 const MONITOR_ALPHA: I16F16 = I16F16::lit("0.0392");
+/// The slowest target the instability supervisor judges: 3 r/min. Below it
+/// the driver's dead band (3 % duty, 1.3 r/min on the design drive) and the
+/// encoder's resolution (one count per 10 ms is 0.13 r/min) make 5 % of the
+/// target meaningless; a tractor coming to rest passes there (test
+/// `no_false_instability_warning_in_the_field_at_every_gear`: at High 1 the
+/// drum sat at 1.5 r/min under a 1.15 r/min target for more than 1 s).
+const MONITOR_MIN_TARGET: I16F16 = I16F16::lit("3");
 /// Band of the smoothed tracking error: 5 % of the target.
 const MONITOR_BAND: I16F16 = I16F16::lit("0.05");
 /// Time beyond the band that is an instability, µs.
@@ -620,15 +628,19 @@ const MONITOR_WINDOW: u8 = 50;
 const MONITOR_WINDOWS: u8 = 2;
 
 impl Monitor {
-    /// One running period; `true` when the drum is unstable.
+    /// One running period; `true` when the drum is unstable. `saturated`:
+    /// the last output was 0 or 100 % duty — a drum that cannot follow
+    /// (a target at `n_max` under load: the Too fast warning's business) is
+    /// not a tracking error of the loop.
     fn step(
         &mut self,
         expected: I16F16,
         measured: I16F16,
         target: I16F16,
         elapsed_us: u32,
+        saturated: bool,
     ) -> bool {
-        if target < STALL_MIN_COMMAND {
+        if target < MONITOR_MIN_TARGET {
             *self = Self::default();
             return false;
         }
@@ -636,7 +648,7 @@ impl Monitor {
         self.error = self
             .error
             .saturating_add(dev.saturating_sub(self.error).saturating_mul(MONITOR_ALPHA));
-        if self.error.saturating_abs() > target.saturating_mul(MONITOR_BAND) {
+        if !saturated && self.error.saturating_abs() > target.saturating_mul(MONITOR_BAND) {
             self.beyond_us = self.beyond_us.saturating_add(elapsed_us);
         } else {
             self.beyond_us = 0;
@@ -1419,7 +1431,13 @@ impl Supervisor {
                         .saturating_mul(self.law.ref_alpha),
                 );
                 self.push_reference_input(target);
-                if !self.fallback && self.monitor.step(expected, measured, target, elapsed_us) {
+                let saturated = self.snapshot.ccr == 0
+                    || u32::from(self.snapshot.ccr) > u32::from(self.hw.pwm_arr);
+                if !self.fallback
+                    && self
+                        .monitor
+                        .step(expected, measured, target, elapsed_us, saturated)
+                {
                     self.fall_back();
                 }
                 let out = match &mut self.drum {

@@ -384,3 +384,59 @@ fn a_misidentified_drive_raises_the_instability_warning_and_falls_back() {
         assert_eq!(rig.sup.run_state(), supervisor::control::RunState::Running);
     }
 }
+
+#[test]
+fn no_false_instability_warning_in_the_field_at_every_gear() {
+    // The instability supervisor must stay quiet on a correct model: the
+    // default drive (the simulator's default), Speed-Adaptive at every gear
+    // (7 cm at Low 1–3, 20 cm at High 1–3), the simulator's default terrain
+    // and noise, a 0.5 s chassis time constant, the seedlings' load at 10 %,
+    // a start from standstill, a stop and a restart of the tractor: 20 s
+    // each. Failed before two rules of the supervisor: a tractor coming to
+    // rest left the drum at 1.5 r/min under a 1.15 r/min target (judged
+    // only from 3 r/min now), and High 3 at 20 cm holds the drum at n_max
+    // under the load, short of the target (not judged while the output is
+    // at 100 %: the Too fast warning says it).
+    use closed::*;
+    use hmi_proto::screen::{Command, Mode, Spacing};
+    use kinematics::consts::Gear;
+    use supervisor::control::Alarm;
+    for (i, gear) in Gear::ALL.into_iter().enumerate() {
+        let spacing_mm = if i < 3 { 70 } else { 200 };
+        let cfg = Config {
+            seed: 1800 + i as u64,
+            initial_gear: Some(gear),
+            track_tau_s: 0.5,
+            load_droop: 0.10,
+            ..Config::default()
+        };
+        let settings = supervisor::settings::Settings {
+            mode: Mode::SpeedAdaptive,
+            spacing: Spacing::new(spacing_mm).unwrap(),
+            gear,
+            ..supervisor::settings::Settings::default()
+        };
+        let mut rig = Rig::new(cfg, settings);
+        rig.m.stop_travel();
+        for _ in 0..50 {
+            rig.period();
+        }
+        rig.sup.command(Command::Start);
+        rig.m.resume_travel();
+        for k in 0..2000 {
+            if k == 800 {
+                rig.m.stop_travel();
+            }
+            if k == 1200 {
+                rig.m.resume_travel();
+            }
+            rig.period();
+            assert_ne!(
+                rig.sup.alarm(),
+                Some(Alarm::DrumUnstable),
+                "{gear:?} at {k}"
+            );
+        }
+        assert!(!rig.sup.in_fallback(), "{gear:?}");
+    }
+}

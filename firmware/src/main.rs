@@ -137,8 +137,8 @@ mod app {
         hmi_tx: board::HmiTx,
         bytes_in: Sender<'static, u8, RX_QUEUE>,
         bytes_out: Receiver<'static, u8, RX_QUEUE>,
-        edges_in: Producer<'static, u32>,
-        edges_out: Consumer<'static, u32>,
+        edges_in: Producer<'static, board::HallEdge>,
+        edges_out: Consumer<'static, board::HallEdge>,
         saves_in: Sender<'static, (), 1>,
         saves_out: Receiver<'static, (), 1>,
         sensors: board::Sensors,
@@ -151,7 +151,7 @@ mod app {
     }
 
     #[init(local = [
-        edge_queue: Queue<u32, EDGE_QUEUE> = Queue::new(),
+        edge_queue: Queue<board::HallEdge, EDGE_QUEUE> = Queue::new(),
         machine_slot: MaybeUninit<Machine> = MaybeUninit::uninit(),
         hmi_slot: MaybeUninit<Hmi> = MaybeUninit::uninit(),
     ])]
@@ -433,6 +433,9 @@ mod app {
     fn hall_capture(mut cx: hall_capture::Context) {
         if let Some(edge) = cx.shared.hall.lock(|h| h.on_interrupt()) {
             stats::HALL_EDGES.inc();
+            if edge.after_lost {
+                stats::HALL_EDGES_LOST.inc();
+            }
             if cx.local.edges_in.enqueue(edge).is_err() {
                 stats::HALL_EDGES_DROPPED.inc();
             }
@@ -476,7 +479,10 @@ mod app {
                     #[cfg(feature = "profile-a")]
                     Machine::DrumBelt(sup) => {
                         while let Some(edge) = edges_out.dequeue() {
-                            sup.hall_edge(Ticks(edge));
+                            if edge.after_lost {
+                                sup.hall_edges_lost();
+                            }
+                            sup.hall_edge(Ticks(edge.stamp));
                         }
                         for &edge in &sample.hall_edges {
                             sup.hall_edge(Ticks(edge));
@@ -489,8 +495,9 @@ mod app {
                         // Profile B wiring: TIM3 counts the ground-wheel encoder,
                         // TIM2 captures one index pulse per feeding-roller turn.
                         let mut pulses = sample.hall_edges.len() as u32;
-                        while edges_out.dequeue().is_some() {
-                            pulses = pulses.saturating_add(1);
+                        while let Some(edge) = edges_out.dequeue() {
+                            // A pulse after an overcapture hides at least one more.
+                            pulses = pulses.saturating_add(1 + u32::from(edge.after_lost));
                         }
                         let c = belt.control_step(sample.drum_encoder, pulses);
                         let snap = belt.planter().snapshot();
@@ -498,7 +505,11 @@ mod app {
                     }
                 }
             });
-            stats::HALL_EDGES.add(sample.hall_edges.len() as u32);
+            // (Only the QEMU board's edges come this way: on the real board
+            // the capture interrupt is the counter's one writer.)
+            if !sample.hall_edges.is_empty() {
+                stats::HALL_EDGES.add(sample.hall_edges.len() as u32);
+            }
 
             // The outputs are written under the stop input's lock: an
             // opening between the step and here cannot be overwritten.
@@ -818,17 +829,23 @@ mod app {
         }
     }
 
-    /// The 1 Hz summary line of the log.
+    /// The 1 Hz summary line of the log: everything `cargo xtask report`
+    /// plots from a field capture (state, spacing setting, travel, drum
+    /// target and actual, compare value, plants, distance, alarm) and the
+    /// health counters. Under 80 bytes a second on RTT (defmt sends the
+    /// arguments, not the text); alarms and state changes have their own
+    /// lines when they happen.
     fn log_status(machine: &Machine, uptime: u32) {
         match machine {
             #[cfg(feature = "profile-a")]
             Machine::DrumBelt(sup) => {
                 let snapshot = sup.snapshot();
                 defmt::info!(
-                    "status: uptime {=u32} ms, {} {}, travel {=u32} m/h, drum target {=u32} actual {=u32} mr/min, ccr {=u16}, plants {=u32}, distance {=u32} mm, alarm {}, loops {=u32} (overruns {=u32}), hall edges {=u32}, hmi rx {=u32} B",
+                    "status: uptime {=u32} ms, {} {}, spacing {=u16} mm, travel {=u32} m/h, drum target {=u32} actual {=u32} mr/min, ccr {=u16}, plants {=u32}, distance {=u32} mm, alarm {}, loops {=u32} (overruns {=u32}), hall edges {=u32} (after lost {=u32}), hmi rx {=u32} B",
                     uptime,
                     sup.settings().mode,
                     sup.run_state(),
+                    sup.settings().spacing.raw(),
                     snapshot.travel_speed_kmh_x1000,
                     snapshot.target_drum_rpm_x1000,
                     snapshot.actual_drum_rpm_x1000,
@@ -839,6 +856,7 @@ mod app {
                     stats::CONTROL_LOOPS.get(),
                     stats::CONTROL_OVERRUNS.get(),
                     stats::HALL_EDGES.get(),
+                    stats::HALL_EDGES_LOST.get(),
                     stats::HMI_RX_BYTES.get()
                 );
             }
@@ -846,7 +864,7 @@ mod app {
             Machine::SeedlingBelt(belt) => {
                 let s = belt.planter().snapshot();
                 defmt::info!(
-                    "status: uptime {=u32} ms, profile B {}, travel {=u32} mm/s, n1 {=u32} n2 {=u32} mr/min, j {=u32}, radius {=u32} um, {}, alarm {}, loops {=u32} (overruns {=u32}), hmi rx {=u32} B",
+                    "status: uptime {=u32} ms, profile B {}, travel {=u32} mm/s, n1 {=u32} n2 {=u32} mr/min, j {=u32}, radius {=u32} um, {}, alarm {}, loops {=u32} (overruns {=u32}), hmi rx {=u32} B, roller pulses after lost {=u32}",
                     uptime,
                     s.state,
                     s.travel_speed.to_milli(),
@@ -858,32 +876,79 @@ mod app {
                     s.alarm,
                     stats::CONTROL_LOOPS.get(),
                     stats::CONTROL_OVERRUNS.get(),
-                    stats::HMI_RX_BYTES.get()
+                    stats::HMI_RX_BYTES.get(),
+                    stats::HALL_EDGES_LOST.get()
                 );
             }
         }
     }
 
-    /// Persists the settings when the operator saves (the drum is stopped:
-    /// a flash page erase stalls the CPU for up to 40 ms).
+    /// Whether the machine's motors are commanded to run (profile A: the
+    /// drum; profile B: the steppers).
+    fn motors_commanded(machine: &Machine) -> bool {
+        match machine {
+            #[cfg(feature = "profile-a")]
+            Machine::DrumBelt(sup) => sup.run_state() == RunState::Running,
+            #[cfg(feature = "profile-b")]
+            Machine::SeedlingBelt(belt) => belt.planter().state() == PlanterState::Running,
+        }
+    }
+
+    /// Control periods the settings task waits for the drivers' enable to
+    /// go low after a Stop before it refuses to save.
+    const SAVE_WAIT_PERIODS: u32 = 3;
+
+    /// Persists the settings when the operator saves, only while the motors
+    /// are stopped: a flash page erase stalls the CPU, and with it the
+    /// control loop, for up to 40 ms.
+    ///
+    /// The screen's Save was accepted with the motors stopped, but a Start
+    /// in the same batch of touches may have run since. So the run state is
+    /// checked again here, right before the erase, together with the
+    /// drivers' enable pin as the control task last set it (after a Stop it
+    /// goes low at the next control period; the task waits up to three).
+    /// That check and the erase are one stretch of code with no `await`:
+    /// the hmi task, which takes Start, shares priority 1 with this task,
+    /// and RTIC 2 runs tasks of one priority to completion between awaits,
+    /// so no command can come in between; the tasks above (control at 2,
+    /// Hall at 3, USART at 4) never start the motors by themselves. A Save
+    /// refused here says so on the screen and in the log and changes
+    /// nothing stored.
     ///
     /// - Priority 1.
     /// - Released by each Save.
-    /// - Budget: 50 ms (one page erase and ≤ 130 half-word programs).
+    /// - Budget: 50 ms (one page erase and ≤ 130 half-word programs), plus
+    ///   up to 30 ms of waiting (not CPU time).
     #[task(priority = 1, local = [saves_out, store], shared = [machine, hmi])]
     async fn settings(mut cx: settings::Context) {
         while let Ok(()) = cx.local.saves_out.recv().await {
-            let settings = cx.shared.machine.lock(|m| m.settings().clone());
-            let text = match cx.local.store.as_mut().map(|s| s.save(&settings)) {
-                Some(Ok(sequence)) => {
-                    defmt::info!("settings: saved as record {=u32}", sequence);
-                    "Settings saved"
+            let mut waited = 0;
+            let text = loop {
+                if cx.shared.machine.lock(|m| motors_commanded(m)) {
+                    defmt::warn!("settings: save refused, the motors were started after Save");
+                    break "Motors running: settings not saved";
                 }
-                Some(Err(e)) => {
-                    defmt::error!("settings: save failed: {}", e);
-                    "Save failed: settings not stored"
+                if !board::drivers_enabled() {
+                    // From here to the end of the save: no await.
+                    let settings = cx.shared.machine.lock(|m| m.settings().clone());
+                    break match cx.local.store.as_mut().map(|s| s.save(&settings)) {
+                        Some(Ok(sequence)) => {
+                            defmt::info!("settings: saved as record {=u32}", sequence);
+                            "Settings saved"
+                        }
+                        Some(Err(e)) => {
+                            defmt::error!("settings: save failed: {}", e);
+                            "Save failed: settings not stored"
+                        }
+                        None => "No settings store on this board",
+                    };
                 }
-                None => "No settings store on this board",
+                if waited >= SAVE_WAIT_PERIODS {
+                    defmt::warn!("settings: save refused, the motor drivers are still enabled");
+                    break "Motors running: settings not saved";
+                }
+                waited += 1;
+                Mono::delay(CONTROL_PERIOD_MS.millis()).await;
             };
             cx.shared.hmi.lock(|hmi| {
                 let _ = hmi.show_message(text);
@@ -904,6 +969,11 @@ mod app {
 fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::interrupt::disable();
     board::safe_state();
+    // A panic while panicking (the log itself failing, e.g. a panic raised
+    // inside a defmt call) goes straight to the end state.
+    if PANICKED.swap(true, core::sync::atomic::Ordering::Relaxed) {
+        board::fatal();
+    }
     #[cfg(feature = "board-qemu")]
     {
         let message = info.message().as_str().unwrap_or("(formatted message)");
@@ -925,11 +995,127 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::asm::udf()
 }
 
-/// HardFault: outputs to their safe state first, then the board's end state
-/// (the real board waits for the watchdog; QEMU exits with a failure code).
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+/// Set by the first panic.
+static PANICKED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
+// The fatal exception entries: HardFault, NMI and every exception or
+// interrupt without a handler of its own (cortex-m-rt's `DefaultHandler`,
+// which the PAC's unused interrupt vectors and the unused core exceptions
+// point to). They replace cortex-m-rt's (link.x: `PROVIDE(HardFault =
+// HardFault_)`, `PROVIDE(NonMaskableInt = DefaultHandler)`, `PROVIDE(
+// DefaultHandler = DefaultHandler_)`, which a global definition overrides;
+// `#[exception]` is not used for them because its HardFault trampoline
+// and the Rust handlers it calls push onto the stack first).
+//
+// With flip-link the stack sits at the bottom of RAM, so a stack overflow
+// faults with SP below RAM: the exception entry's own stacking fails, and
+// any push in the handler would fault again (a lockup, outputs as they
+// were, until the watchdog). So each entry does, without touching the
+// stack: r1 = which exception, r0 = the stack pointer of the interrupted
+// code (EXC_RETURN bit 2 picks MSP or PSP), MSP = `_stack_start` (the top
+// of the stack region, from cortex-m-rt's link.x, 8-byte aligned), then a
+// branch to `fatal_exception`, which drives the outputs safe before
+// anything else. Nothing returns: the stack being reused held only frames
+// that will never run again; the statics and the RTT buffer lie above it.
+core::arch::global_asm!(
+    ".section .text.fatal_entries, \"ax\"",
+    ".global HardFault",
+    ".type HardFault,%function",
+    ".thumb_func",
+    "HardFault:",
+    "    movs r1, #{hard}",
+    "    b 1f",
+    ".global NonMaskableInt",
+    ".type NonMaskableInt,%function",
+    ".thumb_func",
+    "NonMaskableInt:",
+    "    movs r1, #{nmi}",
+    "    b 1f",
+    ".global DefaultHandler",
+    ".type DefaultHandler,%function",
+    ".thumb_func",
+    "DefaultHandler:",
+    "    movs r1, #{other}",
+    "1:",
+    "    mov r0, lr",
+    "    tst r0, #4",
+    "    ite eq",
+    "    mrseq r0, msp",
+    "    mrsne r0, psp",
+    "    ldr r2, =_stack_start",
+    "    bic r2, r2, #7",
+    "    msr msp, r2",
+    "    b {entry}",
+    ".ltorg",
+    hard = const FAULT_HARD,
+    nmi = const FAULT_NMI,
+    other = const FAULT_OTHER,
+    entry = sym fatal_exception,
+);
+
+/// Which entry of the asm above was taken: HardFault.
+const FAULT_HARD: u32 = 0;
+/// NonMaskableInt.
+const FAULT_NMI: u32 = 1;
+/// DefaultHandler (an unused interrupt or core exception).
+const FAULT_OTHER: u32 = 2;
+
+/// The fatal exceptions, on a fresh stack: outputs safe first, then one log
+/// line, then the board's end state (the real board waits for the
+/// watchdog; QEMU exits with a failure code).
+///
+/// - HardFault: the faulting PC from the exception frame, if the frame lies
+///   inside the stack region; otherwise the stack had overflowed.
+/// - NMI: the clock security system (the HSE failed: SYSCLK is back on the
+///   8 MHz HSI), or another NMI source.
+/// - Anything else: an interrupt or exception the firmware never enabled.
+///
+/// # Safety
+///
+/// Only entered from the asm entries above, in handler mode, never returns.
+unsafe extern "C" fn fatal_exception(sp: u32, which: u32) -> ! {
     board::safe_state();
-    defmt::error!("HardFault at pc {=u32:#x}", frame.pc());
+    cortex_m::interrupt::disable();
+    extern "C" {
+        static _stack_start: u32;
+        static _stack_end: u32;
+    }
+    match which {
+        FAULT_HARD => {
+            let bottom = core::ptr::addr_of!(_stack_end) as u32;
+            let top = core::ptr::addr_of!(_stack_start) as u32;
+            // The exception frame: r0-r3, r12, lr, pc, xPSR (8 words).
+            if sp >= bottom
+                && sp.checked_add(32).is_some_and(|end| end <= top)
+                && sp.is_multiple_of(4)
+            {
+                // SAFETY: a word inside the stack region (checked above).
+                let pc = unsafe { core::ptr::read_volatile((sp + 24) as *const u32) };
+                defmt::error!("HardFault at pc {=u32:#x}: outputs off", pc);
+            } else {
+                defmt::error!(
+                    "HardFault with sp {=u32:#x} outside the stack: stack overflow, outputs off",
+                    sp
+                );
+            }
+        }
+        FAULT_NMI => {
+            if board::clock_failed() {
+                defmt::error!("clock security: the 8 MHz crystal (HSE) failed: outputs off");
+            } else {
+                defmt::error!("NMI: outputs off");
+            }
+        }
+        _ => {
+            // SAFETY: a read of SCB ICSR; VECTACTIVE (bits 8:0) is the
+            // active exception number, IRQn + 16.
+            let active = unsafe { (*cortex_m::peripheral::SCB::PTR).icsr.read() } & 0x1FF;
+            defmt::error!(
+                "unexpected exception {=u32} (IRQ {=i32}): outputs off",
+                active,
+                active as i32 - 16
+            );
+        }
+    }
     board::fatal()
 }

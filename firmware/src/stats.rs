@@ -51,3 +51,7 @@ pub static HMI_TX_DROPPED: Counter = Counter::new();
 pub static HALL_EDGES: Counter = Counter::new();
 /// Hall edges dropped because the control task had not taken the earlier ones.
 pub static HALL_EDGES_DROPPED: Counter = Counter::new();
+/// Hall captures that came after lost edges (TIM2's overcapture flag CC1OF:
+/// a capture while the previous one was still unread). Each hides at least
+/// one edge; the estimator skips the interval ending at it.
+pub static HALL_EDGES_LOST: Counter = Counter::new();

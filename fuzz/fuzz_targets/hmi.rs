@@ -22,7 +22,8 @@ fuzz_target!(|data: &[u8]| {
                 hmi.poll_transmit(&mut tx);
             }
             0xF2 => {
-                let page = Page::from_id(it.next().unwrap_or(0) % 9).unwrap_or(Page::Mode);
+                let page = Page::from_id(it.next().unwrap_or(0) % Page::ALL.len() as u8)
+                    .unwrap_or(Page::Mode);
                 let _ = hmi.show_page(page);
             }
             0xF3 => {

@@ -157,8 +157,15 @@ pub struct BootOptions {
     pub scenario: Vec<String>,
     /// Run in QEMU's instruction-counting mode with idle time skipped
     /// (`-icount shift=0,sleep=off`): deterministic and faster than real
-    /// time, for long runs that need no touchscreen replies.
+    /// time. Without [`lockstep`](Self::lockstep) the firmware runs as fast
+    /// as it can, ahead of any touchscreen.
     pub accelerated: bool,
+    /// Lock-step with the test (implies `accelerated`): the QEMU board
+    /// blocks at the start of every control period until the test allows it
+    /// (a byte in a host FIFO, `gate=PATH`), so firmware time is exactly the
+    /// time the test has pumped: the screen answers in firmware time, and
+    /// no host load can make a control period late. The default.
+    pub lockstep: bool,
 }
 
 impl Default for BootOptions {
@@ -169,7 +176,82 @@ impl Default for BootOptions {
             flash: None,
             scenario: Vec::new(),
             accelerated: false,
+            lockstep: true,
         }
+    }
+}
+
+/// The control period of the QEMU board, and so the firmware time one
+/// lock-step token allows.
+pub const LOCKSTEP_PERIOD: Duration = Duration::from_millis(10);
+
+/// Control periods [`Bench::pump`] allows at once while the screen has
+/// nothing to send.
+const LOCKSTEP_BATCH: usize = 5;
+
+/// Most screen bytes one lock-step period carries (the QEMU board's
+/// `GATE_BYTES`).
+pub const GATE_BYTES: usize = 32;
+
+/// The host end of the lock-step gate: a FIFO the QEMU board reads one byte
+/// from per control period.
+struct Gate {
+    fifo: std::fs::File,
+    path: PathBuf,
+}
+
+impl Gate {
+    fn create() -> io::Result<Self> {
+        static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        // Short: the QEMU board keeps at most 32 bytes of the path.
+        let path = PathBuf::from(format!("/tmp/tpg-{}-{n}", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        let status = Command::new("mkfifo").arg(&path).status()?;
+        if !status.success() {
+            return Err(io::Error::other(format!(
+                "mkfifo {}: {status}",
+                path.display()
+            )));
+        }
+        // Read and write: opening a FIFO so never blocks (Linux), and QEMU's
+        // own open for reading finds a writer.
+        let fifo = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&path)?;
+        Ok(Self { fifo, path })
+    }
+
+    /// Tokens written and not yet taken by the firmware.
+    fn pending(&self) -> usize {
+        rustix::io::ioctl_fionread(&self.fifo)
+            .ok()
+            .and_then(|n| usize::try_from(n).ok())
+            .unwrap_or(0)
+    }
+
+    /// Allows `periods` control periods; the first ones carry the screen's
+    /// bytes waiting in `to_firmware` (at most [`GATE_BYTES`] each, the
+    /// QEMU board's message format: a count, then the bytes).
+    fn allow(
+        &self,
+        periods: usize,
+        to_firmware: &mut std::collections::VecDeque<u8>,
+    ) -> io::Result<()> {
+        let mut msg = Vec::with_capacity(periods);
+        for _ in 0..periods {
+            let n = to_firmware.len().min(GATE_BYTES);
+            msg.push(u8::try_from(n).unwrap_or(0));
+            msg.extend(to_firmware.drain(..n));
+        }
+        (&self.fifo).write_all(&msg)
+    }
+}
+
+impl Drop for Gate {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
     }
 }
 
@@ -182,6 +264,9 @@ pub struct Firmware {
     serial_taken: usize,
     logs_rx: Receiver<String>,
     logs: Mutex<Vec<String>>,
+    gate: Option<Gate>,
+    /// Lock-step: the screen's bytes for the next periods.
+    to_firmware: Mutex<std::collections::VecDeque<u8>>,
 }
 
 fn tool_missing(tool: &str, hint: &str) -> io::Error {
@@ -204,11 +289,18 @@ impl Firmware {
         if let Some(flash) = &options.flash {
             semihosting.push_str(&format!(",arg=flash={}", flash.display()));
         }
+        let gate = if options.lockstep {
+            let gate = Gate::create()?;
+            semihosting.push_str(&format!(",arg=gate={}", gate.path.display()));
+            Some(gate)
+        } else {
+            None
+        };
         for word in &options.scenario {
             semihosting.push_str(&format!(",arg={word}"));
         }
         let mut qemu = Command::new("qemu-system-arm");
-        if options.accelerated {
+        if options.accelerated || options.lockstep {
             qemu.args(["-icount", "shift=0,sleep=off"]);
         }
         let mut qemu = qemu
@@ -306,11 +398,81 @@ impl Firmware {
             serial_taken: 0,
             logs_rx,
             logs: Mutex::new(Vec::new()),
+            gate,
+            to_firmware: Mutex::new(std::collections::VecDeque::new()),
         })
     }
 
-    /// Sends bytes into the firmware's USART1 (the touchscreen's TX line).
+    /// Lock-step: allows the firmware `periods` more control periods.
+    /// Without lock-step, nothing.
+    pub fn allow(&self, periods: usize) -> io::Result<()> {
+        match &self.gate {
+            Some(g) => {
+                let mut queue = self
+                    .to_firmware
+                    .lock()
+                    .map_err(|_| io::Error::other("poisoned"))?;
+                g.allow(periods, &mut queue)
+            }
+            None => Ok(()),
+        }
+    }
+
+    /// Lock-step: waits until the firmware has taken every period allowed
+    /// (it then runs the last one and stops at the next).
+    /// Returns at once if QEMU has ended (its run limit).
+    pub fn wait_taken(&mut self) -> io::Result<()> {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while self.pending_periods() > 0 {
+            if self.qemu.try_wait()?.is_some() {
+                return Ok(());
+            }
+            if Instant::now() > deadline {
+                return Err(io::Error::other(
+                    "the firmware stopped taking control periods",
+                ));
+            }
+            thread::sleep(Duration::from_micros(20));
+        }
+        Ok(())
+    }
+
+    /// Lock-step: control periods allowed and not yet taken (0 without
+    /// lock-step).
+    pub fn pending_periods(&self) -> usize {
+        self.gate.as_ref().map_or(0, Gate::pending)
+    }
+
+    /// `true` in lock-step.
+    pub fn is_lockstep(&self) -> bool {
+        self.gate.is_some()
+    }
+
+    /// Lets the firmware run free (QEMU's `-icount`, as fast as it can):
+    /// the gate's end of file.
+    pub fn release(&mut self) {
+        self.gate = None;
+    }
+
+    /// Lock-step: keeps the firmware going while a caller waits for it
+    /// (one period at a time, only when the last was taken).
+    fn keep_going(&self) -> io::Result<()> {
+        if self.gate.is_some() && self.pending_periods() == 0 {
+            self.allow(1)?;
+        }
+        Ok(())
+    }
+
+    /// Sends bytes into the firmware's USART1 (the touchscreen's TX line);
+    /// in lock-step they go with the next allowed periods.
     pub fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        if self.gate.is_some() {
+            self.to_firmware
+                .lock()
+                .map_err(|_| io::Error::other("poisoned"))?
+                .extend(bytes.iter().copied());
+            return Ok(());
+        }
         self.serial.write_all(bytes)?;
         self.serial.flush()
     }
@@ -325,6 +487,7 @@ impl Firmware {
         let deadline = Instant::now() + timeout;
         let mut chunk = [0u8; 256];
         while !done(&self.serial_in) {
+            self.keep_going()?;
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
                 return Err(io::Error::new(
@@ -335,8 +498,9 @@ impl Firmware {
                     ),
                 ));
             }
+            let step = if self.gate.is_some() { 2 } else { 100 };
             self.serial
-                .set_read_timeout(Some(left.min(Duration::from_millis(100))))?;
+                .set_read_timeout(Some(left.min(Duration::from_millis(step))))?;
             match self.serial.read(&mut chunk) {
                 Ok(0) => {
                     return Err(io::Error::new(
@@ -360,17 +524,35 @@ impl Firmware {
     /// the bytes not returned by an earlier call.
     pub fn read_serial_new(&mut self, wait: Duration) -> io::Result<Vec<u8>> {
         let mut chunk = [0u8; 512];
-        self.serial
-            .set_read_timeout(Some(wait.max(Duration::from_millis(1))))?;
-        match self.serial.read(&mut chunk) {
-            Ok(0) => {}
-            Ok(n) => self
-                .serial_in
-                .extend_from_slice(chunk.get(..n).unwrap_or(&[])),
-            Err(e)
-                if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {
+        if wait.is_zero() {
+            // Whatever has arrived, without waiting.
+            self.serial.set_nonblocking(true)?;
+            loop {
+                match self.serial.read(&mut chunk) {
+                    Ok(0) => break,
+                    Ok(n) => self
+                        .serial_in
+                        .extend_from_slice(chunk.get(..n).unwrap_or(&[])),
+                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                    Err(e) => {
+                        self.serial.set_nonblocking(false)?;
+                        return Err(e);
+                    }
+                }
             }
-            Err(e) => return Err(e),
+            self.serial.set_nonblocking(false)?;
+        } else {
+            self.serial.set_read_timeout(Some(wait))?;
+            match self.serial.read(&mut chunk) {
+                Ok(0) => {}
+                Ok(n) => self
+                    .serial_in
+                    .extend_from_slice(chunk.get(..n).unwrap_or(&[])),
+                Err(e)
+                    if e.kind() == io::ErrorKind::WouldBlock
+                        || e.kind() == io::ErrorKind::TimedOut => {}
+                Err(e) => return Err(e),
+            }
         }
         let new = self
             .serial_in
@@ -418,7 +600,15 @@ impl Firmware {
             if left.is_zero() {
                 return None;
             }
-            if let Some(line) = self.drain_logs(left) {
+            let wait = if self.gate.is_some() {
+                if self.keep_going().is_err() {
+                    return None;
+                }
+                left.min(Duration::from_millis(2))
+            } else {
+                left
+            };
+            if let Some(line) = self.drain_logs(wait) {
                 if pred(&line) {
                     return Some(line);
                 }
@@ -429,6 +619,8 @@ impl Firmware {
     /// Waits for QEMU to exit by itself (the firmware's run limit), then
     /// returns its exit status and every decoded log line.
     pub fn wait_exit(mut self, timeout: Duration) -> io::Result<(ExitStatus, Vec<String>)> {
+        // Lock-step ends here: the rest of the run goes at QEMU's pace.
+        self.release();
         let deadline = Instant::now() + timeout;
         let status = loop {
             if let Some(status) = self.qemu.try_wait()? {
@@ -511,6 +703,9 @@ impl Bench {
 
     /// Moves bytes both ways for `dur`.
     pub fn pump(&mut self, dur: Duration) -> io::Result<()> {
+        if self.fw.is_lockstep() {
+            return self.pump_lockstep(dur, true);
+        }
         let deadline = Instant::now() + dur;
         loop {
             let out = self.screen.take_output();
@@ -534,6 +729,9 @@ impl Bench {
     /// and the screen sends nothing (its own state is kept, as a screen
     /// that stays powered keeps it).
     pub fn unplug(&mut self, dur: Duration) -> io::Result<()> {
+        if self.fw.is_lockstep() {
+            return self.pump_lockstep(dur, false);
+        }
         let deadline = Instant::now() + dur;
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
@@ -543,6 +741,39 @@ impl Bench {
             self.fw
                 .read_serial_new(left.min(Duration::from_millis(5)))?;
         }
+    }
+
+    /// Lock-step: `dur` of firmware time (whole control periods, at least
+    /// one), with the screen connected (`connected`) or its cable cut. One
+    /// period at a time while the screen talks: what it sends in answer to
+    /// a period's output reaches the firmware at the start of the period
+    /// after the next (20 ms; a real screen answers in 1–10 ms).
+    fn pump_lockstep(&mut self, dur: Duration, connected: bool) -> io::Result<()> {
+        let periods = dur.as_micros().div_ceil(LOCKSTEP_PERIOD.as_micros()).max(1);
+        let mut left = usize::try_from(periods).unwrap_or(usize::MAX);
+        while left > 0 {
+            let out = self.screen.take_output();
+            // While the screen has nothing to say, a few periods at a time
+            // (its answers to what the firmware sends then come up to 50 ms
+            // later; the firmware's shortest reply timeout is 200 ms).
+            let n = if out.is_empty() {
+                left.min(LOCKSTEP_BATCH)
+            } else {
+                1
+            };
+            if connected && !out.is_empty() {
+                self.fw.send(&out)?;
+            }
+            left -= n;
+            self.fw.allow(n)?;
+            // Taken: the period before has ended, its output is on the line.
+            self.fw.wait_taken()?;
+            let got = self.fw.read_serial_new(Duration::ZERO)?;
+            if connected && !got.is_empty() {
+                self.screen.feed(&got);
+            }
+        }
+        Ok(())
     }
 
     /// Pumps until `pred` holds for the screen, or `timeout`.

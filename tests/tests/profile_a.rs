@@ -190,9 +190,21 @@ fn an_out_of_range_spacing_is_rejected_and_the_saved_spacing_survives_a_reboot()
 /// Runs Speed-Adaptive at Low 2 with a fault injected at `at_ms`; returns
 /// the log.
 fn fault_run(fault: &str, at_ms: u32) -> Vec<String> {
+    fault_run_on(&["gear=2", "noise=0"], None, fault, at_ms)
+}
+
+/// As [`fault_run`] on the machine `words` describe, with the spacing
+/// (mm) entered on the screen first when given.
+fn fault_run_on(words: &[&str], spacing_mm: Option<i32>, fault: &str, at_ms: u32) -> Vec<String> {
     let word = format!("{fault}={at_ms}");
-    let mut bench = boot(&["gear=2", "noise=0", &word], at_ms + 2_000, None);
+    let mut scenario = words.to_vec();
+    scenario.push(&word);
+    let mut bench = boot(&scenario, at_ms + 2_000, None);
     bench.tap("badapt").unwrap();
+    if let Some(mm) = spacing_mm {
+        bench.enter("nspacing", mm, "bapply").unwrap();
+        assert_eq!(bench.screen.value("nspacing"), Some(mm));
+    }
     bench.tap("bstart").unwrap();
     assert!(
         bench
@@ -235,20 +247,101 @@ fn a_stalled_drum_gives_the_alarm_page_and_pwm_0() {
 
 #[test]
 fn a_lost_hall_signal_gives_the_alarm_page_and_pwm_0() {
+    // High 3 (3.65 km/h) at 35 cm (allowed up to ≈ 4 km/h): the one gear
+    // fast enough for a silence to prove a loss (docs/firmware.md; at Low 2
+    // a 1 g stop ends within a millimetre, so silence is a stop there).
     let at = 3_000;
-    let logs = fault_run("hall_loss", at);
+    let logs = fault_run_on(&["gear=6", "noise=0"], Some(350), "hall_loss", at);
     let alarm = time_of(&logs, "alarm: HallLost");
-    // Low 2: one Hall period is 177 ms; silence of 2 periods from the last
-    // edge (at most one period before the loss) declares it.
-    assert!(
-        alarm > at && alarm <= at + 2 * 177 + 100,
-        "alarm at {alarm} ms"
-    );
+    // Noiseless High 3: one edge every 25.13 mm / (3.65 km/h / 0.997)
+    // = 24.7 ms. The last edge came at most 24.7 ms before the loss; the
+    // next one is overdue 43.3 ms after it (docs/kinematics.md, hand
+    // computed in `next_edge_deadline`'s rustdoc); the control step that
+    // sees it comes within 10 ms: ≤ 78 ms, plus 10 ms for the model's
+    // millisecond sampling of the injection.
+    println!("Hall loss at {at} ms, alarm at {alarm} ms");
+    assert!(alarm > at && alarm <= at + 88, "alarm at {alarm} ms");
     let after: Vec<SimSample> = sim_samples(&logs)
         .into_iter()
         .filter(|s| s.t_ms > alarm)
         .collect();
     assert!(!after.is_empty() && after.iter().all(|s| s.ccr == 0));
+}
+
+/// Mean true drum speed and mean eq. 7 target on the true ground speed (7 cm)
+/// over the samples in `from..to` ms.
+fn drum_and_eq7(samples: &[SimSample], from: u32, to: u32) -> (f64, f64) {
+    let window: Vec<&SimSample> = samples
+        .iter()
+        .filter(|s| (from..to).contains(&s.t_ms))
+        .collect();
+    assert!(!window.is_empty(), "no samples in {from}..{to} ms");
+    let n = window.len() as f64;
+    (
+        window.iter().map(|s| s.drum_rpm).sum::<f64>() / n,
+        window
+            .iter()
+            .map(|s| eq7_drum_speed(s.ground_m_s, 0.07))
+            .sum::<f64>()
+            / n,
+    )
+}
+
+#[test]
+fn stops_of_the_tractor_through_a_half_second_chassis_latch_no_alarm() {
+    // Issue 16 item 5 on the firmware: Low 2, the full noise model (terrain,
+    // slip, tooth errors), a chassis with a 0.5 s time constant, driven
+    // stop-and-go (`stopgo=10000`: 5 s of travel, 5 s of rest, from boot),
+    // and stopped for good by `stop=21500` after its third start;
+    // Speed-Adaptive at 7 cm. Before the Hall silence rule the first stop
+    // latched "Hall speed signal lost" and the drum stayed off. Instruction
+    // counting (taps only): every time here is firmware time.
+    let options = BootOptions {
+        run_ms: Some(26_000),
+        scenario: vec![
+            "gear=2".into(),
+            "tau=500".into(),
+            "stopgo=10000".into(),
+            "stop=21500".into(),
+        ],
+        accelerated: true,
+        ..BootOptions::default()
+    };
+    let mut bench = Bench::boot(&options).expect("boot QEMU");
+    assert!(bench
+        .pump_until(Duration::from_secs(30), |s| s.page() == 1)
+        .unwrap());
+    bench.tap("badapt").unwrap();
+    assert!(bench
+        .pump_until(Duration::from_secs(30), |s| s.page() == 3)
+        .unwrap());
+    bench.tap("bstart").unwrap();
+    let logs = run_to_end(bench, 240);
+    let alarms: Vec<&String> = logs.iter().filter(|l| l.contains("alarm: ")).collect();
+    assert!(alarms.is_empty(), "{alarms:?}");
+    let samples = sim_samples(&logs);
+    // Running in the last second before each of the two stop-and-go stops
+    // (the chassis is at speed 4 s after each start: e^-8): the mean drum
+    // speed within 3 % of eq. 7 on the true ground speed (the seedlings'
+    // ±5 % load ripple and the terrain average over the second).
+    for (from, to) in [(4_000, 5_000), (14_000, 15_000)] {
+        let (drum, target) = drum_and_eq7(&samples, from, to);
+        assert!(
+            (drum - target).abs() / target <= 0.03,
+            "{from}..{to} ms: drum {drum:.2} vs {target:.2} r/min"
+        );
+    }
+    // At rest 4 s into each rest and after the final stop: the chassis
+    // (e^-8 of its speed) and the drum, which followed the travel speed
+    // down: the chassis's last crawl still brings an edge up to ≈ 1.5 s
+    // after the stop, and the estimator reports 0 at the latest 1.5 s after
+    // the last edge.
+    for s in samples.iter().filter(|s| {
+        (9_000..10_000).contains(&s.t_ms) || (19_000..20_000).contains(&s.t_ms) || s.t_ms >= 25_500
+    }) {
+        assert!(s.ground_m_s < 0.001, "{s:?}");
+        assert!(s.drum_rpm < 0.1 && s.target_rpm == 0.0, "{s:?}");
+    }
 }
 
 #[test]

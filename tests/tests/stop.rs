@@ -1,10 +1,10 @@
 //! Stopping, through the firmware on the QEMU board (issue 16, items 1–2):
 //! a Stop touch after a corrupted frame, and the controller's stop input.
 //!
-//! All runs use QEMU's instruction-counting mode (`accelerated`): every
-//! time asserted here is firmware time from the firmware's own log stamps
-//! (1 ms) or the QEMU board's µs truth, never the host's clock, so a busy
-//! host cannot change the result.
+//! All runs are in lock-step (QEMU's instruction counting, paced by the
+//! test): every time asserted here is firmware time from the firmware's own
+//! log stamps (1 ms) or the QEMU board's µs truth, never the host's clock,
+//! so a busy host cannot change the result.
 
 use std::time::Duration;
 
@@ -25,7 +25,6 @@ fn boot_to(scenario: &[&str], run_ms: u32, pages: &[u8]) -> Bench {
     let options = BootOptions {
         run_ms: Some(run_ms),
         scenario: scenario.iter().map(|s| s.to_string()).collect(),
-        accelerated: true,
         ..BootOptions::default()
     };
     let mut bench = Bench::boot(&options).expect("boot QEMU");
@@ -97,7 +96,9 @@ fn a_stop_touch_right_after_a_corrupted_frame_stops_the_drum_within_one_control_
         let before = bench.fw.logs().len();
         bench.fw.send(&corrupted).unwrap();
         if let Some(gap) = gap {
-            std::thread::sleep(gap);
+            // Firmware time (lock-step): the corrupted frame goes in the
+            // next period, the Stop 50 ms later.
+            bench.pump(gap).unwrap();
         }
         bench.fw.send(&stop).unwrap();
         let deadline = std::time::Instant::now() + Duration::from_secs(60);
@@ -170,13 +171,27 @@ fn the_stop_input_switches_the_drum_off_within_1_ms_and_stays_latched_after_it_c
         (0.0..=1000.0).contains(&latency_us),
         "outputs safe {latency_us} us after the contact opened"
     );
-    // The alarm page with its text.
+    // The alarm page with its text, timed in firmware time (lock-step:
+    // one period per pump, the newest log stamp is the firmware's now).
+    let mut shown_at = None;
+    for _ in 0..100 {
+        if bench.screen.page() == Page::Alarm.id()
+            && bench.screen.text("talarm") == Some("Stop input open (stop switch)")
+        {
+            shown_at = bench.fw.logs().iter().rev().find_map(|l| log_time_ms(l));
+            break;
+        }
+        bench.pump(Duration::from_millis(10)).unwrap();
+    }
+    let shown_at = shown_at.expect("no stop-input alarm on the screen");
+    eprintln!(
+        "stop input: alarm page on the screen by {shown_at} ms (contact opened at {open_at} ms)"
+    );
+    // The page instruction goes out in the period that sees the opening;
+    // the screen has it by the next periods (115200 baud, lock-step pacing).
     assert!(
-        bench
-            .pump_until(Duration::from_secs(10), |s| s.page() == Page::Alarm.id()
-                && s.text("talarm") == Some("Stop input open (stop switch)"))
-            .unwrap(),
-        "no stop-input alarm on the screen"
+        shown_at <= open_at + 5 * CONTROL_PERIOD_MS,
+        "alarm page at {shown_at} ms"
     );
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
     while !bench.fw.logs().iter().any(|l| l.contains("run limit of")) {
@@ -237,5 +252,77 @@ fn start_is_refused_while_the_stop_input_is_open() {
     assert!(
         !bench.fw.logs().iter().any(|l| l.contains("drum: Running")),
         "the drum started with the stop input open"
+    );
+}
+
+/// Profile B: the stop input switches both stepper outputs off within
+/// 1 ms and the planter stops (its commanded rates are zero from the next
+/// period on, and the simulated machine drops no more plants).
+#[test]
+fn the_stop_input_stops_both_steppers_of_profile_b() {
+    let open_at = 4_000;
+    let options = BootOptions {
+        run_ms: Some(7_000),
+        scenario: ["profile=b", "speed=300", &format!("stop_input={open_at}")]
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
+        ..BootOptions::default()
+    };
+    let mut bench = Bench::boot_image(qemu_tests::Image::ProfileBOnly, &options).unwrap();
+    assert!(bench
+        .pump_until(Duration::from_secs(30), |s| s.page() == Page::Belt.id())
+        .unwrap());
+    bench.tap("bstart").unwrap();
+    let truth = pump_until_log(&mut bench, "stop input truth", |l| {
+        l.contains("sim: stop input opened at")
+    });
+    let latency_us = number_after(&truth, "outputs safe at").unwrap()
+        - number_after(&truth, "opened at").unwrap();
+    assert!((0.0..=1000.0).contains(&latency_us), "{latency_us} us");
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while !bench.fw.logs().iter().any(|l| l.contains("run limit of")) {
+        assert!(std::time::Instant::now() < deadline);
+        bench.pump(Duration::from_millis(100)).unwrap();
+    }
+    let (status, logs) = bench.fw.wait_exit(Duration::from_secs(30)).unwrap();
+    assert!(status.success());
+    assert!(logs.iter().any(|l| l.contains("planter: Running")));
+    let stopped = first_after(&logs, open_at, "planter: Stopped").expect("planter stopped");
+    assert!(
+        stopped <= open_at + CONTROL_PERIOD_MS,
+        "stopped at {stopped} ms"
+    );
+    // `sim-b:` lines: time, plants, …, feed mHz, plant mHz.
+    let rates: Vec<(u32, f64, f64, f64)> = logs
+        .iter()
+        .filter(|l| l.contains("sim-b: plants"))
+        .filter_map(|l| {
+            Some((
+                log_time_ms(l)?,
+                number_after(l, "plants ")?,
+                number_after(l, "feed ")?,
+                number_after(l, "plant ")?,
+            ))
+        })
+        .collect();
+    let before: Vec<_> = rates.iter().filter(|r| r.0 < open_at).collect();
+    assert!(
+        before.iter().any(|r| r.2 > 0.0 && r.3 > 0.0),
+        "both motors ran before the stop"
+    );
+    let after: Vec<_> = rates
+        .iter()
+        .filter(|r| r.0 > open_at + CONTROL_PERIOD_MS)
+        .collect();
+    assert!(after.len() > 10);
+    assert!(
+        after.iter().all(|r| r.2 == 0.0 && r.3 == 0.0),
+        "rates after the stop"
+    );
+    let plants_then = after.first().map_or(0.0, |r| r.1);
+    assert!(
+        after.iter().all(|r| r.1 <= plants_then + 1.0),
+        "plants kept dropping after the stop"
     );
 }

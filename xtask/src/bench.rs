@@ -7,7 +7,7 @@ mod belt;
 mod drum;
 mod field;
 mod speed;
-mod svg;
+pub(crate) mod svg;
 
 use crate::{cargo, ensure_tools, footprint, root, Board, Result, TARGET};
 

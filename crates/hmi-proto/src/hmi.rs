@@ -630,6 +630,14 @@ impl Hmi {
                 Some(Command::AcknowledgeAlarm)
             }
             Action::SaveSettings => Some(Command::SaveSettings),
+            Action::IdentifyDrive => Some(Command::IdentifyDrive),
+            Action::AcceptDriveModel => Some(Command::AcceptDriveModel),
+            Action::ToggleEncoderDirection => {
+                let mut s = self.settings;
+                s.drum_encoder_reversed = !s.drum_encoder_reversed;
+                let _ = self.set_settings(s);
+                Some(Command::SetDrumEncoderReversed(s.drum_encoder_reversed))
+            }
         };
         if let Some(c) = cmd {
             self.event(Event::Command(c));

@@ -66,11 +66,13 @@ pub enum Page {
     Belt = 7,
     /// 8 `beltpar`: profile B parameters (X, B, β, N, r, h, Y).
     BeltParameters = 8,
+    /// 9 `drive`: drum drive identification (profile A).
+    Drive = 9,
 }
 
 impl Page {
     /// All pages in id order.
-    pub const ALL: [Page; 9] = [
+    pub const ALL: [Page; 10] = [
         Self::Boot,
         Self::Mode,
         Self::Fixed,
@@ -80,6 +82,7 @@ impl Page {
         Self::Settings,
         Self::Belt,
         Self::BeltParameters,
+        Self::Drive,
     ];
 
     /// The page id.
@@ -104,6 +107,7 @@ impl Page {
             Self::Settings => "settings",
             Self::Belt => "belt",
             Self::BeltParameters => "beltpar",
+            Self::Drive => "drive",
         }
     }
 
@@ -589,6 +593,13 @@ pub enum Command {
     SetBeltThickness(BeltThickness),
     /// Profile B: new speed-change threshold Y.
     SetSpeedThreshold(SpeedThreshold),
+    /// The drum encoder counts backwards (`true`: A/B swapped on the
+    /// machine); page 6 `benc` toggles it. Persisted with *Save settings*.
+    SetDrumEncoderReversed(bool),
+    /// Page 9: start the drive identification (drum stopped, belt empty).
+    IdentifyDrive,
+    /// Page 9: use and save the drive model just identified.
+    AcceptDriveModel,
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -637,6 +648,17 @@ pub struct Settings {
     pub profile: MachineProfile,
     /// Profile B's parameters.
     pub belt: BeltSettings,
+    /// The drum encoder's direction is reversed (page 6 `tenc`).
+    pub drum_encoder_reversed: bool,
+}
+
+/// The label of the drum encoder direction (page 6 `tenc`).
+pub const fn encoder_direction_label(reversed: bool) -> &'static str {
+    if reversed {
+        "reversed (A/B)"
+    } else {
+        "normal"
+    }
 }
 
 /// Live values written to the screen; each goes to the components showing it
@@ -669,6 +691,14 @@ pub struct Status {
     pub roller_turns: u32,
     /// Profile B: effective roller radius r' = r + h·j, 0.1 mm (saturating).
     pub roller_radius_dmm: u16,
+    /// Drum drive `n_max` (identified, or in force), r/min × 100.
+    pub drive_n_max_x100: u16,
+    /// Drum drive time constant τ, 0.1 ms.
+    pub drive_tau_x10_ms: u16,
+    /// Drum drive dead time, 0.1 ms.
+    pub drive_dead_time_x10_ms: u16,
+    /// Drive identification: 0 idle, 1 running, 2 done (press Save), 3 failed.
+    pub drive_identification: u8,
 }
 
 /// Live values shown by display-only components.
@@ -699,6 +729,14 @@ pub enum StatusField {
     RollerTurns,
     /// [`Status::roller_radius_dmm`].
     RollerRadius,
+    /// [`Status::drive_n_max_x100`].
+    DriveNMax,
+    /// [`Status::drive_tau_x10_ms`].
+    DriveTau,
+    /// [`Status::drive_dead_time_x10_ms`].
+    DriveDeadTime,
+    /// [`Status::drive_identification`].
+    DriveIdentification,
 }
 
 impl StatusField {
@@ -718,6 +756,10 @@ impl StatusField {
             Self::FeedMotorSpeed => i32::from(s.feed_motor_rpm_x100),
             Self::RollerTurns => sat(s.roller_turns),
             Self::RollerRadius => i32::from(s.roller_radius_dmm),
+            Self::DriveNMax => i32::from(s.drive_n_max_x100),
+            Self::DriveTau => i32::from(s.drive_tau_x10_ms),
+            Self::DriveDeadTime => i32::from(s.drive_dead_time_x10_ms),
+            Self::DriveIdentification => i32::from(s.drive_identification),
         }
     }
 }
@@ -757,6 +799,12 @@ pub enum Action {
     AcknowledgeAlarm,
     /// [`Command::SaveSettings`].
     SaveSettings,
+    /// [`Command::SetDrumEncoderReversed`] with the other direction.
+    ToggleEncoderDirection,
+    /// [`Command::IdentifyDrive`].
+    IdentifyDrive,
+    /// [`Command::AcceptDriveModel`].
+    AcceptDriveModel,
 }
 
 /// The role of a component in the contract.
@@ -777,6 +825,8 @@ pub enum Role {
     ProfileLabel,
     /// The firmware version, written with `tver.txt=`.
     Version,
+    /// The drum encoder direction's label, written with `tenc.txt=`.
+    EncoderDirectionLabel,
     /// The alarm text, written with `talarm.txt=`.
     AlarmText,
     /// The page's message box for validation errors and notices.
@@ -1147,6 +1197,21 @@ pub const COMPONENTS: &[Component] = &[
         R::Action(A::NextProfile),
     ),
     c(P::Settings, 8, "tprofile", K::Text, R::ProfileLabel),
+    c(
+        P::Settings,
+        9,
+        "benc",
+        K::Button,
+        R::Action(A::ToggleEncoderDirection),
+    ),
+    c(P::Settings, 10, "tenc", K::Text, R::EncoderDirectionLabel),
+    c(
+        P::Settings,
+        11,
+        "bdrive",
+        K::Button,
+        R::Action(A::ShowPage(P::Drive)),
+    ),
     // 7 belt (profile B home)
     c(P::Belt, 1, "bstart", K::Button, R::Action(A::Start)),
     c(P::Belt, 2, "bstop", K::Button, R::Action(A::Stop)),
@@ -1314,6 +1379,58 @@ pub const COMPONENTS: &[Component] = &[
         R::Action(A::ShowPage(P::Belt)),
     ),
     c(P::BeltParameters, 16, "tmsg", K::Text, R::Message),
+    // 9 drive (profile A: drum drive identification)
+    c(
+        P::Drive,
+        1,
+        "bident",
+        K::Button,
+        R::Action(A::IdentifyDrive),
+    ),
+    c(
+        P::Drive,
+        2,
+        "bidsave",
+        K::Button,
+        R::Action(A::AcceptDriveModel),
+    ),
+    c(
+        P::Drive,
+        3,
+        "bback",
+        K::Button,
+        R::Action(A::ShowPage(P::Settings)),
+    ),
+    c(
+        P::Drive,
+        4,
+        "xnmax",
+        K::Xfloat(2),
+        R::Status(StatusField::DriveNMax),
+    ),
+    c(
+        P::Drive,
+        5,
+        "xtau",
+        K::Xfloat(1),
+        R::Status(StatusField::DriveTau),
+    ),
+    c(
+        P::Drive,
+        6,
+        "xdead",
+        K::Xfloat(1),
+        R::Status(StatusField::DriveDeadTime),
+    ),
+    c(
+        P::Drive,
+        7,
+        "nidstate",
+        K::Number,
+        R::Status(StatusField::DriveIdentification),
+    ),
+    c(P::Drive, 8, "bstop", K::Button, R::Action(A::Stop)),
+    c(P::Drive, 9, "tmsg", K::Text, R::Message),
 ];
 
 /// Most instructions one page refresh needs ([`page_instructions`]).
@@ -1343,6 +1460,11 @@ pub fn page_instructions(
                 ScreenText::new(settings.profile.label()).unwrap_or(version),
             ),
             Role::Version => Instruction::SetText(comp.obj(), version),
+            Role::EncoderDirectionLabel => Instruction::SetText(
+                comp.obj(),
+                ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
+                    .unwrap_or(version),
+            ),
             _ => continue,
         };
         // Capacity is checked by a test for every page.
@@ -1399,6 +1521,7 @@ mod tests {
                                 | Role::GearLabel
                                 | Role::CalibrationLabel
                                 | Role::ProfileLabel
+                                | Role::EncoderDirectionLabel
                                 | Role::Version
                         )
                     })
@@ -1422,6 +1545,10 @@ mod tests {
         }
         for p in MachineProfile::ALL {
             let l = p.label();
+            assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
+        }
+        for r in [false, true] {
+            let l = encoder_direction_label(r);
             assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
         }
         let m = PROFILE_RESTART_MESSAGE;

@@ -382,6 +382,49 @@ fn calibration_and_settings_pages() {
         ]
     );
     assert_eq!(screen.brightness(), 40);
+
+    // The drum encoder direction toggles on page 6 and its label follows.
+    assert_eq!(screen.text("tenc"), Some("normal"));
+    screen.release("benc").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetDrumEncoderReversed(true))]
+    );
+    assert_eq!(screen.text("tenc"), Some("reversed (A/B)"));
+    screen.release("benc").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetDrumEncoderReversed(false))]
+    );
+    assert_eq!(screen.text("tenc"), Some("normal"));
+
+    // Page 9: the drive identification's buttons and values.
+    screen.release("bdrive").unwrap();
+    assert!(pump(&mut hmi, &mut screen).is_empty());
+    assert_eq!(screen.page(), Page::Drive.id());
+    screen.release("bident").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::IdentifyDrive)]
+    );
+    hmi.write_status(&Status {
+        drive_n_max_x100: 5811,
+        drive_tau_x10_ms: 875,
+        drive_dead_time_x10_ms: 600,
+        drive_identification: 2,
+        ..Status::default()
+    })
+    .unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.value("xnmax"), Some(5811));
+    assert_eq!(screen.value("xtau"), Some(875));
+    assert_eq!(screen.value("xdead"), Some(600));
+    assert_eq!(screen.value("nidstate"), Some(2));
+    screen.release("bidsave").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::AcceptDriveModel)]
+    );
 }
 
 #[test]
@@ -392,7 +435,7 @@ fn virtual_screen_answers_like_the_real_one() {
     s.feed(b"tmsg.txt=\"a\\\"b\\\\c\\rd\"\xff\xff\xffget tmsg.txt\xff\xff\xff");
     assert_eq!(s.text("tmsg"), Some("a\"b\\c\nd"));
     assert_eq!(s.take_output(), b"\x70a\"b\\c\nd\xff\xff\xff");
-    s.feed(b"page 9\xff\xff\xffget nspeed.txt\xff\xff\xffbogus\xff\xff\xff");
+    s.feed(b"page 10\xff\xff\xffget nspeed.txt\xff\xff\xffbogus\xff\xff\xff");
     assert_eq!(
         s.take_output(),
         b"\x03\xff\xff\xff\x1a\xff\xff\xff\x00\xff\xff\xff"

@@ -39,6 +39,10 @@ fn burst(page: Page) -> (usize, u32) {
         feed_motor_rpm_x100: u16::MAX,
         roller_turns: u32::MAX,
         roller_radius_dmm: u16::MAX,
+        drive_n_max_x100: u16::MAX,
+        drive_tau_x10_ms: u16::MAX,
+        drive_dead_time_x10_ms: u16::MAX,
+        drive_identification: u8::MAX,
     };
     let _ = hmi.show_page(page);
     let _ = hmi.write_status(&status);

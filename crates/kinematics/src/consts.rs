@@ -40,6 +40,18 @@ pub const DRUM_GEAR_RATIO: u8 = 118;
 pub const CAPTURE_TIMER_HZ: u32 = 1_000_000;
 /// Largest pulse rate the NPN Hall proximity switch supports, Hz.
 pub const HALL_MAX_HZ: u32 = 1_000;
+/// Track per Hall edge, µm: `π·(D1 + 2·H1) / Z1` = π·0.20 m / 25 = 25 132.7 µm
+/// (SPEC §2), rounded.
+pub const HALL_GAP_UM: u32 = 25_133;
+/// The fastest a tracked chassis can slow down, mm/s² of track speed: 1 g.
+///
+/// Without skidding the track rolls with the ground, so its speed can drop
+/// only as fast as friction decelerates the machine, `μ·g`. Rubber tracks
+/// reach a friction coefficient of about 0.5–0.8 on field soil and about
+/// 0.8–0.9 on dry concrete; μ = 1 is above every surface the machine works
+/// on (docs/kinematics.md, "Hall silence"). A track that locks and skids is
+/// not a normal stop.
+pub const CHASSIS_DECEL_LIMIT_MM_S2: u32 = 9_810;
 /// MCU system clock (paper A eq. 1 `Hclk`), Hz.
 pub const HCLK_HZ: u32 = 72_000_000;
 

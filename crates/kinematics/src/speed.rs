@@ -40,6 +40,23 @@
 //!
 //! *Glitches*: an edge closer than `min_edge_gap` or than 1/2^`glitch_shift`
 //! of the last period (default ¼) is dropped and counted.
+//!
+//! # Hall silence: a stop or a lost signal?
+//!
+//! [`MtEstimator::next_edge_deadline`] says by when the next edge must come
+//! if the machine cannot slow down faster than a [`DecelerationBound`]. Over
+//! the last gap (length `s`, time `T`) the mean speed was `s/T`; since the
+//! speed drops by at most `a` per second, it was at least `v_e = s/T − a·T/2`
+//! at the newest edge, and from there the machine covers at least
+//! `v_e²/(2a)` before it can be at rest. If that is less than the next gap
+//! `s′`, the machine may stop before the next tooth: silence then proves
+//! nothing ([`None`]). Otherwise the next edge must come by the time `t` with
+//! `v_e·t − a·t²/2 = s′`, i.e. `t = 2s′ / (v_e + √(v_e² − 2a·s′))`; an edge
+//! later than that is impossible for a moving machine, so the signal is lost.
+//! The gap lengths are the learned tooth shares with a tolerance (pitch
+//! errors of teeth not learned yet, capture jitter) that shortens `s` and
+//! lengthens `s′`. With the chassis limit of 1 g this leaves evidence only
+//! above ≈ 3.4 km/h (docs/kinematics.md).
 
 use crate::units::{RevPerMin, Seconds, Ticks};
 use crate::{fx, Error};
@@ -138,6 +155,62 @@ impl CaptureExtender {
     #[must_use]
     pub fn now(&self, counter: u16, overflow_pending: bool) -> Ticks {
         self.extend(counter, overflow_pending)
+    }
+
+    /// Extends a capture with the counter read *after* the update flag:
+    /// exact as long as the capture and the pending update are less than one
+    /// whole wrap old (65.5 ms at 1 MHz), where [`extend`](Self::extend)'s
+    /// half-range rule needs the interrupt within half a wrap.
+    ///
+    /// Read in this order in the timer interrupt: the capture register, then
+    /// the status register (`overflow_pending` = its UIF, not yet passed to
+    /// [`on_overflow`](Self::on_overflow)), then the counter
+    /// (`counter_after`). With an update pending, the counter has wrapped
+    /// since the last accounted period and only counted up from 0 since: a
+    /// capture taken after the wrap is at most the counter read later, one
+    /// taken before it (less than a wrap ago) is above it. Without one, no
+    /// wrap came before the status read, so the capture (read earlier) is in
+    /// the accounted period.
+    ///
+    /// This is what a CPU stall needs: a flash page erase holds the bus for
+    /// up to 40 ms, and a capture made 35 ms after an overflow that could not
+    /// be serviced reads 35 000 (above half the range): the half-range rule
+    /// stamps it a whole wrap early, this one does not.
+    ///
+    /// ```
+    /// use kinematics::speed::CaptureExtender;
+    /// let x = CaptureExtender::new();
+    /// // Overflow at 65 536 µs, unserviced; edge at 65 536 + 35 000; the
+    /// // interrupt runs at 65 536 + 38 000 (counter 38 000).
+    /// assert_eq!(x.extend_at(35_000, true, 38_000).0, 65_536 + 35_000);
+    /// // Edge at 60 000 (before the wrap), read at 65 536 + 30 000.
+    /// assert_eq!(x.extend_at(60_000, true, 30_000).0, 60_000);
+    /// // No update pending: the capture is in the accounted period.
+    /// assert_eq!(x.extend_at(65_000, false, 65_100).0, 65_000);
+    /// ```
+    #[must_use]
+    pub fn extend_at(&self, capture: u16, overflow_pending: bool, counter_after: u16) -> Ticks {
+        let high = if overflow_pending && capture <= counter_after {
+            self.high.wrapping_add(1)
+        } else {
+            self.high
+        };
+        Ticks((u32::from(high) << 16) | u32::from(capture))
+    }
+
+    /// The current time from the counter read between two reads of the
+    /// update flag (`pending_before`, `counter`, `pending_after`): exact while
+    /// the pending update is less than a whole wrap old. An update already
+    /// pending before the read means the counter is past the wrap; one that
+    /// appeared between the reads happened next to the counter read (the
+    /// counter is then near 0 or near 2^16, and the half-range rule decides).
+    #[must_use]
+    pub fn now_between(&self, pending_before: bool, counter: u16, pending_after: bool) -> Ticks {
+        if pending_before {
+            Ticks((u32::from(self.high.wrapping_add(1)) << 16) | u32::from(counter))
+        } else {
+            self.extend(counter, pending_after)
+        }
     }
 }
 
@@ -245,8 +318,109 @@ impl EstimatorSettings {
             history: [0; 3],
             history_len: 0,
             glitches: 0,
+            lost: false,
         })
     }
+}
+
+/// The fastest the Hall gear's track speed can fall, with the gap tolerance
+/// of the silence rule ([`MtEstimator::next_edge_deadline`]); build it with
+/// [`DecelerationBound::new`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DecelerationBound {
+    /// Deceleration in Q16 nominal gaps per tick², × 2^48.
+    alpha_q48: u64,
+    /// Relative tolerance on a gap's length, %.
+    tolerance_pct: u8,
+}
+
+/// Why [`DecelerationBound::new`] refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DecelerationBoundError {
+    /// Deceleration outside 1 … 100 m/s².
+    Deceleration,
+    /// Gap length outside 1 mm … 1 m.
+    Gap,
+    /// Timer rate outside 1 … 100 MHz.
+    TimerRate,
+    /// Gap tolerance above 50 %.
+    Tolerance,
+}
+
+impl core::fmt::Display for DecelerationBoundError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::Deceleration => "deceleration outside 1 .. 100 m/s2",
+            Self::Gap => "gap length outside 1 mm .. 1 m",
+            Self::TimerRate => "timer rate outside 1 .. 100 MHz",
+            Self::Tolerance => "gap tolerance above 50 %",
+        })
+    }
+}
+
+impl core::error::Error for DecelerationBoundError {}
+
+impl DecelerationBound {
+    /// A deceleration of `decel_mm_s2` of track speed, where one nominal gap
+    /// of the gear is `gap_um` of track and the capture timer counts
+    /// `timer_hz`; gap lengths are trusted to ±`tolerance_pct` %.
+    ///
+    /// ```
+    /// use kinematics::speed::DecelerationBound;
+    /// // 10.5 m/s² on the 25.133 mm gaps of the Hall gear, 1 MHz ticks, ±5 %.
+    /// assert!(DecelerationBound::new(10_500, 25_133, 1_000_000, 5).is_ok());
+    /// assert!(DecelerationBound::new(0, 25_133, 1_000_000, 5).is_err());
+    /// ```
+    pub fn new(
+        decel_mm_s2: u32,
+        gap_um: u32,
+        timer_hz: u32,
+        tolerance_pct: u8,
+    ) -> Result<Self, DecelerationBoundError> {
+        if !(1_000..=100_000).contains(&decel_mm_s2) {
+            return Err(DecelerationBoundError::Deceleration);
+        }
+        if !(1_000..=1_000_000).contains(&gap_um) {
+            return Err(DecelerationBoundError::Gap);
+        }
+        if !(1_000_000..=100_000_000).contains(&timer_hz) {
+            return Err(DecelerationBoundError::TimerRate);
+        }
+        if tolerance_pct > 50 {
+            return Err(DecelerationBoundError::Tolerance);
+        }
+        // α = a / gap nominal gaps per s² = a·1000/gap_um (a in mm/s²);
+        // in Q16 gaps per tick², × 2^48: α·2^16·2^48 / f². Formed as
+        // ((a·2^40 / gap_um)·1000 / f)·2^24 / f without u128 division: over
+        // the accepted ranges every step fits u64 (a·2^40 < 2^57; at most
+        // 2^61 before the last division) and the result is exact to 1e-8 at
+        // the board's values, to 0.1 % at the far corner (1 m/s², 1 m gaps,
+        // 100 MHz).
+        let f = u64::from(timer_hz);
+        let alpha_q48 = (u64::from(decel_mm_s2) << 40)
+            .checked_div(u64::from(gap_um))
+            .and_then(|q| q.checked_mul(1000))
+            .and_then(|q| q.checked_div(f))
+            .and_then(|q| q.checked_mul(1 << 24))
+            .and_then(|q| q.checked_div(f))
+            .ok_or(DecelerationBoundError::Deceleration)?;
+        Ok(Self {
+            alpha_q48,
+            tolerance_pct,
+        })
+    }
+}
+
+/// The terms of the Hall silence rule for the newest edge (see
+/// `MtEstimator::silence`).
+struct Silence {
+    t: u64,
+    e: u64,
+    a: u64,
+    s_next: u64,
+    disc: u64,
 }
 
 /// What an update saw.
@@ -352,6 +526,8 @@ pub struct MtEstimator {
     history: [u32; 3],
     history_len: u8,
     glitches: u32,
+    /// Edges were lost before the next one (see [`MtEstimator::edges_lost`]).
+    lost: bool,
 }
 
 #[cfg(feature = "defmt")]
@@ -419,6 +595,137 @@ impl MtEstimator {
             .map_or(ONE_Q16, |&d| weight_from_offset(d))
     }
 
+    /// By how many ticks after the newest edge the next edge must have come
+    /// if the machine slows down no faster than `bound` (module docs, "Hall
+    /// silence"); `None` when the silence proves nothing: the machine may
+    /// stop before the next tooth (too slow for the bound), or there is no
+    /// measured gap (at start, after a stop).
+    ///
+    /// ```
+    /// use kinematics::speed::{DecelerationBound, EstimatorSettings};
+    /// use kinematics::units::Ticks;
+    /// let bound = DecelerationBound::new(10_500, 25_133, 1_000_000, 5).unwrap();
+    /// let mut est = EstimatorSettings::default().build().unwrap();
+    /// // High 3 (3.66 km/h at the gear): one edge every 24.7 ms.
+    /// for k in 0..5u32 {
+    ///     est.push_edge(Ticks(k * 24_700));
+    /// }
+    /// // By hand: u = a·T²/s = 10.5 · 0.0247² / 0.025 133 = 0.2549 gap;
+    /// // v_e·T = 0.95 − u/2 = 0.8225 gap; t = T · 2·1.05 / (0.8225 +
+    /// // √(0.8225² − 2·0.2549·1.05)) = 1.7524 T = 43.28 ms.
+    /// let d = est.next_edge_deadline(&bound).unwrap();
+    /// assert!((43_200..43_360).contains(&d), "{d}");
+    /// // Low 2 (0.51 km/h, 177 ms per edge): the machine can stop within
+    /// // a gap, so silence proves nothing.
+    /// let mut est = EstimatorSettings::default().build().unwrap();
+    /// for k in 0..5u32 {
+    ///     est.push_edge(Ticks(k * 177_000));
+    /// }
+    /// assert_eq!(est.next_edge_deadline(&bound), None);
+    /// ```
+    #[must_use]
+    pub fn next_edge_deadline(&self, bound: &DecelerationBound) -> Option<u32> {
+        let Silence {
+            t, e, s_next, disc, ..
+        } = self.silence(bound)?;
+        let root = disc.isqrt();
+        // t = 2s′/(v_e + √…) = T·2s′/(v_e·T + √…·T).
+        let deadline = t
+            .checked_mul(s_next)?
+            .checked_mul(2)?
+            .checked_div(e.checked_add(root)?)?;
+        Some(u32::try_from(deadline).unwrap_or(u32::MAX))
+    }
+
+    /// Whether the next edge, `since_edge_ticks` after the newest one and
+    /// still not there, is later than any machine slowing down no faster
+    /// than `bound` allows: the same rule as
+    /// [`next_edge_deadline`](Self::next_edge_deadline) (`since >
+    /// deadline`), without its square root (≈ 0.5 KB of flash on the MCU):
+    /// the least distance such a machine covers in that time,
+    /// `v_e·t − a·t²/2` (or `v_e²/2a` once it can be at rest), exceeds the
+    /// next gap. `false` whenever there is no deadline.
+    ///
+    /// ```
+    /// use kinematics::speed::{DecelerationBound, EstimatorSettings};
+    /// use kinematics::units::Ticks;
+    /// let bound = DecelerationBound::new(10_500, 25_133, 1_000_000, 5).unwrap();
+    /// let mut est = EstimatorSettings::default().build().unwrap();
+    /// for k in 0..5u32 {
+    ///     est.push_edge(Ticks(k * 24_700)); // High 3
+    /// }
+    /// // The deadline is 43.28 ms (see `next_edge_deadline`).
+    /// assert!(!est.next_edge_overdue(43_200, &bound));
+    /// assert!(est.next_edge_overdue(43_360, &bound));
+    /// ```
+    #[must_use]
+    pub fn next_edge_overdue(&self, since_edge_ticks: u32, bound: &DecelerationBound) -> bool {
+        let Some(Silence {
+            t, e, a, s_next, ..
+        }) = self.silence(bound)
+        else {
+            return false;
+        };
+        // r = τ/T, Q16 (τ < 2^32, so τ·2^16 < 2^48).
+        let Some(r) = (u64::from(since_edge_ticks) << 16).checked_div(t) else {
+            return false;
+        };
+        // Past the moment the machine can be at rest (a·τ ≥ v_e, i.e.
+        // a·T²·r ≥ v_e·T·2^16): it has covered v_e²/2a ≥ s′ (there is a
+        // deadline), so the edge is overdue.
+        let e_q32 = e.saturating_mul(1 << 16);
+        let a_r = a.saturating_mul(r);
+        if a_r >= e_q32 {
+            return true;
+        }
+        // Least distance covered, Q32 gaps: (v_e·T)·r − (a·T²)·r²/2, with
+        // a·T²·r < v_e·T·2^16 < 2^33 here, so every product fits.
+        let covered = e
+            .saturating_mul(r)
+            .saturating_sub(((a_r >> 16).saturating_mul(r)) >> 1);
+        covered > s_next.saturating_mul(1 << 16)
+    }
+
+    /// The terms of the silence rule (module docs), when the silence can
+    /// prove anything: the last gap `t` (ticks), `v_e·T` (`e`), `a·T²`
+    /// (`a`) and the next gap `s′` (`s_next`), all in Q16 nominal gaps, and
+    /// the discriminant `(v_e·T)² − 2·a·T²·s′ ≥ 0`.
+    fn silence(&self, bound: &DecelerationBound) -> Option<Silence> {
+        if !self.has_last || self.valid_run < 2 || self.last_gap == 0 {
+            return None;
+        }
+        let t = u64::from(self.last_gap);
+        let tol = u64::from(bound.tolerance_pct);
+        // Gap lengths, Q16 nominal gaps (< 2^17 each).
+        let s_last = u64::from(self.weight(self.tooth))
+            .checked_mul(100_u64.checked_sub(tol)?)?
+            .checked_div(100)?;
+        let next = self
+            .tooth
+            .checked_add(1)
+            .filter(|&i| i < self.z)
+            .unwrap_or(0);
+        let s_next = u64::from(self.weight(next))
+            .checked_mul(tol.checked_add(100)?)?
+            .checked_div(100)?;
+        // a·T², Q16 gaps: (α·T >> 24)·T >> 24. A product that overflows is
+        // a deceleration far beyond one gap: no evidence.
+        let a = (bound.alpha_q48.checked_mul(t)? >> 24).checked_mul(t)? >> 24;
+        // v_e·T = s − a·T²/2; not positive: the machine may be at rest.
+        let e = s_last.checked_sub(a / 2).filter(|&e| e > 0)?;
+        // (v_e·T)² − 2·a·T²·s′ < 0: it may stop before the next tooth.
+        let disc = e
+            .checked_mul(e)?
+            .checked_sub(a.checked_mul(s_next)?.checked_mul(2)?)?;
+        Some(Silence {
+            t,
+            e,
+            a,
+            s_next,
+            disc,
+        })
+    }
+
     /// Records one Hall edge (call from the capture interrupt). O(1), no division.
     pub fn push_edge(&mut self, t: Ticks) -> EdgeVerdict {
         let t = t.0;
@@ -438,7 +745,8 @@ impl MtEstimator {
             if dt > self.cfg.stop_timeout_ticks {
                 self.restart();
                 verdict = EdgeVerdict::Restart;
-            } else {
+            } else if !self.lost {
+                // (A gap with lost edges in it is not a tooth period.)
                 self.last_gap = dt;
             }
         } else {
@@ -458,8 +766,40 @@ impl MtEstimator {
         self.has_last = true;
         self.edges_total = self.edges_total.wrapping_add(1);
         self.valid_run = self.valid_run.saturating_add(1);
+        if core::mem::take(&mut self.lost) && verdict == EdgeVerdict::Accepted {
+            self.resync();
+        }
         self.track_steadiness(t);
         verdict
+    }
+
+    /// Says that the capture hardware lost one or more edges before the next
+    /// one pushed (the F103's overcapture flag CC1OF: a capture came while
+    /// the previous one was unread). The interval that ends at the next edge
+    /// spans an unknown number of teeth, so it is not measured: the next
+    /// edge starts a new window (the speed held until then is kept, and
+    /// decays as usual), and the tooth-pitch table, whose tooth index is
+    /// now off by the lost count, is dropped and learnt again from whole
+    /// revolutions.
+    pub fn edges_lost(&mut self) {
+        self.lost = true;
+    }
+
+    /// Restarts the window and the pitch table at the newest edge after lost
+    /// edges, keeping the held speed.
+    fn resync(&mut self) {
+        self.ref_stamp = self.newest();
+        self.ref_edges = self.edges_total;
+        self.ref_valid = true;
+        self.valid_run = 1;
+        self.rev_min = u32::MAX;
+        self.rev_max = 0;
+        self.rev_count = 0;
+        self.rev_steady = false;
+        self.weights = [0; MAX_TEETH];
+        self.weight_sum = u32::try_from(self.z).unwrap_or(0).saturating_mul(ONE_Q16);
+        self.learned_mask = 0;
+        self.learned_upto = self.edges_total;
     }
 
     /// Keeps the spread of the rolling revolution time over groups of z

@@ -5,7 +5,14 @@ use kinematics::consts::{self, Gear};
 
 use crate::machine::Machine;
 
-/// Longest transport delay the delay line holds, milliseconds.
+/// Longest transport delay the delay line holds, milliseconds: 63 on the
+/// host (feature `std`: drives with their own speed loop, ramp or RS-485
+/// read-back, 20–60 ms, issue 16 item 3), 15 without `std` (the QEMU
+/// board's RAM).
+#[cfg(feature = "std")]
+pub const MAX_TRANSPORT_DELAY_MS: u8 = 63;
+/// See above.
+#[cfg(not(feature = "std"))]
 pub const MAX_TRANSPORT_DELAY_MS: u8 = 15;
 
 /// Which machine the plants come from.
@@ -69,6 +76,13 @@ pub struct Config {
     /// Chassis lag of the wheel speed behind its command, s (0 = steps are
     /// instantaneous). Default 0.
     pub track_tau_s: f32,
+    /// Largest deceleration of the wheel (track rolling) speed, mm/s² (0 =
+    /// no limit; an integer so that the model stays within its 528 bytes).
+    /// A tracked chassis whose tracks do not skid slows down at most as fast
+    /// as the friction between track and ground allows (μ·g,
+    /// docs/machine-sim.md); with `track_tau_s` 0 a stop is then a constant
+    /// deceleration at this limit. Default 0.
+    pub track_decel_limit_mm_s2: u16,
     /// Scale of the Table 12 track slip `1 − k2` (0 = no slip). Default 1.
     pub track_slip_scale: f32,
     /// Relative variation (SD) of the slip (low-pass, τ = 1 s). Default 0.1.
@@ -85,6 +99,10 @@ pub struct Config {
     pub terrain_stop_interval_s: f32,
     /// Duration of a random stop, s. Default 1.
     pub terrain_stop_duration_s: f32,
+    /// Stop-and-go: the stops come exactly `terrain_stop_interval_s` after
+    /// the end of the previous one (the first at `terrain_stop_interval_s`)
+    /// instead of at random. Default false.
+    pub terrain_stops_regular: bool,
 
     // ----- Hall sensor (SPEC §2) -----
     /// Teeth of the Hall gear. Default 25 (`consts::Z1`).
@@ -154,6 +172,7 @@ impl Default for Config {
             belt_initial_phase: 0.0,
             initial_gear: None,
             track_tau_s: 0.0,
+            track_decel_limit_mm_s2: 0,
             track_slip_scale: 1.0,
             track_slip_noise: 0.1,
             terrain_amplitude: 0.03,
@@ -162,6 +181,7 @@ impl Default for Config {
             terrain_step_interval_s: 5.0,
             terrain_stop_interval_s: 0.0,
             terrain_stop_duration_s: 1.0,
+            terrain_stops_regular: false,
             hall_teeth: consts::Z1,
             hall_pitch_error: 0.02,
             hall_k1_scale: 1.0,

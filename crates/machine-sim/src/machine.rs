@@ -7,8 +7,17 @@ use crate::metrics::{FieldMetrics, MetricsError, SpacingAccumulator};
 use crate::rng::{hash_signed_unit, splitmix64, Rng};
 use crate::tables;
 
-/// Slots of the transport-delay line (one per millisecond).
+/// Slots of the transport-delay line (one per millisecond): up to
+/// [`crate::MAX_TRANSPORT_DELAY_MS`] (63 ms on the host with `std`, 15 ms
+/// without it, i.e. on the QEMU board, whose 8 KB of RAM has no room to
+/// spare). Each slot holds the duty in `u16` fractions of 1 (1/65 535, far
+/// finer than the PWM's 1/3600).
+#[cfg(feature = "std")]
+const RING: usize = 64;
+#[cfg(not(feature = "std"))]
 const RING: usize = 16;
+/// Scale of a delay-line slot (see [`RING`]).
+const DUTY_SCALE: f32 = 65_535.0;
 /// The model's internal grid: sub-steps never cross a millisecond boundary.
 const GRID_US: u32 = 1000;
 const TWO_PI: f32 = core::f32::consts::TAU;
@@ -116,7 +125,7 @@ pub struct Machine {
     faults: u8,
     // Drum motor.
     delay_head: u8,
-    delay_line: [f32; RING],
+    delay_line: [u16; RING],
     motor_alpha_1ms: f32,
     drum_rpm: f32,
     speed_noise: LpNoise,
@@ -161,6 +170,16 @@ pub struct Machine {
     metrics: SpacingAccumulator,
 }
 
+/// When the next stop of the terrain starts: `interval_s` after `from_us`
+/// when the stops are regular (no random draw), else at random.
+fn stop_time_us(rng: &mut Rng, cfg: &Config, from_us: u64) -> u64 {
+    if cfg.terrain_stops_regular && cfg.terrain_stop_interval_s > 0.0 {
+        from_us.saturating_add((f64::from(cfg.terrain_stop_interval_s) * 1.0e6) as u64)
+    } else {
+        event_time_us(rng, cfg.terrain_stop_interval_s, from_us)
+    }
+}
+
 fn event_time_us(rng: &mut Rng, mean_s: f32, now_us: u64) -> u64 {
     if mean_s > 0.0 {
         let dt = (rng.exponential(mean_s) * 1.0e6).max(1000.0);
@@ -175,7 +194,7 @@ impl Machine {
     pub(crate) fn new(cfg: Config) -> Self {
         let mut rng = Rng::new(cfg.seed);
         let next_terrain_step_us = event_time_us(&mut rng, cfg.terrain_step_interval_s, 0);
-        let next_stop_us = event_time_us(&mut rng, cfg.terrain_stop_interval_s, 0);
+        let next_stop_us = stop_time_us(&mut rng, &cfg, 0);
         // The ranges were checked by `Config::validate`.
         let metrics = SpacingAccumulator::new_unchecked(
             f64::from(cfg.target_spacing_m),
@@ -187,7 +206,7 @@ impl Machine {
             now_us: 0,
             faults: 0,
             delay_head: 0,
-            delay_line: [0.0; RING],
+            delay_line: [0; RING],
             motor_alpha_1ms: lag_alpha(1.0e-3, cfg.motor_tau_s),
             drum_rpm: 0.0,
             speed_noise: LpNoise::default(),
@@ -272,7 +291,8 @@ impl Machine {
         };
         self.delay_head = (self.delay_head + 1) % RING as u8;
         if let Some(slot) = self.delay_line.get_mut(usize::from(self.delay_head)) {
-            *slot = duty;
+            // `duty` is sanitised to 0 … 1: the product fits u16.
+            *slot = libm::roundf(duty * DUTY_SCALE) as u16;
         }
         let c = &self.cfg;
         if c.speed_noise > 0.0 {
@@ -293,8 +313,7 @@ impl Machine {
             self.stop_until_us = self
                 .now_us
                 .saturating_add((c.terrain_stop_duration_s * 1.0e6) as u64);
-            self.next_stop_us =
-                event_time_us(&mut self.rng, c.terrain_stop_interval_s, self.stop_until_us);
+            self.next_stop_us = stop_time_us(&mut self.rng, c, self.stop_until_us);
         }
     }
 
@@ -309,7 +328,9 @@ impl Machine {
             };
         }
         let idx = (usize::from(self.delay_head) + RING - d) % RING;
-        self.delay_line.get(idx).copied().unwrap_or(0.0)
+        self.delay_line
+            .get(idx)
+            .map_or(0.0, |&d| f32::from(d) / DUTY_SCALE)
     }
 
     /// Speed the driver steers towards for duty `d` (dead band, droop, ripple, saturation).
@@ -414,6 +435,7 @@ impl Machine {
 
         // ---- track: command → lag → slip (Table 12) → ground ----
         let cmd = self.wheel_command(hs);
+        let v_prev = self.wheel_m_s;
         self.wheel_m_s = if self.cfg.track_tau_s > 0.0 {
             let a = if full {
                 self.track_alpha_1ms
@@ -424,6 +446,11 @@ impl Machine {
         } else {
             cmd
         };
+        if self.cfg.track_decel_limit_mm_s2 > 0 {
+            // Friction: the track slows by at most the limit × h.
+            let limit = f32::from(self.cfg.track_decel_limit_mm_s2) * 1.0e-3;
+            self.wheel_m_s = self.wheel_m_s.max(v_prev - limit * hs);
+        }
         let v_wheel = self.wheel_m_s;
         let mut slip = self.cfg.track_slip_scale * tables::track_slip_at(v_wheel * 3.6);
         if self.cfg.track_slip_noise > 0.0 {

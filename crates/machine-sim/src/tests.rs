@@ -255,8 +255,10 @@ fn same_seed_same_run_different_seed_different_run() {
 fn machine_state_is_small() {
     let size = core::mem::size_of::<Machine>();
     std::println!("size_of::<Machine>() = {size} bytes");
-    // 8 KB of RAM on the QEMU board: the model must stay small.
-    assert!(size <= 528, "{size} bytes");
+    // 8 KB of RAM on the QEMU board: the model must stay small. With `std`
+    // (the host) the delay line holds 63 ms (64 u16 slots, issue 16 item
+    // 3); the QEMU board's build (no `std`) keeps 16 slots, 96 bytes less.
+    assert!(size <= 592, "{size} bytes");
 }
 
 #[test]
@@ -467,7 +469,7 @@ fn config_errors_name_the_field() {
         "machine-sim config: `motor_tau_s` out of range"
     );
     let e = Config {
-        transport_delay_ms: 16,
+        transport_delay_ms: crate::MAX_TRANSPORT_DELAY_MS + 1,
         ..Config::default()
     }
     .build()
@@ -662,5 +664,81 @@ mod prop {
                 }
             }
         }
+    }
+}
+
+#[test]
+fn regular_stops_make_a_stop_and_go_profile_and_the_deceleration_limit_holds() {
+    // Low 2: 0.52 km/h = 0.144 44 m/s of wheel speed. No lag, a 1 m/s²
+    // friction limit: each stop is a constant deceleration, at rest after
+    // v/a = 144.4 ms and v²/2a = 10.43 mm of track (hand-computed); the
+    // stops are regular: 5 s of travel, 5 s of rest, every 10 s; travel
+    // resumes at once (no lag).
+    let v = 0.52 / 3.6;
+    let mut m = Config {
+        initial_gear: Some(Gear::Low2),
+        track_decel_limit_mm_s2: 1000,
+        terrain_stop_interval_s: 5.0,
+        terrain_stop_duration_s: 5.0,
+        terrain_stops_regular: true,
+        track_slip_scale: 0.0,
+        ..Config::noiseless()
+    }
+    .build()
+    .unwrap();
+    let circumference = core::f64::consts::PI * 0.20;
+    for cycle in 0..2u32 {
+        run_ms(&mut m, 4_990, &Inputs::default());
+        assert!((m.wheel_speed_m_s() - v).abs() < 1e-5, "cycle {cycle}");
+        run_ms(&mut m, 10, &Inputs::default());
+        let w0 = m.wheel_turns();
+        run_ms(&mut m, 72, &Inputs::default());
+        // Half-way through the braking: v − a·72 ms.
+        let half = v - 0.072;
+        assert!(
+            (m.wheel_speed_m_s() - half).abs() < 1e-4,
+            "{}",
+            m.wheel_speed_m_s()
+        );
+        run_ms(&mut m, 4_928, &Inputs::default());
+        assert_eq!(m.wheel_speed_m_s(), 0.0);
+        // Track travelled while braking: v²/2a, within the 1 ms rectangle
+        // rule's a·h·t/2 = 0.07 mm.
+        let braked = (m.wheel_turns() - w0) * circumference;
+        let expected = f64::from(v) * f64::from(v) / 2.0;
+        assert!((braked - expected).abs() < 2e-4, "{braked} m vs {expected}");
+    }
+    run_ms(&mut m, 1, &Inputs::default());
+    assert!((m.wheel_speed_m_s() - v).abs() < 1e-5);
+}
+
+#[test]
+fn a_long_transport_delay_holds_the_drum_still_for_exactly_that_long() {
+    // Drives with their own speed loop or a slow link: up to 60 ms of dead
+    // time (issue 16 item 3). A duty step at t = 0 moves nothing for d ms,
+    // then the 25 ms lag starts: at d + 25 ms, 1 − 1/e of the step.
+    // Up to the longest the build holds (63 ms with `std`, 15 without).
+    let max = crate::MAX_TRANSPORT_DELAY_MS;
+    for d in [15u8, 20, 60, max].into_iter().filter(|&d| d <= max) {
+        let mut m = Config {
+            transport_delay_ms: d,
+            ..Config::noiseless()
+        }
+        .build()
+        .unwrap();
+        let mut samples = Vec::new();
+        for _ in 0..(u32::from(d) + 200) {
+            m.step(1000, &duty(0.5), &mut |_| {});
+            samples.push(m.drum_speed_rpm());
+        }
+        let d = usize::from(d);
+        assert!(samples[..d].iter().all(|&n| n == 0.0), "delay {d}");
+        assert!(samples[d] > 0.0, "delay {d}");
+        // samples[i] is at t = i + 1 ms: at t = d + 25 ms, 63.2 % of 22.35.
+        let at_tau = samples[d + 24];
+        assert!(
+            (at_tau / (0.5 * 44.7) - 0.632).abs() < 0.01,
+            "delay {d}: {at_tau}"
+        );
     }
 }

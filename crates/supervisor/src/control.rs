@@ -16,28 +16,31 @@
 //! | fault | detected when | action |
 //! |---|---|---|
 //! | drum stall (or encoder lost) | the drum is commanded ≥ 1 r/min and the encoder has not moved for 200 ms | PWM 0, driver off, latched alarm until acknowledged |
-//! | Hall signal lost | Speed-Adaptive, drum running, travel was ≥ 0.25 km/h, and no edge for 2 × the last period (at least 100 ms) | PWM 0, driver off, latched alarm until acknowledged |
+//! | Hall signal lost | Speed-Adaptive, drum running, and the next Hall edge is later than a chassis braking at its physical limit allows ([`HALL_SILENCE_DECEL_MM_S2`]; evidence exists only above ≈ 3.4 km/h) | PWM 0, driver off, latched alarm until acknowledged |
 //! | too fast for the spacing | eq. 7 asks for more than `n_max` | drum held at `n_max`, warning with the allowed maximum (not latched) |
 //!
 //! A stalled drum and a lost encoder look the same from here (commanded, no
-//! counts); the alarm names both. A Hall signal lost at working speed and an
-//! abrupt stop of the tractor also look the same; either way the drum must
-//! stop, and the alarm asks the operator to check the sensor before
-//! restarting. After an acknowledged alarm the machine is stopped: the
-//! operator presses Start again.
+//! counts); the alarm names both. A silent Hall sensor is a lost signal only
+//! when the chassis cannot have stopped before the next tooth: below
+//! ≈ 3.4 km/h it can (1 g stops it within a millimetre at Low 2), so there
+//! the silence is taken for a stop — the travel speed decays to zero, the
+//! drum follows it and runs again with the next edges, without an alarm
+//! (docs/firmware.md, "Faults"). After an acknowledged alarm the machine is
+//! stopped: the operator presses Start again.
 
-use fixed::types::{U12F20, U16F16};
+use fixed::types::U16F16;
 use fuzzy_pid::{Controller, I16F16};
 use hmi_proto::screen::{self, CalibrationKind, Command, Mode};
 use kinematics::{
     consts,
     drum::{DrumPlan, DrumSettings, DrumTarget},
-    speed::{EstimatorSettings, MotionState, MtEstimator},
+    speed::{DecelerationBound, EstimatorSettings, MotionState, MtEstimator},
     table::{CoeffTable, TablePoint},
     travel,
     units::{Metres, RevPerMin, Ticks},
 };
 
+use crate::drive::{exp_neg_q30, DriveModel, Identifier, IdentifyError, IdentifyState};
 use crate::settings::{self, Settings};
 
 /// Fixed facts of the board the supervisor runs on.
@@ -93,7 +96,8 @@ pub enum Alarm {
     /// Commanded drum with no encoder motion: jammed drum, or encoder lost.
     /// Latched.
     DrumStall,
-    /// No Hall edges at working speed while the drum was running. Latched.
+    /// The next Hall edge is later than any stop of the chassis allows
+    /// (module docs) while the drum was running. Latched.
     HallLost,
     /// Travel speed too high for the spacing; the drum is held at `n_max`.
     /// Clears by itself. Carries the allowed maximum, km/h × 100.
@@ -101,6 +105,13 @@ pub enum Alarm {
         /// The highest travel speed this spacing allows, km/h × 100.
         max_kmh_x100: u16,
     },
+    /// The drum speed oscillated, or missed the drive model's response by
+    /// more than 5 % for more than 1 s: the controller switched to its
+    /// conservative mode (see [`Supervisor`]'s instability supervisor). A
+    /// warning: the drum keeps running. Run the drive identification again.
+    DrumUnstable,
+    /// The drive identification ended without a model (a warning).
+    IdentifyFailed(IdentifyError),
 }
 
 impl Alarm {
@@ -114,6 +125,8 @@ impl Alarm {
         match self {
             Self::DrumStall => w.write_str("Drum stalled or encoder lost"),
             Self::HallLost => w.write_str("Hall speed signal lost"),
+            Self::DrumUnstable => w.write_str(DRUM_UNSTABLE_TEXT),
+            Self::IdentifyFailed(e) => w.write_str(e.text()),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
                 // `core::fmt`'s number formatting (~2 KB of flash), and
@@ -146,6 +159,12 @@ impl Alarm {
     }
 }
 
+/// The message shown when the drive identification starts.
+pub const IDENTIFY_MESSAGE: &str = "Identifying drive: keep belt empty";
+
+/// The warning text of [`Alarm::DrumUnstable`].
+pub const DRUM_UNSTABLE_TEXT: &str = "Drum unstable: safe mode, identify";
+
 /// Whether the drum is running.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -154,6 +173,8 @@ pub enum RunState {
     Stopped,
     /// Drum under control in the current mode.
     Running,
+    /// The drive identification steps the drum (page 9, belt empty).
+    Identifying,
 }
 
 /// What the board must apply after a control step.
@@ -256,11 +277,16 @@ pub enum CalibrationRun {
 const STALL_MIN_COMMAND: I16F16 = I16F16::lit("1");
 /// Stall: time without encoder motion, µs.
 const STALL_TIME_US: u32 = 200_000;
-/// Hall loss: the slowest travel speed (km/h × 1000) at which a silent Hall
-/// sensor is a fault rather than the machine stopping.
-const HALL_LOSS_MIN_KMH_X1000: u32 = 250;
-/// Hall loss: floor of the silence timeout, µs.
-const HALL_LOSS_MIN_SILENCE_US: u32 = 100_000;
+/// Hall silence: the fastest the Hall gear's speed can fall when the
+/// tractor stops, mm/s² of monitored track speed: the chassis limit of 1 g
+/// ([`consts::CHASSIS_DECEL_LIMIT_MM_S2`]) seen through a k1 down to 0.934
+/// (9.81 / 0.934 = 10.5; paper A's Table 11 has k1 = 0.966 … 1.031), so
+/// that no stop the chassis can make reads as a lost signal.
+pub const HALL_SILENCE_DECEL_MM_S2: u32 = 10_500;
+/// Hall silence: the tolerance on a gap's length, % — pitch errors of
+/// teeth whose share is not learned yet (±2 % of a pitch per tooth, so
+/// ±4 % per gap) and the capture jitter.
+pub const HALL_SILENCE_GAP_TOLERANCE_PCT: u8 = 5;
 /// Smoothing of the reported drum speed: `Ts / (Ts + τ)` with `τ` = 0.5 s.
 /// The seedlings load the drum once per partition (1.5 Hz at 20 r/min), a
 /// ripple of about ±1 % that the operator need not watch; the mean, which the
@@ -273,7 +299,13 @@ pub struct Supervisor {
     settings: Settings,
     plan: DrumPlan,
     estimator: MtEstimator,
-    controller: Controller,
+    /// The drum controller, or, while the drive is identified, the
+    /// identification in its place (they are never needed together; sharing
+    /// the space keeps the supervisor small enough for the QEMU board's
+    /// 8 KB of RAM).
+    drum: Drum,
+    /// The last identification's outcome (its model until saved).
+    identified: IdentifyState,
     run: RunState,
     alarm: Option<Alarm>,
     calibration_run: CalibrationRun,
@@ -290,17 +322,31 @@ pub struct Supervisor {
     edges: u32,
     /// Ground distance since Start (∫ V1 dt), µm.
     distance_um: u64,
-    /// Drum encoder counts since Start.
-    drum_counts_since_start: u64,
-    /// Last measured travel speed, km/h × 1000, and the period behind it, µs.
-    last_travel_kmh_x1000: u32,
-    last_period_us: u32,
+    /// The chassis's deceleration limit at the Hall gear, for the silence
+    /// rule.
+    hall_silence: DecelerationBound,
+    /// Drum encoder counts since Start, each weighted by the belt slip k3
+    /// (× 1000) at the drum speed measured when it was counted: Σ Δcounts ·
+    /// k3(n) · 1000. The plant count follows from it
+    /// ([`Supervisor::plants_since_start`]).
+    belt_counts_k3_milli: u64,
     /// The drum speed the feed-forward alone should produce by now: the
     /// target through a model of the drum's response (see
     /// [`REFERENCE_ALPHA`]). The PID corrects the measurement towards it.
     reference: I16F16,
-    /// The target of the previous period (the model's input, one period late).
-    reference_input: I16F16,
+    /// The targets of the last periods, newest at `ref_head`: the reference
+    /// model's input, delayed by the drive's dead time. In r/min × 256
+    /// (±127 r/min: every accepted `n_max`), to keep the supervisor small.
+    ref_history: [i16; REF_HISTORY],
+    ref_head: usize,
+    /// What follows from the drive model in force.
+    law: DriveLaw,
+    /// Whether the controller is scheduled from the drive model
+    /// ([`Supervisor::new`]) or was given ([`Supervisor::with_controller`]).
+    scheduled: bool,
+    /// The conservative mode after an instability (until a new drive model).
+    fallback: bool,
+    monitor: Monitor,
     predictor: Predictor,
     snapshot: Snapshot,
 }
@@ -377,8 +423,12 @@ impl Predictor {
     }
 }
 
-/// Smoothing factor of the reference model of the drum, `1 − e^(−Ts/τ)` with
-/// `Ts` = 10 ms and the motor's `τ` = 25 ms.
+/// Smoothing factor of the reference model of the drum on the default drive,
+/// `1 − e^(−Ts/τ)` with `Ts` = 10 ms and the motor's `τ` = 25 ms. With a
+/// drive model ([`DriveModel`], identified on page 9) the factor is computed
+/// from its τ and the model's input is delayed by its dead time
+/// (docs/firmware.md, "The drum drive model"); on the default model that
+/// is this value and two periods.
 ///
 /// The model predicts what the *measurement* (encoder counts over the period
 /// that just ended) should read if the feed-forward alone drove the drum:
@@ -395,25 +445,282 @@ impl Predictor {
 /// overshoot. Comparing it with the modelled response leaves the PID only the
 /// part of the error the feed-forward cannot explain (load, slip, model
 /// mismatch): a two-degree-of-freedom structure.
-const REFERENCE_ALPHA: I16F16 = I16F16::lit("0.3297");
+pub const REFERENCE_ALPHA: I16F16 = I16F16::lit("0.3297");
+
+/// Targets the reference model remembers: a dead time up to 200 ms
+/// ([`DriveModel::DEAD_TIME_MAX`]) is 1 + 21 periods of 10 ms.
+const REF_HISTORY: usize = 24;
+
+/// The drum controller, or the drive identification in its place.
+// The variants differ in size by design: the point is sharing the space
+// (no heap to box into).
+#[allow(clippy::large_enum_variant)]
+enum Drum {
+    /// Not built yet ([`Supervisor::new`]): built at the first control step.
+    Unbuilt,
+    Control(Controller),
+    Identify(Identifier),
+}
+
+/// What the controller takes from the drive model: the feed-forward gain
+/// (`n_max`), the reference model's smoothing and delay.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct DriveLaw {
+    /// Drum speed at 100 % duty, r/min × 100.
+    n_max_x100: u16,
+    /// `n_max` in r/min.
+    n_max: I16F16,
+    /// `1 − e^(−T/τ)`.
+    ref_alpha: I16F16,
+    /// Periods from a target to the reference model's lag input:
+    /// `1 + round((L + T/2)/T)` (the command acts after the dead time `L`
+    /// and is seen in the mean of the period it falls in, half a period
+    /// later on average). 2 on the default drive, as before the model.
+    ref_delay: usize,
+}
+
+impl DriveLaw {
+    fn of(model: &DriveModel, period_us: u32) -> Self {
+        let t_x10 = i64::from(period_us / 100).max(1);
+        let tau_x10 = i64::from(model.tau_x10_ms()).max(1);
+        let dead_x10 = i64::from(model.dead_time_x10_ms());
+        // T/τ in Q30 (T ≤ 6553.5 ms, τ ≥ 1 ms: ≤ 2^16 · 2^30).
+        let x = (t_x10 << 30).checked_div(tau_x10).unwrap_or(0);
+        let alpha_q30 = (1i64 << 30).saturating_sub(exp_neg_q30(x));
+        let ref_alpha = I16F16::from_bits(i32::try_from(alpha_q30 >> 14).unwrap_or(i32::MAX));
+        let periods = dead_x10
+            .saturating_add(t_x10 / 2)
+            .saturating_add(t_x10 / 2)
+            .checked_div(t_x10)
+            .unwrap_or(0);
+        let ref_delay = usize::try_from(periods.saturating_add(1))
+            .unwrap_or(REF_HISTORY)
+            .clamp(2, REF_HISTORY);
+        Self {
+            n_max_x100: model.n_max_x100(),
+            n_max: centi_to_fix(model.n_max_x100()),
+            ref_alpha,
+            ref_delay,
+        }
+    }
+}
+
+/// The controller scheduled from the drive model: [`drum_controller_config`]
+/// with every gain (base gains, fuzzy ranges, floors) scaled by
+/// `s = min(1, (τ/θ) / (τ₀/θ₀))`, output limited to the model's `n_max`.
+///
+/// `θ = L + T` is the loop's effective dead time (the drive's dead time
+/// plus half a period of PWM hold and half a period of measurement mean),
+/// `τ₀/θ₀ = 25/15` the drive the fuzzy PID was tuned on. The proportional
+/// gain SIMC gives a first-order-plus-dead-time plant, `Kc = τ/(K·2θ)`
+/// (τc = θ), scales with `τ/θ`; so does the integral gain at a fixed
+/// `τI = τ` and the ultimate gain when θ ≫ τ. Keeping the product's
+/// proven gains where the drive is as fast as or slower than the design
+/// (`s = 1`) and shrinking all of them in the SIMC ratio where the dead time
+/// grows or τ shrinks keeps the fuzzy tuner's shape and the nominal
+/// behaviour (bench §1) unchanged. docs/fuzzy-pid.md has the table.
+pub fn scheduled_config(model: &DriveModel, period_us: u32) -> fuzzy_pid::Config {
+    let mut config = drum_controller_config();
+    let s = schedule_scale(model, period_us);
+    let scale = |g: fuzzy_pid::Gains| fuzzy_pid::Gains {
+        kp: g.kp.saturating_mul(s),
+        ki: g.ki.saturating_mul(s),
+        kd: g.kd.saturating_mul(s),
+    };
+    config.base = scale(config.base);
+    config.min_gains = scale(config.min_gains);
+    if let fuzzy_pid::Schedule::Fuzzy(fuzzy) = &mut config.schedule {
+        fuzzy.range = scale(fuzzy.range);
+    }
+    config.output_max = centi_to_fix(model.n_max_x100());
+    config
+}
+
+/// [`scheduled_config`], built. Not inlined: the configuration and the
+/// controller it builds (≈ 1 KB of stack) stay in this frame.
+#[inline(never)]
+fn scheduled_controller(model: &DriveModel, period_us: u32) -> Result<Controller, Error> {
+    scheduled_config(model, period_us)
+        .build()
+        .map_err(|_| Error::Controller)
+}
+
+/// The scale `s` of [`scheduled_config`], in (0, 1].
+pub fn schedule_scale(model: &DriveModel, period_us: u32) -> I16F16 {
+    // In 0.1 ms: τ₀ = 250, θ₀ = 50 + 100 (5 ms dead time + 10 ms period).
+    let t_x10 = i64::from(period_us / 100);
+    let theta = i64::from(model.dead_time_x10_ms())
+        .saturating_add(t_x10)
+        .max(1);
+    let theta0 = 50i64.saturating_add(t_x10);
+    let s = i64::from(model.tau_x10_ms())
+        .saturating_mul(theta0)
+        .saturating_mul(1 << 16)
+        .checked_div(theta.saturating_mul(250))
+        .unwrap_or(0)
+        .clamp(1, 1 << 16);
+    I16F16::from_bits(i32::try_from(s).unwrap_or(1 << 16))
+}
+
+/// The conservative mode after an instability: no proportional or
+/// derivative action, integral only with `Ki` = [`FALLBACK_KI`] per period,
+/// on top of the feed-forward and the reference model.
+///
+/// An integrator with gain `Ki/T` behind a delay θ has its crossover at
+/// `Ki/T` rad/s and a phase margin of `90° − Ki·θ/T`: with `Ki` = 0.02 and
+/// up to 200 ms of effective dead time (the longest a drive model holds)
+/// that is ≥ 67°, and ≥ 44° with a drive twice as strong as its model. The
+/// price: load changes are corrected in about `T/Ki` = 0.5 s.
+pub fn fallback_config(model: &DriveModel) -> fuzzy_pid::Config {
+    let mut config = fuzzy_pid::Config::conventional(fuzzy_pid::Gains {
+        kp: I16F16::ZERO,
+        ki: FALLBACK_KI,
+        kd: I16F16::ZERO,
+    });
+    config.output_max = centi_to_fix(model.n_max_x100());
+    config
+}
+
+/// Integral gain per period of the conservative mode ([`fallback_config`]).
+pub const FALLBACK_KI: I16F16 = I16F16::lit("0.02");
+
+/// Instability supervisor: the tracking error (measurement against the
+/// reference model) smoothed over 0.25 s beyond 5 % of the target for more
+/// than 1 s, or the unsmoothed error swinging by more than 25 % of the
+/// target within each of two consecutive 0.5 s windows.
+#[derive(Clone, Copy, Debug, Default)]
+struct Monitor {
+    /// Smoothed tracking error, r/min.
+    error: I16F16,
+    /// Time the smoothed error has been beyond the band, µs.
+    beyond_us: u32,
+    /// Extremes of the error in the current window, and its length.
+    low: I16F16,
+    high: I16F16,
+    periods: u8,
+    /// Consecutive windows with a swing beyond the limit.
+    swinging: u8,
+}
+
+/// Smoothing of the monitored tracking error: `1 − e^(−10 ms / 0.25 s)`. The
+/// seedlings' load (up to ±5 % at 1.5–3 Hz) is damped to about a third, so
+/// it does not count as a tracking error.
+const MONITOR_ALPHA: I16F16 = I16F16::lit("0.0392");
+/// The slowest target the instability supervisor judges: 3 r/min. Below it
+/// the driver's dead band (3 % duty, 1.3 r/min on the design drive) and the
+/// encoder's resolution (one count per 10 ms is 0.13 r/min) make 5 % of the
+/// target meaningless; a tractor coming to rest passes there (test
+/// `no_false_instability_warning_in_the_field_at_every_gear`: at High 1 the
+/// drum sat at 1.5 r/min under a 1.15 r/min target for more than 1 s).
+const MONITOR_MIN_TARGET: I16F16 = I16F16::lit("3");
+/// Band of the smoothed tracking error: 5 % of the target.
+const MONITOR_BAND: I16F16 = I16F16::lit("0.05");
+/// Time beyond the band that is an instability, µs.
+const MONITOR_TIME_US: u32 = 1_000_000;
+/// Swing (max − min) of the error in a window that counts as an
+/// oscillation: 25 % of the target. The seedlings' load swings the speed by
+/// up to 10 %; the limit cycle of issue 16 (a 20 ms drive on the 5 ms
+/// tuning) by 80 %.
+const MONITOR_SWING: I16F16 = I16F16::lit("0.25");
+/// Window of the swing, periods (0.5 s at 10 ms), and how many windows in a
+/// row make an oscillation (1 s).
+const MONITOR_WINDOW: u8 = 50;
+const MONITOR_WINDOWS: u8 = 2;
+
+impl Monitor {
+    /// One running period; `true` when the drum is unstable. `saturated`:
+    /// the last output was 0 or 100 % duty — a drum that cannot follow
+    /// (a target at `n_max` under load: the Too fast warning's business) is
+    /// not a tracking error of the loop.
+    fn step(
+        &mut self,
+        expected: I16F16,
+        measured: I16F16,
+        target: I16F16,
+        elapsed_us: u32,
+        saturated: bool,
+    ) -> bool {
+        if target < MONITOR_MIN_TARGET {
+            *self = Self::default();
+            return false;
+        }
+        let dev = expected.saturating_sub(measured);
+        self.error = self
+            .error
+            .saturating_add(dev.saturating_sub(self.error).saturating_mul(MONITOR_ALPHA));
+        if !saturated && self.error.saturating_abs() > target.saturating_mul(MONITOR_BAND) {
+            self.beyond_us = self.beyond_us.saturating_add(elapsed_us);
+        } else {
+            self.beyond_us = 0;
+        }
+        if self.periods == 0 {
+            self.low = dev;
+            self.high = dev;
+        }
+        self.low = self.low.min(dev);
+        self.high = self.high.max(dev);
+        self.periods = self.periods.saturating_add(1);
+        if self.periods >= MONITOR_WINDOW {
+            if self.high.saturating_sub(self.low) > target.saturating_mul(MONITOR_SWING) {
+                self.swinging = self.swinging.saturating_add(1);
+            } else {
+                self.swinging = 0;
+            }
+            self.periods = 0;
+        }
+        self.beyond_us > MONITOR_TIME_US || self.swinging >= MONITOR_WINDOWS
+    }
+}
 
 fn rpm_to_fix(n: RevPerMin) -> I16F16 {
     I16F16::saturating_from_num(n.to_fixed())
 }
 
-fn fix_to_rpm(x: I16F16) -> RevPerMin {
-    RevPerMin::from_fixed(U12F20::saturating_from_num(x))
+/// `x × 1000`, rounded to nearest (halves up), negative values as 0:
+/// computed from the raw bits in `i64`, so every `I16F16` (up to
+/// 32 767.99 r/min) is reported exactly. Multiplying in `I16F16` itself
+/// saturated at 32.767 r/min (issue 16 item 4). Rounding (not flooring)
+/// gives back the decimal a speed was set from: 25.21 r/min is
+/// 1 652 163 / 65 536 = 25.210 005 in I16F16, and 25.209 995 when truncated.
+pub fn milli(x: I16F16) -> u32 {
+    // |bits| < 2^31, × 1000 < 2^41: no overflow; `>>` floors.
+    let v = i64::from(x.to_bits())
+        .saturating_mul(1000)
+        .saturating_add(1 << 15)
+        >> 16;
+    u32::try_from(v.max(0)).unwrap_or(u32::MAX)
 }
 
-fn milli(x: I16F16) -> u32 {
-    x.saturating_mul_int(1000).saturating_to_num::<u32>()
+/// A speed as r/min × 256 in an `i16` (saturating at ±127.99 r/min).
+fn to_i16_x256(x: I16F16) -> i16 {
+    let v = x.to_bits() >> 8;
+    i16::try_from(v).unwrap_or(if v < 0 { i16::MIN } else { i16::MAX })
+}
+
+/// A speed in r/min × 100 (the screen's unit) as the nearest `I16F16`.
+fn centi_to_fix(raw: u16) -> I16F16 {
+    // raw · 65 536 / 100, rounded: ≤ 65 535 · 65 536 < 2^32, fits i64.
+    let bits = i64::from(raw)
+        .saturating_mul(65_536)
+        .saturating_add(50)
+        .checked_div(100)
+        .unwrap_or(0);
+    I16F16::from_bits(i32::try_from(bits).unwrap_or(i32::MAX))
 }
 
 impl Supervisor {
     /// Builds the supervisor from validated settings, stopped, with the
     /// drum controller tuned for this machine ([`drum_controller_config`]).
+    ///
+    /// The controller itself is built at the first control step (or Start),
+    /// not here: building the fuzzy tuner takes 1.3 KB of stack, which at
+    /// boot would sit on top of the supervisor's own 1.5 KB being built —
+    /// more than the QEMU board's 4.7 KB of stack holds with the rest of
+    /// `init`. The scheduled configuration is valid for every valid drive
+    /// model (its gains are scaled by `s ∈ (0, 1]`, test
+    /// `scheduled_configs_build_for_extreme_models`).
     pub fn new(hw: Hardware, settings: Settings) -> Result<Self, Error> {
-        Self::with_controller(hw, settings, &drum_controller_config())
+        Self::build(hw, settings, Drum::Unbuilt, true)
     }
 
     /// As [`Supervisor::new`] with another drum controller (for comparisons:
@@ -423,20 +730,33 @@ impl Supervisor {
         settings: Settings,
         controller: &fuzzy_pid::Config,
     ) -> Result<Self, Error> {
+        let controller = controller.build().map_err(|_| Error::Controller)?;
+        Self::build(hw, settings, Drum::Control(controller), false)
+    }
+
+    fn build(hw: Hardware, settings: Settings, drum: Drum, scheduled: bool) -> Result<Self, Error> {
         if hw.encoder_counts_per_drum_rev == 0 || hw.control_period_us == 0 {
             return Err(Error::Hardware);
         }
         let estimator = EstimatorSettings::default()
             .build()
             .map_err(|_| Error::Estimator)?;
+        let hall_silence = DecelerationBound::new(
+            HALL_SILENCE_DECEL_MM_S2,
+            consts::HALL_GAP_UM,
+            estimator.settings().timer_hz,
+            HALL_SILENCE_GAP_TOLERANCE_PCT,
+        )
+        .map_err(|_| Error::Estimator)?;
         let plan = Self::plan_for(&settings, hw)?;
-        let controller = controller.build().map_err(|_| Error::Controller)?;
+        let law = DriveLaw::of(&settings.drive, hw.control_period_us);
         Ok(Self {
             hw,
             settings,
             plan,
             estimator,
-            controller,
+            drum,
+            identified: IdentifyState::Idle,
             run: RunState::Stopped,
             alarm: None,
             calibration_run: CalibrationRun::Idle,
@@ -448,11 +768,15 @@ impl Supervisor {
             reported: I16F16::ZERO,
             edges: 0,
             distance_um: 0,
-            drum_counts_since_start: 0,
-            last_travel_kmh_x1000: 0,
-            last_period_us: 0,
+            hall_silence,
+            belt_counts_k3_milli: 0,
             reference: I16F16::ZERO,
-            reference_input: I16F16::ZERO,
+            ref_history: [0; REF_HISTORY],
+            ref_head: 0,
+            law,
+            scheduled,
+            fallback: false,
+            monitor: Monitor::default(),
             predictor: Predictor::default(),
             snapshot: Snapshot::default(),
         })
@@ -493,8 +817,11 @@ impl Supervisor {
 
     /// The drum controller's state (gains, error terms, output) after the
     /// last step, for logs and comparisons.
-    pub fn controller_status(&self) -> &fuzzy_pid::Status {
-        self.controller.status()
+    pub fn controller_status(&self) -> fuzzy_pid::Status {
+        match &self.drum {
+            Drum::Control(c) => *c.status(),
+            Drum::Unbuilt | Drum::Identify(_) => fuzzy_pid::Status::default(),
+        }
     }
 
     /// Live values after the last step.
@@ -520,10 +847,24 @@ impl Supervisor {
         }
     }
 
+    /// Says that Hall edges were lost before the next one (the capture
+    /// timer's overcapture flag): the interval ending at the next edge is not
+    /// measured ([`kinematics::speed::MtEstimator::edges_lost`]).
+    pub fn hall_edges_lost(&mut self) {
+        self.estimator.edges_lost();
+    }
+
     /// Stops the drum (no alarm).
     pub fn stop(&mut self) {
         self.run = RunState::Stopped;
-        self.controller.stop();
+        match &mut self.drum {
+            Drum::Control(c) => c.stop(),
+            Drum::Unbuilt => {}
+            Drum::Identify(_) => {
+                self.identified = IdentifyState::Failed(IdentifyError::Aborted);
+                self.restore_controller();
+            }
+        }
         self.stall_us = 0;
     }
 
@@ -534,11 +875,15 @@ impl Supervisor {
             }
         }
         if self.run == RunState::Stopped {
+            self.ensure_controller();
+            let Drum::Control(c) = &mut self.drum else {
+                return Effect::Message("Drive identification running");
+            };
             self.run = RunState::Running;
-            self.controller.start();
+            c.start();
             self.stall_us = 0;
             self.distance_um = 0;
-            self.drum_counts_since_start = 0;
+            self.belt_counts_k3_milli = 0;
         }
         Effect::None
     }
@@ -562,8 +907,8 @@ impl Supervisor {
                 if mode != self.settings.mode {
                     // Bumpless: the controller restarts from its output.
                     self.settings.mode = mode;
-                    if self.run == RunState::Running {
-                        self.controller.start();
+                    if let (RunState::Running, Drum::Control(c)) = (self.run, &mut self.drum) {
+                        c.start();
                     }
                 }
                 Effect::SettingsChanged
@@ -652,6 +997,47 @@ impl Supervisor {
                 self.settings.brightness = b;
                 Effect::SettingsChanged
             }
+            Command::IdentifyDrive => {
+                if self.run != RunState::Stopped {
+                    return Effect::Message("Stop the drum first");
+                }
+                if self.alarm.is_some_and(|a| a.is_latched()) {
+                    return Effect::Message("Acknowledge the alarm first");
+                }
+                if matches!(self.alarm, Some(Alarm::IdentifyFailed(_))) {
+                    self.alarm = None;
+                }
+                let mut id = Identifier::new(self.hw.control_period_us);
+                id.start();
+                self.drum = Drum::Identify(id);
+                self.identified = IdentifyState::Running;
+                self.run = RunState::Identifying;
+                self.stall_us = 0;
+                self.belt_counts_k3_milli = 0;
+                Effect::Message(IDENTIFY_MESSAGE)
+            }
+            Command::AcceptDriveModel => match self.identify_state() {
+                IdentifyState::Done(model) if self.run == RunState::Stopped => {
+                    match self.use_drive(model) {
+                        Ok(()) => {
+                            self.identified = IdentifyState::Idle;
+                            if self.alarm == Some(Alarm::DrumUnstable) {
+                                self.alarm = None;
+                            }
+                            // Persisted at once (the drum is stopped).
+                            Effect::Save
+                        }
+                        Err(_) => Effect::Message("Drive model rejected"),
+                    }
+                }
+                _ => Effect::Message("Identify the drive first"),
+            },
+            // Applies from the next control step (the counter's raw value
+            // is kept, only the sign of its delta changes).
+            Command::SetDrumEncoderReversed(reversed) => {
+                self.settings.drum_encoder_reversed = reversed;
+                Effect::SettingsChanged
+            }
             // The machine profile applies after Save and a restart
             // (crate::machine).
             Command::SelectProfile(p) => {
@@ -683,8 +1069,13 @@ impl Supervisor {
     /// run state; rejected settings change nothing.
     pub fn apply_settings(&mut self, settings: Settings) -> Result<(), Error> {
         let plan = Self::plan_for(&settings, self.hw)?;
+        let drive = settings.drive;
+        let old = self.settings.drive;
         self.plan = plan;
         self.settings = settings;
+        if drive != old {
+            self.use_drive(drive)?;
+        }
         Ok(())
     }
 
@@ -913,11 +1304,19 @@ impl Supervisor {
     /// ```
     #[inline(never)]
     pub fn control_step(&mut self, now: Ticks, drum_encoder: u16) -> Actuation {
+        self.ensure_controller();
         self.snapshot.steps = self.snapshot.steps.wrapping_add(1);
         let delta = match self.last_encoder {
-            // Forward only: a backwards jitter reads as standstill.
+            // Forward only: a backwards jitter reads as standstill. With the
+            // encoder reversed (A/B swapped, `Settings::drum_encoder_reversed`)
+            // the delta is negated first, so that the drum turning forward
+            // counts forward.
             Some(prev) => {
-                let d = drum_encoder.wrapping_sub(prev);
+                let d = if self.settings.drum_encoder_reversed {
+                    prev.wrapping_sub(drum_encoder)
+                } else {
+                    drum_encoder.wrapping_sub(prev)
+                };
                 if d > u16::MAX / 2 {
                     0
                 } else {
@@ -945,16 +1344,12 @@ impl Supervisor {
         let travel_kmh_x1000 = travel
             .and_then(|t| t.travel_speed_kmh().ok())
             .map_or(0, |v| v.to_milli());
-        if matches!(m.state, MotionState::Measured) && m.edges > 0 {
-            self.last_travel_kmh_x1000 = travel_kmh_x1000;
-            self.last_period_us = m.window_ticks.checked_div(m.edges).unwrap_or(0);
-        }
 
         let mut too_fast = None;
         let target = match self.settings.mode {
-            Mode::Fixed => I16F16::saturating_from_num(self.settings.fixed_drum_speed.raw())
-                .checked_div_int(100)
-                .unwrap_or(I16F16::ZERO),
+            // Capped at the drive's n_max (a drive slower than the screen's
+            // 44.70 r/min range cannot do more).
+            Mode::Fixed => centi_to_fix(self.settings.fixed_drum_speed.raw()).min(self.law.n_max),
             Mode::SpeedAdaptive => {
                 match travel.map(|t| self.plan.target(&t, &self.settings.calibration)) {
                     Some(Ok(target)) => {
@@ -963,26 +1358,38 @@ impl Supervisor {
                                 max_kmh_x100: self.max_travel_kmh_x100(),
                             });
                         }
-                        let n = rpm_to_fix(target.command().drum_speed);
-                        n.saturating_mul_int(i32::from(self.settings.motor_coefficient.raw()))
+                        let n = rpm_to_fix(target.command().drum_speed)
+                            .saturating_mul_int(i32::from(self.settings.motor_coefficient.raw()))
                             .checked_div_int(100)
-                            .unwrap_or(I16F16::ZERO)
-                            .min(rpm_to_fix(kinematics::consts::N_MAX))
+                            .unwrap_or(I16F16::ZERO);
+                        // The plan saturates at the paper's 44.7 r/min; a
+                        // drive identified slower saturates at its own.
+                        let cap = rpm_to_fix(kinematics::consts::N_MAX).min(self.law.n_max);
+                        if n > cap && too_fast.is_none() {
+                            too_fast = Some(Alarm::TooFast {
+                                max_kmh_x100: self.max_travel_kmh_x100(),
+                            });
+                        }
+                        n.min(cap)
                     }
                     _ => I16F16::ZERO,
                 }
             }
         };
 
-        // The too-fast warning follows the speed; latched alarms stay.
+        // The too-fast warning follows the speed; latched alarms and the
+        // instability warning stay.
         match (self.alarm, too_fast) {
-            (Some(a), _) if a.is_latched() => {}
+            (Some(a), _) if a.is_latched() || a == Alarm::DrumUnstable => {}
             (_, Some(w)) if self.run == RunState::Running => self.alarm = Some(w),
             (Some(Alarm::TooFast { .. }), _) => self.alarm = None,
             _ => {}
         }
 
         let mut actuation = Actuation::OFF;
+        if self.run == RunState::Identifying {
+            actuation = self.identify_step(measured, delta, elapsed_us);
+        }
         if self.run == RunState::Running {
             // Fault: drum commanded but not turning.
             if target >= STALL_MIN_COMMAND && delta == 0 {
@@ -990,47 +1397,78 @@ impl Supervisor {
             } else {
                 self.stall_us = 0;
             }
-            // Fault: Hall silent at working speed in Speed-Adaptive mode.
-            let silence_limit = self
-                .last_period_us
-                .saturating_mul(2)
-                .max(HALL_LOSS_MIN_SILENCE_US);
+            // Fault: in Speed-Adaptive mode, the next Hall edge is later
+            // than any stop the chassis can make allows. Without such
+            // evidence the silence is a stop: the estimator's speed decays
+            // to zero and the drum with it.
             let hall_lost = self.settings.mode == Mode::SpeedAdaptive
-                && self.last_travel_kmh_x1000 >= HALL_LOSS_MIN_KMH_X1000
-                && m.since_edge_ticks > silence_limit;
+                && self
+                    .estimator
+                    .next_edge_overdue(m.since_edge_ticks, &self.hall_silence);
             if self.stall_us > STALL_TIME_US {
                 self.latch(Alarm::DrumStall);
             } else if hall_lost {
                 self.latch(Alarm::HallLost);
-                self.last_travel_kmh_x1000 = 0;
             } else {
                 // What the measurement should read from the feed-forward
-                // alone; then advance the model with last period's command.
+                // alone; then advance the model with the target of
+                // `ref_delay − 1` periods ago (the drive's dead time).
                 let expected = self.reference;
+                let back = self.law.ref_delay.saturating_sub(2);
+                let delayed = self
+                    .ref_history
+                    .get(
+                        self.ref_head
+                            .wrapping_add(REF_HISTORY)
+                            .wrapping_sub(back)
+                            .checked_rem(REF_HISTORY)
+                            .unwrap_or(0),
+                    )
+                    .map_or(target, |&v| I16F16::from_bits(i32::from(v) << 8));
                 self.reference = self.reference.saturating_add(
-                    self.reference_input
+                    delayed
                         .saturating_sub(self.reference)
-                        .saturating_mul(REFERENCE_ALPHA),
+                        .saturating_mul(self.law.ref_alpha),
                 );
-                self.reference_input = target;
-                let out = self.controller.step(expected, measured, target);
-                let ccr = self.plan.ccr(fix_to_rpm(out)).unwrap_or(0);
+                self.push_reference_input(target);
+                let saturated = self.snapshot.ccr == 0
+                    || u32::from(self.snapshot.ccr) > u32::from(self.hw.pwm_arr);
+                if !self.fallback
+                    && self
+                        .monitor
+                        .step(expected, measured, target, elapsed_us, saturated)
+                {
+                    self.fall_back();
+                }
+                let out = match &mut self.drum {
+                    Drum::Control(c) => c.step(expected, measured, target),
+                    Drum::Unbuilt | Drum::Identify(_) => I16F16::ZERO,
+                };
                 actuation = Actuation {
-                    ccr,
+                    ccr: self.ccr_of(out),
                     driver_enabled: true,
                 };
             }
         }
-        if self.run == RunState::Stopped {
-            self.last_travel_kmh_x1000 = travel_kmh_x1000;
+        if self.run != RunState::Running {
             // Restart from the drum's actual speed (it may still coast).
             self.reference = measured;
-            self.reference_input = measured;
+            self.ref_history = [to_i16_x256(measured); REF_HISTORY];
+            self.monitor = Monitor::default();
         }
 
-        self.drum_counts_since_start = self
-            .drum_counts_since_start
-            .saturating_add(u64::from(delta));
+        // k3 at the drum speed these counts were turned at (this period's
+        // measurement, exact over the whole range: `milli`), not at the
+        // target: the belt slips at the speed it turns, and after a Stop
+        // the counts still coasting in keep the k3 of their own speed.
+        let k3_x1000 = self
+            .settings
+            .calibration
+            .k3_at(RevPerMin::from_ratio(milli(measured), 1000).unwrap_or(RevPerMin::ZERO))
+            .to_milli();
+        self.belt_counts_k3_milli = self
+            .belt_counts_k3_milli
+            .saturating_add(u64::from(delta).saturating_mul(u64::from(k3_x1000)));
         self.drum_counts_total = self.drum_counts_total.saturating_add(u64::from(delta));
         self.snapshot.travel_speed_kmh_x1000 = travel_kmh_x1000;
         self.snapshot.target_drum_rpm_x1000 = if self.run == RunState::Running {
@@ -1052,23 +1490,160 @@ impl Supervisor {
         actuation
     }
 
-    /// Belt partitions passed since Start: drum turns · π·(D2+2H2) · k3 / Lclap.
+    fn push_reference_input(&mut self, target: I16F16) {
+        self.ref_head = self
+            .ref_head
+            .wrapping_add(1)
+            .checked_rem(REF_HISTORY)
+            .unwrap_or(0);
+        if let Some(slot) = self.ref_history.get_mut(self.ref_head) {
+            *slot = to_i16_x256(target);
+        }
+    }
+
+    /// Eq. 10 with the drive model's gain: the compare value for `out`
+    /// r/min, `out / n_max · (ARR + 1)`, rounded, within 0 … ARR + 1.
+    fn ccr_of(&self, out: I16F16) -> u16 {
+        let arr1 = i64::from(self.hw.pwm_arr).saturating_add(1);
+        let ccr = i64::from(out.to_bits())
+            .max(0)
+            .saturating_mul(arr1)
+            .saturating_mul(100)
+            .checked_div(i64::from(self.law.n_max_x100))
+            .unwrap_or(0)
+            .saturating_add(1 << 15)
+            >> 16;
+        u16::try_from(ccr.min(arr1)).unwrap_or(0)
+    }
+
+    /// The instability supervisor fired: the conservative controller takes
+    /// over (bumpless from the feed-forward), the warning goes up. Not
+    /// inlined: the controller it builds (≈ 0.6 KB with its configuration)
+    /// must not widen `control_step`'s own stack frame on every period.
+    #[inline(never)]
+    fn fall_back(&mut self) {
+        self.fallback = true;
+        if let Ok(mut c) = fallback_config(&self.settings.drive).build() {
+            c.start();
+            self.drum = Drum::Control(c);
+        }
+        if !self.alarm.is_some_and(|a| a.is_latched()) {
+            self.alarm = Some(Alarm::DrumUnstable);
+        }
+    }
+
+    /// Whether the conservative mode is on ([`fallback_config`]).
+    pub fn in_fallback(&self) -> bool {
+        self.fallback
+    }
+
+    /// The drive model in force, with the controller scheduled from it (or
+    /// the given controller kept, for [`Supervisor::with_controller`]).
+    #[inline(never)]
+    fn use_drive(&mut self, model: DriveModel) -> Result<(), Error> {
+        if self.scheduled {
+            let mut c = scheduled_controller(&model, self.hw.control_period_us)?;
+            if self.run == RunState::Running {
+                c.start();
+            }
+            self.drum = Drum::Control(c);
+        }
+        self.law = DriveLaw::of(&model, self.hw.control_period_us);
+        self.settings.drive = model;
+        self.fallback = false;
+        self.monitor = Monitor::default();
+        Ok(())
+    }
+
+    /// Builds the controller if it is not yet ([`Supervisor::new`]).
+    fn ensure_controller(&mut self) {
+        if matches!(self.drum, Drum::Unbuilt) {
+            self.restore_controller();
+        }
+    }
+
+    /// The controller back in place of an identification that ended: the
+    /// one scheduled from the drive model in force (a controller given to
+    /// [`Supervisor::with_controller`] is not kept across an
+    /// identification).
+    #[inline(never)]
+    fn restore_controller(&mut self) {
+        let config = if self.fallback {
+            fallback_config(&self.settings.drive)
+        } else {
+            scheduled_config(&self.settings.drive, self.hw.control_period_us)
+        };
+        if let Ok(c) = config.build() {
+            self.drum = Drum::Control(c);
+        }
+    }
+
+    /// One period of the drive identification.
+    #[inline(never)]
+    fn identify_step(&mut self, measured: I16F16, delta: u16, elapsed_us: u32) -> Actuation {
+        let duty = match &mut self.drum {
+            Drum::Identify(id) => {
+                let duty = id.step(measured.to_bits());
+                if duty.is_none() {
+                    self.identified = id.state();
+                }
+                duty
+            }
+            Drum::Unbuilt | Drum::Control(_) => None,
+        };
+        match duty {
+            Some(permille) => {
+                // Stall: the drum does not move under a 25 % or 75 % duty.
+                if delta == 0 {
+                    self.stall_us = self.stall_us.saturating_add(elapsed_us);
+                } else {
+                    self.stall_us = 0;
+                }
+                if self.stall_us > STALL_TIME_US {
+                    self.latch(Alarm::DrumStall);
+                    return Actuation::OFF;
+                }
+                let arr1 = u32::from(self.hw.pwm_arr).saturating_add(1);
+                let ccr = arr1.saturating_mul(u32::from(permille)) / 1000;
+                Actuation {
+                    ccr: u16::try_from(ccr).unwrap_or(0),
+                    driver_enabled: true,
+                }
+            }
+            None => {
+                self.run = RunState::Stopped;
+                self.stall_us = 0;
+                self.restore_controller();
+                if let IdentifyState::Failed(e) = self.identified {
+                    if !self.alarm.is_some_and(|a| a.is_latched()) {
+                        self.alarm = Some(Alarm::IdentifyFailed(e));
+                    }
+                }
+                Actuation::OFF
+            }
+        }
+    }
+
+    /// The drive identification's state (page 9).
+    pub fn identify_state(&self) -> IdentifyState {
+        match &self.drum {
+            Drum::Identify(id) => id.state(),
+            Drum::Unbuilt | Drum::Control(_) => self.identified,
+        }
+    }
+
+    /// Belt partitions passed since Start: Σ drum turns · k3(n) · π·(D2+2H2)
+    /// / Lclap, each turn with the belt slip k3 at the drum speed it was
+    /// turned at.
     fn plants_since_start(&self) -> u32 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
-        let k3_x1000 = u64::from(
-            self.settings
-                .calibration
-                .k3_at(
-                    RevPerMin::from_ratio(self.snapshot.target_drum_rpm_x1000, 1000)
-                        .unwrap_or(RevPerMin::ZERO),
-                )
-                .to_milli(),
-        );
-        self.drum_counts_since_start
-            .saturating_mul(PARTITIONS_PER_TURN_X1E6)
+        // Σ Δcounts·k3·1000 / counts per turn = turns · k3 · 1000.
+        self.belt_counts_k3_milli
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .map(|v| v.saturating_mul(k3_x1000) / 1_000_000_000)
+            .map(|turns_k3_x1000| {
+                turns_k3_x1000.saturating_mul(PARTITIONS_PER_TURN_X1E6) / 1_000_000_000
+            })
             .and_then(|v| u32::try_from(v).ok())
             .unwrap_or(u32::MAX)
     }
@@ -1100,6 +1675,11 @@ impl Supervisor {
             }
             _ => (0, 0),
         };
+        // The model measured (until saved) or the one in force.
+        let shown_drive = match self.identify_state() {
+            IdentifyState::Done(model) => model,
+            _ => self.settings.drive,
+        };
         screen::Status {
             travel_speed_kmh_x100: x100(s.travel_speed_kmh_x1000),
             target_drum_rpm_x100: x100(s.target_drum_rpm_x1000),
@@ -1108,6 +1688,15 @@ impl Supervisor {
             distance_dm: s.distance_mm / 100,
             measured_distance_cm,
             calibration_result_x1000,
+            drive_n_max_x100: shown_drive.n_max_x100(),
+            drive_tau_x10_ms: shown_drive.tau_x10_ms(),
+            drive_dead_time_x10_ms: shown_drive.dead_time_x10_ms(),
+            drive_identification: match self.identify_state() {
+                IdentifyState::Idle => 0,
+                IdentifyState::Running => 1,
+                IdentifyState::Done(_) => 2,
+                IdentifyState::Failed(_) => 3,
+            },
             // Profile B's live values: not this machine's.
             ..screen::Status::default()
         }
@@ -1144,6 +1733,7 @@ impl Supervisor {
             calibration_kind: self.calibration_kind,
             profile: crate::machine::screen_profile(settings.profile),
             belt: crate::machine::belt_to_screen(&settings.belt),
+            drum_encoder_reversed: settings.drum_encoder_reversed,
         }
     }
 }
@@ -1181,4 +1771,120 @@ pub fn drum_controller_config() -> fuzzy_pid::Config {
         fuzzy.range.kp = PRODUCT_DELTA_KP_RANGE;
     }
     config
+}
+
+#[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_precision_loss
+)]
+mod tests {
+    use super::*;
+    use hmi_proto::screen::DrumSpeed;
+    use proptest::prelude::*;
+
+    /// Reference: `floor(x · 1000 + 0.5)` in f64 (exact: `bits / 65536 ·
+    /// 1000` has at most 41 significant bits), negative values as 0.
+    fn milli_f64(bits: i32) -> u32 {
+        let v = (f64::from(bits) / 65_536.0 * 1000.0 + 0.5).floor();
+        if v < 0.0 {
+            0
+        } else {
+            v as u32
+        }
+    }
+
+    #[test]
+    fn milli_above_32_767_r_min_is_exact() {
+        // Failed before the fix: I16F16 × 1000 saturated to 32 767.99…, so
+        // 40 r/min read 32 767 (issue 16 item 4).
+        assert_eq!(milli(I16F16::from_num(40)), 40_000);
+        assert_eq!(
+            milli(I16F16::from_num(44.7)),
+            milli_f64(I16F16::from_num(44.7).to_bits())
+        );
+        // The largest I16F16, 32 767 + 65 535/65 536 r/min, rounds up.
+        assert_eq!(milli(I16F16::MAX), 32_768_000);
+        assert_eq!(milli(I16F16::from_num(-1)), 0);
+    }
+
+    #[test]
+    fn the_default_drive_model_reproduces_the_design_controller() {
+        // The default model (44.70 r/min, 25 ms, 5 ms) is the drive the
+        // controller was tuned on: scale 1, the same configuration, the
+        // reference model's 2 periods and α = 1 − e^(−10/25) = 0.329 680.
+        let model = DriveModel::DEFAULT;
+        assert_eq!(schedule_scale(&model, 10_000), I16F16::ONE);
+        let mut design = drum_controller_config();
+        design.output_max = I16F16::from_num(44.7);
+        let scheduled = scheduled_config(&model, 10_000);
+        assert_eq!(scheduled.base, design.base);
+        assert_eq!(scheduled.schedule, design.schedule);
+        assert_eq!(scheduled.min_gains, design.min_gains);
+        assert!((scheduled.output_max - design.output_max).abs() < I16F16::from_num(0.0001));
+        let law = DriveLaw::of(&model, 10_000);
+        assert_eq!(law.ref_delay, 2);
+        let alpha = 1.0 - (-0.4f64).exp();
+        assert!((law.ref_alpha.to_num::<f64>() - alpha).abs() < 2e-5);
+        assert!((REFERENCE_ALPHA.to_num::<f64>() - alpha).abs() < 1e-4);
+    }
+
+    #[test]
+    fn scheduled_configs_build_for_extreme_models() {
+        // The corners of DriveModel's ranges: every scheduled configuration
+        // (and the fallback) builds, so the controller `new` defers can
+        // always be built.
+        for n in [1000u16, 9000] {
+            for tau in [10u16, 5000] {
+                for dead in [0u16, 2000] {
+                    let m = DriveModel::new(n, tau, dead).unwrap();
+                    assert!(scheduled_config(&m, 10_000).build().is_ok(), "{m:?}");
+                    assert!(fallback_config(&m).build().is_ok(), "{m:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_schedule_shrinks_with_dead_time_and_a_faster_drive() {
+        // s = min(1, (τ/θ)/(25/15)), θ = L + 10 ms (hand-computed).
+        let s = |tau_x10, dead_x10| {
+            schedule_scale(&DriveModel::new(4470, tau_x10, dead_x10).unwrap(), 10_000)
+                .to_num::<f64>()
+        };
+        assert!((s(250, 200) - 0.5).abs() < 1e-4); // 25/30 / (25/15)
+        assert!((s(88, 600) - 8.8 / 70.0 * 15.0 / 25.0).abs() < 1e-4);
+        assert_eq!(s(750, 0), 1.0); // slower drive: the design gains
+                                    // Reference delay 1 + round((L + 5 ms)/10 ms): 60 ms → 7 + 1 = 8.
+        let law = DriveLaw::of(&DriveModel::new(4470, 250, 600).unwrap(), 10_000);
+        assert_eq!(law.ref_delay, 8);
+    }
+
+    proptest! {
+        /// Every `I16F16` the supervisor can hold (the whole type, so any
+        /// drum speed up to any `n_max`) against the f64 reference.
+        #[test]
+        fn milli_matches_f64_over_the_whole_type(bits in any::<i32>()) {
+            prop_assert_eq!(milli(I16F16::from_bits(bits)), milli_f64(bits));
+        }
+
+        /// Fixed mode, every drum speed the screen accepts (0–44.70 r/min):
+        /// the target in the snapshot (log) and on the screen is the set
+        /// speed itself (r/min × 100 from the screen, × 10 for the log).
+        #[test]
+        fn every_fixed_drum_speed_is_reported_as_set(raw in DrumSpeed::MIN..=DrumSpeed::MAX) {
+            let settings = Settings {
+                mode: Mode::Fixed,
+                fixed_drum_speed: DrumSpeed::new(i32::from(raw)).unwrap(),
+                ..Settings::default()
+            };
+            let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+            sup.command(Command::Start);
+            sup.control_step(Ticks(0), 0);
+            prop_assert_eq!(sup.snapshot().target_drum_rpm_x1000, u32::from(raw) * 10);
+            prop_assert_eq!(sup.screen_status().target_drum_rpm_x100, raw);
+        }
+    }
 }

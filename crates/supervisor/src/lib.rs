@@ -12,6 +12,7 @@ compile_error!("enable at least one machine: feature `profile-a` or `profile-b`"
 
 pub mod control;
 pub mod crc;
+pub mod drive;
 pub mod machine;
 pub mod profile_b;
 pub mod settings;

@@ -161,6 +161,12 @@ impl BeltMachine {
                 Effect::SettingsChanged
             }
             Command::AcknowledgeAlarm => Effect::AlarmCleared,
+            // Profile A's drum encoder: kept (and saved) here too, so that
+            // it survives a switch of machine.
+            Command::SetDrumEncoderReversed(r) => {
+                self.settings.drum_encoder_reversed = r;
+                Effect::SettingsChanged
+            }
             other => match belt_with(&self.settings.belt, other) {
                 Some(Ok(config)) => match self.planter.set_config(config) {
                     Ok(()) => {
@@ -183,6 +189,7 @@ impl BeltMachine {
             brightness: self.settings.brightness,
             profile: screen_profile(self.settings.profile),
             belt: belt_to_screen(&self.settings.belt),
+            drum_encoder_reversed: self.settings.drum_encoder_reversed,
             ..screen::Settings::default()
         }
     }

@@ -1,13 +1,16 @@
 //! The persisted settings and their versioned byte format.
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
-//! multi-byte number is little endian. Format version 2 (version 1 is
-//! version 2 without its last 34 bytes, written before profile B existed;
-//! [`decode`] still reads it, as profile A with profile B's defaults):
+//! multi-byte number is little endian. Format version 3. [`decode`] still
+//! reads the older formats: version 2 is version 3 without its last 7 bytes
+//! (written before the drum encoder direction and the drive model existed;
+//! read with the encoder not reversed and [`DriveModel::DEFAULT`]), version 1
+//! is version 2 without its last 34 bytes (written before profile B existed;
+//! read as profile A with profile B's defaults):
 //!
 //! | offset | size | field | encoding |
 //! |---|---|---|---|
-//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 2 |
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 3 |
 //! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
 //! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
 //! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
@@ -17,8 +20,10 @@
 //! | 10 | 199 | [`Settings::calibration`] | [`Calibration::to_bytes`] (its own version byte, then k1, k2, k3 tables padded to 66 bytes each) |
 //! | 209 | 1 | [`Settings::profile`] | 1 = A (drum belt), 2 = B (seedling belt) |
 //! | 210 | 33 | [`Settings::belt`] | [`ProfileBConfig::to_bytes`] |
+//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bits 1–7 zero |
+//! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
 //!
-//! Total 243 bytes (version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! Total 250 bytes (version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -34,12 +39,12 @@
 //! s.spacing = Spacing::new(120).unwrap();
 //! let bytes = s.encode();
 //! assert_eq!(bytes.len(), SETTINGS_BYTES);
-//! // version 2, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // version 3, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
 //! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
 //! // brightness 100 (0x64).
 //! assert_eq!(
 //!     bytes[..10],
-//!     [2, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//!     [3, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
 //! );
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
@@ -51,10 +56,11 @@ use kinematics::consts::Gear;
 use kinematics::table::TableError;
 use kinematics::travel::{Calibration, CALIBRATION_BYTES};
 
+use crate::drive::{DriveModel, DriveModelError, DRIVE_MODEL_BYTES};
 use crate::profile_b::{ProfileBConfig, CONFIG_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
-pub const SETTINGS_FORMAT_VERSION: u8 = 2;
+pub const SETTINGS_FORMAT_VERSION: u8 = 3;
 
 /// Bytes before the calibration block: version, mode, spacing, drum speed,
 /// motor coefficient, gear, brightness.
@@ -63,8 +69,14 @@ const HEAD_BYTES: usize = 10;
 /// Size of a format-1 record: 10 + 199 = 209.
 pub const SETTINGS_V1_BYTES: usize = HEAD_BYTES + CALIBRATION_BYTES;
 
-/// Size of an encoded [`Settings`] (format version 2): 209 + 1 + 33 = 243.
-pub const SETTINGS_BYTES: usize = SETTINGS_V1_BYTES + 1 + CONFIG_BYTES;
+/// Size of a format-2 record: 209 + 1 + 33 = 243.
+pub const SETTINGS_V2_BYTES: usize = SETTINGS_V1_BYTES + 1 + CONFIG_BYTES;
+
+/// Size of an encoded [`Settings`] (format version 3): 243 + 1 + 6 = 250.
+pub const SETTINGS_BYTES: usize = SETTINGS_V2_BYTES + 1 + DRIVE_MODEL_BYTES;
+
+/// Flags byte (offset 243), bit 0: the drum encoder counts backwards.
+const FLAG_ENCODER_REVERSED: u8 = 1;
 
 /// Which machine the firmware runs (SPEC §1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -114,6 +126,13 @@ pub struct Settings {
     pub profile: Profile,
     /// Profile B's parameters. Default: `ProfileBSettings::default()`.
     pub belt: ProfileBConfig,
+    /// The drum encoder's A/B channels are swapped (or the motor turns the
+    /// other way): the supervisor negates its counts before anything else.
+    /// Default: `false`.
+    pub drum_encoder_reversed: bool,
+    /// The drum drive's model (feed-forward gain, controller's drum model).
+    /// Default: [`DriveModel::DEFAULT`], until an identification is saved.
+    pub drive: DriveModel,
 }
 
 impl Default for Settings {
@@ -128,6 +147,8 @@ impl Default for Settings {
             calibration: Calibration::paper_defaults(),
             profile: Profile::default(),
             belt: ProfileBConfig::default(),
+            drum_encoder_reversed: false,
+            drive: DriveModel::DEFAULT,
         }
     }
 }
@@ -157,6 +178,10 @@ pub enum SettingsError {
     Profile(u8),
     /// Profile B's parameters failed validation.
     Belt,
+    /// The flags byte (offset 243) has bits set this firmware does not know.
+    Flags(u8),
+    /// The drive model (offset 244) failed validation.
+    Drive(DriveModelError),
 }
 
 impl fmt::Display for SettingsError {
@@ -172,6 +197,8 @@ impl fmt::Display for SettingsError {
             Self::Calibration(e) => write!(f, "calibration: {e}"),
             Self::Profile(p) => write!(f, "invalid machine profile byte {p}"),
             Self::Belt => f.write_str("invalid profile B parameters"),
+            Self::Flags(b) => write!(f, "invalid flags byte {b}"),
+            Self::Drive(e) => write!(f, "{e}"),
         }
     }
 }
@@ -224,11 +251,20 @@ const fn mode_from_byte(b: u8) -> Option<Mode> {
 }
 
 impl Settings {
-    /// Serialises in format version 2 (layout in the [module docs](self)).
+    /// Serialises in format version 3 (layout in the [module docs](self)).
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
-        let (v1, tail) = out.split_at_mut(SETTINGS_V1_BYTES);
+        let (v2, v3) = out.split_at_mut(SETTINGS_V2_BYTES);
+        if let Some((flags, drive)) = v3.split_first_mut() {
+            *flags = if self.drum_encoder_reversed {
+                FLAG_ENCODER_REVERSED
+            } else {
+                0
+            };
+            drive.copy_from_slice(&self.drive.to_bytes());
+        }
+        let (v1, tail) = v2.split_at_mut(SETTINGS_V1_BYTES);
         if let Some((profile, belt)) = tail.split_first_mut() {
             *profile = match self.profile {
                 Profile::DrumBelt => 1,
@@ -264,21 +300,21 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         found: bytes.len(),
     };
     let (&version, _) = bytes.split_first().ok_or(length)?;
-    let (v1, tail) = match version {
-        1 if bytes.len() == SETTINGS_V1_BYTES => (bytes, None),
-        SETTINGS_FORMAT_VERSION if bytes.len() == SETTINGS_BYTES => {
-            let (v1, tail) = bytes.split_at(SETTINGS_V1_BYTES);
-            (v1, Some(tail))
-        }
-        1 => {
-            return Err(SettingsError::Length {
-                expected: SETTINGS_V1_BYTES,
-                found: bytes.len(),
-            })
-        }
-        SETTINGS_FORMAT_VERSION => return Err(length),
+    let expected = match version {
+        1 => SETTINGS_V1_BYTES,
+        2 => SETTINGS_V2_BYTES,
+        SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
         other => return Err(SettingsError::UnsupportedVersion(other)),
     };
+    if bytes.len() != expected {
+        return Err(SettingsError::Length {
+            expected,
+            found: bytes.len(),
+        });
+    }
+    let (v2, v3) = bytes.split_at(bytes.len().min(SETTINGS_V2_BYTES));
+    let (v1, tail) = v2.split_at(v2.len().min(SETTINGS_V1_BYTES));
+    let tail = if tail.is_empty() { None } else { Some(tail) };
     let (head, cal) = v1.split_at(HEAD_BYTES);
     let Ok::<[u8; HEAD_BYTES], _>([_, mode, s0, s1, d0, d1, m0, m1, gear, brightness]) =
         head.try_into()
@@ -309,6 +345,19 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
             )
         }
     };
+    let (drum_encoder_reversed, drive) = match v3.split_first() {
+        None => (false, DriveModel::DEFAULT),
+        Some((&flags, drive)) => {
+            if flags & !FLAG_ENCODER_REVERSED != 0 {
+                return Err(SettingsError::Flags(flags));
+            }
+            let drive: &[u8; DRIVE_MODEL_BYTES] = drive.try_into().map_err(|_| length)?;
+            (
+                flags & FLAG_ENCODER_REVERSED != 0,
+                DriveModel::from_bytes(drive).map_err(SettingsError::Drive)?,
+            )
+        }
+    };
     Ok(Settings {
         mode,
         spacing,
@@ -319,6 +368,8 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         calibration,
         profile,
         belt,
+        drum_encoder_reversed,
+        drive,
     })
 }
 
@@ -339,7 +390,9 @@ mod tests {
         assert_eq!(CALIBRATION_BYTES, 199);
         assert_eq!(SETTINGS_V1_BYTES, 209);
         // + profile byte + ProfileBConfig::to_bytes (33).
-        assert_eq!(SETTINGS_BYTES, 243);
+        assert_eq!(SETTINGS_V2_BYTES, 243);
+        // + flags byte + DriveModel::to_bytes (3 × u16).
+        assert_eq!(SETTINGS_BYTES, 250);
     }
 
     #[test]
@@ -368,15 +421,99 @@ mod tests {
             calibration: Calibration::identity(),
             profile: Profile::SeedlingBelt,
             belt: ProfileBConfig::default(),
+            drum_encoder_reversed: true,
+            drive: DriveModel::new(5811, 875, 600).unwrap(),
         };
         let b = s.encode();
         // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
-        assert_eq!(b[..10], [2, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
+        assert_eq!(b[..10], [3, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
         assert_eq!(b[10..209], Calibration::identity().to_bytes());
         // Profile B (2) and its parameters.
         assert_eq!(b[209], 2);
-        assert_eq!(b[210..], s.belt.to_bytes());
+        assert_eq!(b[210..243], s.belt.to_bytes());
+        // Flags: encoder reversed (bit 0); drive 58.11 r/min = 5811 =
+        // 0x16B3, τ 87.5 ms = 875 = 0x036B, dead time 60 ms = 600 = 0x0258.
+        assert_eq!(b[243..], [1, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02]);
         assert_eq!(decode(&b).unwrap(), s);
+    }
+
+    #[test]
+    fn a_version_2_record_reads_with_the_encoder_forward_and_the_default_drive() {
+        // A record written before the encoder direction and the drive model:
+        // version 2, the first 243 bytes (profile B and its parameters kept).
+        let s = Settings {
+            profile: Profile::SeedlingBelt,
+            spacing: Spacing::new(150).unwrap(),
+            drum_encoder_reversed: true,
+            drive: DriveModel::new(3000, 100, 0).unwrap(),
+            ..Settings::default()
+        };
+        let mut v2 = [0u8; SETTINGS_V2_BYTES];
+        v2.copy_from_slice(&s.encode()[..SETTINGS_V2_BYTES]);
+        v2[0] = 2;
+        assert_eq!(
+            decode(&v2),
+            Ok(Settings {
+                drum_encoder_reversed: false,
+                drive: DriveModel::DEFAULT,
+                ..s.clone()
+            })
+        );
+        // A version-2 record must be 243 bytes long, a version-3 one 250.
+        let mut v2_long = s.encode();
+        v2_long[0] = 2;
+        assert_eq!(
+            decode(&v2_long),
+            Err(SettingsError::Length {
+                expected: 243,
+                found: 250
+            })
+        );
+        let mut v3_short = v2;
+        v3_short[0] = 3;
+        assert_eq!(
+            decode(&v3_short),
+            Err(SettingsError::Length {
+                expected: 250,
+                found: 243
+            })
+        );
+    }
+
+    #[test]
+    fn rejects_unknown_flags_and_a_bad_drive_model() {
+        let good = Settings::default().encode();
+        let with = |i: usize, v: u8| {
+            let mut b = good;
+            b[i] = v;
+            decode(&b)
+        };
+        assert_eq!(with(243, 2), Err(SettingsError::Flags(2)));
+        assert_eq!(with(243, 0xFF), Err(SettingsError::Flags(0xFF)));
+        assert!(with(243, 1).unwrap().drum_encoder_reversed);
+        // n_max 0x1100 + low byte: 4352 + 0xFF… → 0xFF_xx > 9000.
+        assert_eq!(
+            with(245, 0xFF),
+            Err(SettingsError::Drive(DriveModelError::NMax(
+                u16::from_le_bytes([good[244], 0xFF])
+            )))
+        );
+        // τ 0 < 1 ms.
+        let mut b = good;
+        b[246] = 0;
+        b[247] = 0;
+        assert_eq!(
+            decode(&b),
+            Err(SettingsError::Drive(DriveModelError::Tau(0)))
+        );
+        // Dead time 0xFFFF > 200 ms.
+        let mut b = good;
+        b[248] = 0xFF;
+        b[249] = 0xFF;
+        assert_eq!(
+            decode(&b),
+            Err(SettingsError::Drive(DriveModelError::DeadTime(0xFFFF)))
+        );
     }
 
     #[test]
@@ -411,7 +548,7 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(0, 3), Err(SettingsError::UnsupportedVersion(3)));
+        assert_eq!(with(0, 4), Err(SettingsError::UnsupportedVersion(4)));
         assert_eq!(with(0, 0xFF), Err(SettingsError::UnsupportedVersion(0xFF)));
         assert_eq!(with(1, 0), Err(SettingsError::Mode(0)));
         assert_eq!(with(1, 3), Err(SettingsError::Mode(3)));
@@ -453,19 +590,19 @@ mod tests {
         assert_eq!(
             decode(&[]),
             Err(SettingsError::Length {
-                expected: 243,
+                expected: 250,
                 found: 0
             })
         );
         assert_eq!(
-            decode(&good[..242]),
+            decode(&good[..249]),
             Err(SettingsError::Length {
-                expected: 243,
-                found: 242
+                expected: 250,
+                found: 249
             })
         );
-        let mut long = [0u8; 244];
-        long[..243].copy_from_slice(&good);
+        let mut long = [0u8; 251];
+        long[..250].copy_from_slice(&good);
         assert!(matches!(decode(&long), Err(SettingsError::Length { .. })));
         // A version-1 record must be 209 bytes long.
         let mut v1_short = good;
@@ -474,7 +611,7 @@ mod tests {
             decode(&v1_short),
             Err(SettingsError::Length {
                 expected: 209,
-                found: 243
+                found: 250
             })
         );
         assert_eq!(
@@ -534,30 +671,40 @@ mod tests {
             Brightness::MIN..=Brightness::MAX,
             (table(), table(), table()),
             (any::<bool>(), 110u32..=990),
+            (
+                any::<bool>(),
+                DriveModel::N_MAX_RANGE,
+                DriveModel::TAU_RANGE,
+                0..=DriveModel::DEAD_TIME_MAX,
+            ),
         )
             .prop_map(
-                |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm))| Settings {
-                    mode: if fixed {
-                        Mode::Fixed
-                    } else {
-                        Mode::SpeedAdaptive
-                    },
-                    spacing: Spacing::new(i32::from(sp)).unwrap(),
-                    fixed_drum_speed: DrumSpeed::new(i32::from(ds)).unwrap(),
-                    motor_coefficient: MotorCoefficient::new(i32::from(mc)).unwrap(),
-                    gear: Gear::ALL[g],
-                    brightness: Brightness::new(i32::from(br)).unwrap(),
-                    calibration: Calibration { k1, k2, k3 },
-                    profile: if b {
-                        Profile::SeedlingBelt
-                    } else {
-                        Profile::DrumBelt
-                    },
-                    belt: ProfileBConfig::new(ProfileBSettings {
-                        plant_spacing: kinematics::units::Metres::from_mm(x_mm),
-                        ..ProfileBSettings::default()
-                    })
-                    .unwrap(),
+                |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm), (rev, n, tau, dead))| {
+                    Settings {
+                        mode: if fixed {
+                            Mode::Fixed
+                        } else {
+                            Mode::SpeedAdaptive
+                        },
+                        spacing: Spacing::new(i32::from(sp)).unwrap(),
+                        fixed_drum_speed: DrumSpeed::new(i32::from(ds)).unwrap(),
+                        motor_coefficient: MotorCoefficient::new(i32::from(mc)).unwrap(),
+                        gear: Gear::ALL[g],
+                        brightness: Brightness::new(i32::from(br)).unwrap(),
+                        calibration: Calibration { k1, k2, k3 },
+                        profile: if b {
+                            Profile::SeedlingBelt
+                        } else {
+                            Profile::DrumBelt
+                        },
+                        belt: ProfileBConfig::new(ProfileBSettings {
+                            plant_spacing: kinematics::units::Metres::from_mm(x_mm),
+                            ..ProfileBSettings::default()
+                        })
+                        .unwrap(),
+                        drum_encoder_reversed: rev,
+                        drive: DriveModel::new(n, tau, dead).unwrap(),
+                    }
                 },
             )
     }

@@ -9,15 +9,15 @@
 //! |---|---|---|
 //! | 0 | 4 | magic [`MAGIC`] = `"TPS1"` |
 //! | 4 | 4 | sequence, u32; the newer record has the higher sequence, compared with wrap-around |
-//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 209 for format 1) |
+//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 250 for settings format 3; 243 and 209 for formats 2 and 1) |
 //! | 10 | 2 | `!n` (guards the length before the CRC is known) |
 //! | 12 | `n` | payload: [`Settings::encode`] |
 //! | 12 + n | 0–3 | zero padding to a multiple of 4 |
 //! | `c` = 12 + ⌈n⌉₄ | 4 | CRC-32 ([`crate::crc`]) of bytes 4 .. `c`: sequence, length, `!n`, payload, padding |
 //! | ⌈c + 4⌉_W | max(4, W) | commit word [`COMMIT`] = `"DONE"` (then zeros up to `W`, the flash's `WRITE_SIZE`) |
 //!
-//! With the STM32F1 (`WRITE_SIZE` = 2) a record is 232 bytes: header at 0,
-//! payload at 12, CRC at 224, commit word at 228.
+//! With the STM32F1 (`WRITE_SIZE` = 2) a record is 272 bytes: header at 0,
+//! payload at 12, CRC at 264, commit word at 268.
 //!
 //! A save ([`SettingsStore::save`]) targets the slot that does **not** hold
 //! the newest valid record: it erases that page, programs everything up to
@@ -77,10 +77,10 @@
 //!
 //! // The bytes in flash follow the documented layout.
 //! let flash = store.into_inner();
-//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xF3\x00\x0C\xFF"); // magic, seq 1, n = 243, !n
-//! assert_eq!(flash.0[12], 2); // settings format version
-//! assert_eq!(&flash.0[260..264], b"DONE");
-//! assert_eq!(flash.0[264], 0xFF); // the record ends there
+//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xFA\x00\x05\xFF"); // magic, seq 1, n = 250, !n
+//! assert_eq!(flash.0[12], 3); // settings format version
+//! assert_eq!(&flash.0[268..272], b"DONE");
+//! assert_eq!(flash.0[272], 0xFF); // the record ends there
 //! # Ok::<(), supervisor::store::StoreError<NorFlashErrorKind>>(())
 //! ```
 
@@ -91,6 +91,7 @@ use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 use crate::crc::Crc32;
 use crate::settings::{
     decode, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION, SETTINGS_V1_BYTES,
+    SETTINGS_V2_BYTES,
 };
 
 /// Record magic at offset 0: `"TPS1"` (transplanter settings, record format 1).
@@ -664,9 +665,10 @@ impl<F: NorFlash> SettingsStore<F> {
         if self.crc(slot, 4, lay.crc_off)? != u32::from_le_bytes(word) {
             return Ok(Slot::Corrupt);
         }
-        // This format, or format 1 (written before profile B): the decoder
-        // reads both.
-        if lay.len == SETTINGS_BYTES || lay.len == SETTINGS_V1_BYTES {
+        // This format, format 2 (written before the drive model) or format
+        // 1 (before profile B): the decoder reads all three.
+        if lay.len == SETTINGS_BYTES || lay.len == SETTINGS_V2_BYTES || lay.len == SETTINGS_V1_BYTES
+        {
             let mut buf = [0u8; SETTINGS_BYTES];
             let payload = buf.get_mut(..lay.len).ok_or(ReadFail::Bounds)?;
             self.read(slot, HEADER_BYTES, payload)?;
@@ -741,16 +743,16 @@ mod tests {
 
     #[test]
     fn f1_layout() {
-        // 243-byte payload, WRITE_SIZE 2: CRC at 12 + 244 = 256, commit at
-        // 260, end 264 = 132 half-words.
+        // 250-byte payload, WRITE_SIZE 2: CRC at 12 + 252 = 264, commit at
+        // 268, end 272 = 136 half-words.
         let l = layout(SETTINGS_BYTES, 2).unwrap();
         assert_eq!(
             (l.crc_off, l.commit_off, l.commit_len, l.end),
-            (256, 260, 4, 264)
+            (264, 268, 4, 272)
         );
-        // WRITE_SIZE 8: the commit gets its own double word at 264.
+        // WRITE_SIZE 8: the commit gets its own double word at 272.
         let l = layout(SETTINGS_BYTES, 8).unwrap();
-        assert_eq!((l.commit_off, l.commit_len, l.end), (264, 8, 272));
+        assert_eq!((l.commit_off, l.commit_len, l.end), (272, 8, 280));
     }
 
     #[test]

@@ -280,6 +280,8 @@ fn settings_b() -> Settings {
             ..ProfileBSettings::default()
         })
         .unwrap(),
+        drum_encoder_reversed: true,
+        drive: supervisor::drive::DriveModel::new(5000, 400, 200).unwrap(),
     }
 }
 
@@ -423,9 +425,9 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&a).unwrap();
     let only_a = st.into_inner();
     let total = sweep(&only_a, &a, &b);
-    // One erase + 264 bytes / 2 = 132 half-word programs (243-byte payload:
-    // header 12, payload padded to 244, CRC 4, commit 4).
-    assert_eq!(total, 133);
+    // One erase + 272 bytes / 2 = 136 half-word programs (250-byte payload:
+    // header 12, payload padded to 252, CRC 4, commit 4).
+    assert_eq!(total, 137);
 
     // 2. X (seq 1) in slot 0, A (seq 2) in slot 1; B overwrites X's slot.
     //    X must never come back, whatever the torn erase leaves of it.
@@ -433,30 +435,30 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&x).unwrap();
     st.save(&a).unwrap();
     let x_then_a = st.into_inner();
-    assert_eq!(sweep(&x_then_a, &a, &b), 133);
+    assert_eq!(sweep(&x_then_a, &a, &b), 137);
 
     // 3. Sequence wrap: X at u32::MAX − 1 in slot 0, A at u32::MAX in slot 1;
     //    B gets sequence 0 in slot 0.
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(u32::MAX - 1, &x.encode()));
     put_raw(&mut f, 1, &raw_record(u32::MAX, &a.encode()));
-    assert_eq!(sweep(&f, &a, &b), 133);
+    assert_eq!(sweep(&f, &a, &b), 137);
 }
 
 #[test]
 fn power_cut_with_wider_program_units() {
     // A flash with 8-byte program units (and 8-byte reads): the commit word
-    // takes its own unit at 264, the record ends at 272 = 34 units.
+    // takes its own unit at 272, the record ends at 280 = 35 units.
     let (a, b) = (settings_a(), settings_b());
     let mut st = store(SimFlash::<8>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 34);
-    // And 1-byte units: 264 programs.
+    assert_eq!(sweep(&f, &a, &b), 1 + 35);
+    // And 1-byte units: 272 programs.
     let mut st = store(SimFlash::<1>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 264);
+    assert_eq!(sweep(&f, &a, &b), 1 + 272);
 }
 
 #[test]
@@ -508,26 +510,26 @@ fn record_bytes_follow_the_documented_layout() {
     assert_eq!(st.save(&settings_b()), Ok(1));
     let f = st.into_inner();
     let rec = raw_record(1, &settings_b().encode());
-    assert_eq!(rec.len(), 264);
+    assert_eq!(rec.len(), 272);
     let slot0 = slot_bytes(&f, 0);
-    assert_eq!(&slot0[..264], &rec[..]);
-    assert!(slot0[264..].iter().all(|&b| b == 0xFF));
+    assert_eq!(&slot0[..272], &rec[..]);
+    assert!(slot0[272..].iter().all(|&b| b == 0xFF));
     assert!(slot_bytes(&f, 1).iter().all(|&b| b == 0xFF));
-    // Header bytes spelled out: "TPS1", seq 1, n = 243 = 0x00F3, !n = 0xFF0C.
+    // Header bytes spelled out: "TPS1", seq 1, n = 250 = 0x00FA, !n = 0xFF05.
     assert_eq!(
         &slot0[..12],
-        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xF3, 0x00, 0x0C, 0xFF]
+        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xFA, 0x00, 0x05, 0xFF]
     );
-    assert_eq!(SETTINGS_BYTES, 243);
+    assert_eq!(SETTINGS_BYTES, 250);
 }
 
 #[test]
-fn one_save_costs_one_erase_and_132_programs() {
+fn one_save_costs_one_erase_and_136_programs() {
     let mut st = store(SimFlash::<2>::new());
     st.save(&settings_a()).unwrap();
     let f = st.into_inner();
-    // 1 erase + 264 / 2 half-words (record layout: end of commit word at 264).
-    assert_eq!(f.ops, 133);
+    // 1 erase + 272 / 2 half-words (record layout: end of commit word at 272).
+    assert_eq!(f.ops, 137);
     assert_eq!(f.erases, [0, 1, 0, 0]);
 }
 
@@ -537,15 +539,15 @@ fn erase_first_then_body_in_order_then_commit_word_last() {
     st.save(&settings_a()).unwrap();
     st.save(&settings_b()).unwrap(); // into slot 1 at offset 2048
     let log = st.into_inner().log;
-    let second = &log[133..];
+    let second = &log[137..];
     assert_eq!(second[0], (true, 2 * PAGE));
-    // Half-words 0, 2, …, 258 of the page: header, payload, padding, CRC.
-    let body: Vec<_> = (0..130).map(|i| (false, 2 * PAGE + 2 * i)).collect();
-    assert_eq!(&second[1..131], &body[..]);
-    // Then, and only then, the commit word "DONE" at 260 and 262.
+    // Half-words 0, 2, …, 266 of the page: header, payload, padding, CRC.
+    let body: Vec<_> = (0..134).map(|i| (false, 2 * PAGE + 2 * i)).collect();
+    assert_eq!(&second[1..135], &body[..]);
+    // Then, and only then, the commit word "DONE" at 268 and 270.
     assert_eq!(
-        &second[131..],
-        &[(false, 2 * PAGE + 260), (false, 2 * PAGE + 262)]
+        &second[135..],
+        &[(false, 2 * PAGE + 268), (false, 2 * PAGE + 270)]
     );
 }
 
@@ -625,9 +627,9 @@ fn any_flipped_bit_in_the_newest_record_falls_back_to_the_older() {
     st.save(&settings_a()).unwrap(); // slot 0, seq 1
     st.save(&settings_b()).unwrap(); // slot 1, seq 2
     let good = st.into_inner();
-    // Every bit of every byte of the 264-byte record: magic, sequence,
+    // Every bit of every byte of the 272-byte record: magic, sequence,
     // length, !length, payload, padding, CRC, commit word.
-    for byte in 0..264 {
+    for byte in 0..272 {
         for bit in 0..8 {
             let mut f = good.clone();
             f.mem[2 * PAGE + byte] ^= 1 << bit;
@@ -678,7 +680,8 @@ fn a_record_with_valid_crc_but_invalid_field_is_corrupt() {
 fn a_record_written_before_profile_b_still_loads() {
     // Format 1: the first 209 bytes of today's payload, version byte 1
     // (docs of supervisor::settings). It loads as profile A with profile B's
-    // defaults, and the next save writes format 2 into the other slot.
+    // defaults (and format 2's defaults: encoder forward, the default
+    // drive), and the next save writes format 3 into the other slot.
     let b = settings_b();
     let mut v1 = b.encode()[..209].to_vec();
     v1[0] = 1;
@@ -687,6 +690,8 @@ fn a_record_written_before_profile_b_still_loads() {
     let expected = Settings {
         profile: Profile::DrumBelt,
         belt: ProfileBConfig::default(),
+        drum_encoder_reversed: false,
+        drive: supervisor::drive::DriveModel::DEFAULT,
         ..b.clone()
     };
     assert_eq!(
@@ -708,10 +713,44 @@ fn a_record_written_before_profile_b_still_loads() {
 }
 
 #[test]
+fn a_record_written_before_the_drive_model_still_loads() {
+    // Format 2: the first 243 bytes of today's payload, version byte 2
+    // (docs of supervisor::settings). It loads with the encoder forward and
+    // the default drive model, and the next save writes format 3.
+    // settings_b: encoder reversed, a drive model other than the default.
+    let b = settings_b();
+    let mut v2 = b.encode()[..243].to_vec();
+    v2[0] = 2;
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 1, &raw_record(11, &v2));
+    let expected = Settings {
+        drum_encoder_reversed: false,
+        drive: supervisor::drive::DriveModel::DEFAULT,
+        ..b.clone()
+    };
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: expected,
+            sequence: 11
+        }
+    );
+    let mut st = store(f);
+    assert_eq!(st.save(&b), Ok(12));
+    assert_eq!(
+        boot(&st.into_inner()),
+        Loaded::Saved {
+            settings: b,
+            sequence: 12
+        }
+    );
+}
+
+#[test]
 fn unsupported_version_falls_back_or_is_reported() {
     let a = settings_a();
-    // A record of a future format 3 (payload version byte 3, longer payload).
-    let mut v2 = vec![3u8; 300];
+    // A record of a future format 4 (payload version byte 4, longer payload).
+    let mut v2 = vec![4u8; 300];
     v2[1] = 7;
     // Alone: defaults, reason UnsupportedVersion.
     let mut f = SimFlash::new();
@@ -741,7 +780,7 @@ fn unsupported_version_falls_back_or_is_reported() {
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(5, &a.encode()));
     let mut same_len = settings_b().encode();
-    same_len[0] = 3;
+    same_len[0] = 4;
     put_raw(&mut f, 1, &raw_record(6, &same_len));
     assert_eq!(
         boot(&f),
@@ -750,7 +789,7 @@ fn unsupported_version_falls_back_or_is_reported() {
             sequence: 5
         }
     );
-    // The next save overwrites the v3 record (slot 1) with sequence 7.
+    // The next save overwrites the v4 record (slot 1) with sequence 7.
     let mut st = store(f);
     assert_eq!(st.save(&settings_b()), Ok(7));
     assert_eq!(
@@ -864,9 +903,10 @@ fn settings() -> impl Strategy<Value = Settings> {
         Brightness::MIN..=Brightness::MAX,
         (table(), table(), table()),
         (any::<bool>(), 110u32..=990),
+        (any::<bool>(), 1000u16..=9000, 10u16..=5000, 0u16..=2000),
     )
         .prop_map(
-            |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm))| Settings {
+            |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm), (rev, n, tau, dead))| Settings {
                 mode: if fixed {
                     Mode::Fixed
                 } else {
@@ -888,6 +928,8 @@ fn settings() -> impl Strategy<Value = Settings> {
                     ..ProfileBSettings::default()
                 })
                 .unwrap(),
+                drum_encoder_reversed: rev,
+                drive: supervisor::drive::DriveModel::new(n, tau, dead).unwrap(),
             },
         )
 }

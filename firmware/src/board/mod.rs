@@ -13,7 +13,7 @@
 //!
 //! The control code above this module sees only [`Board`], [`DrumDrive`],
 //! [`Sensors`], [`HallCapture`] and the free functions [`safe_state`],
-//! [`fatal`] and [`run_limit_ms`].
+//! [`drivers_enabled`], [`fatal`] and [`run_limit_ms`].
 
 #[cfg(feature = "board-qemu")]
 mod qemu;
@@ -46,6 +46,16 @@ pub const HARDWARE: supervisor::control::Hardware = supervisor::control::Hardwar
 /// Most Hall edges one [`Sensors::sample`] can return (the Hall sensor is
 /// rated 1 kHz, so at most 10 in a 10 ms control period).
 pub const MAX_EDGES_PER_SAMPLE: usize = 10;
+
+/// One Hall edge from the capture interrupt.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HallEdge {
+    /// Capture timestamp, 32-bit, in 1 µs ticks.
+    pub stamp: u32,
+    /// The capture hardware lost one or more edges before this one (TIM2's
+    /// overcapture flag): the interval ending here is not a tooth period.
+    pub after_lost: bool,
+}
 
 /// What the control task reads every period.
 pub struct SensorSample {

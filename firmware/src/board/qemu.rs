@@ -26,7 +26,7 @@
 use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering::Relaxed};
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
-use machine_sim::{Fault, Inputs, Machine};
+use machine_sim::{Event, Fault, Inputs, Machine};
 use stm32f1xx_hal::{
     pac::{self, USART1},
     prelude::*,
@@ -43,8 +43,37 @@ use super::{
 
 /// Transmit half of the touchscreen UART.
 pub type HmiTx = Tx<USART1>;
-/// Receive half of the touchscreen UART.
-pub type HmiRx = Rx<USART1>;
+
+/// Most screen bytes one lock-step period carries (a real line carries
+/// ≈ 115 per 10 ms; the tests send at most this many).
+const GATE_BYTES: usize = 32;
+/// Screen bytes delivered through the lock-step gate, for [`HmiRx`].
+type GateQueue = heapless::spsc::Queue<u8, { GATE_BYTES + 1 }>;
+
+/// Receive half of the touchscreen UART. In lock-step the screen's bytes
+/// come through the gate at the start of a control period (see
+/// [`Sensors::sample`]) and are read here first, through the same USART1
+/// interrupt task; otherwise from the emulated USART1.
+pub struct HmiRx {
+    uart: Rx<USART1>,
+    gate: heapless::spsc::Consumer<'static, u8>,
+}
+
+impl HmiRx {
+    /// The next received byte.
+    pub fn read(&mut self) -> nb::Result<u8, serial::Error> {
+        match self.gate.dequeue() {
+            Some(byte) => {
+                if self.gate.ready() {
+                    // More to come: the interrupt task runs again.
+                    pac::NVIC::pend(pac::Interrupt::USART1);
+                }
+                Ok(byte)
+            }
+            None => self.uart.read(),
+        }
+    }
+}
 
 /// QEMU's `stm32vldiscovery` clocks SysTick at a fixed 24 MHz.
 pub const SYSCLK_HZ: u32 = 24_000_000;
@@ -99,7 +128,14 @@ pub struct Board {
 struct CmdLine {
     run_ms: Option<u32>,
     scenario: Scenario,
+    /// `gate=PATH`: the lock-step gate (see [`Sensors::sample`]).
+    gate: [u8; GATE_PATH_MAX],
+    gate_len: usize,
 }
+
+/// Longest lock-step gate path (the tests use a short one in `/tmp`;
+/// 32 keeps `Default` derivable).
+const GATE_PATH_MAX: usize = 32;
 
 /// Scheduled changes to the simulated machine, in firmware milliseconds.
 ///
@@ -107,11 +143,15 @@ struct CmdLine {
 /// `step=T:+P` / `step=T:-P` sets the travel speed P % off its gear speed at
 /// T ms (`step=T:0` returns to it; up to four); `tau=MS` gives the chassis a
 /// speed time constant;
-/// `stop=T` stops the tractor at T ms; `stop_input=T` opens the stop
+/// `stop=T` stops the tractor at T ms; `stopgo=MS` drives it stop-and-go
+/// (MS/2 of travel, MS/2 of rest, from boot); `stop_input=T` opens the stop
 /// input's contact at T ms and `stop_input_close=T` closes it; `stall=T`, `hall_loss=T`,
 /// `enc_loss=T` inject faults at T ms; `noise=0` makes the model noiseless;
 /// `seed=N` seeds it; `slip=P` scales the track slip of paper A's Table 12
-/// to P % (a machine whose calibration is not the paper's).
+/// to P % (a machine whose calibration is not the paper's); `plant_log=1`
+/// logs every plant the model drops (`sim: plant N at P um`, the main job's
+/// report plots each spacing from them; off by default to keep the long
+/// accelerated runs' logs short).
 #[derive(Default, Clone, Copy)]
 struct Scenario {
     gear: Option<u8>,
@@ -120,6 +160,8 @@ struct Scenario {
     stop: Option<u32>,
     stop_input: Option<u32>,
     stop_input_close: Option<u32>,
+    /// Stop-and-go period, ms (`stopgo=MS`).
+    stop_go_ms: Option<u32>,
     stall: Option<u32>,
     hall_loss: Option<u32>,
     enc_loss: Option<u32>,
@@ -133,6 +175,8 @@ struct Scenario {
     metrics_from: Option<u32>,
     /// Track slip, % of Table 12's (`slip=P`).
     slip_pct: Option<u32>,
+    /// Log every plant's ground position (`plant_log=1`).
+    plant_log: bool,
 }
 
 /// Brings up the emulated peripherals. Called once from `init`.
@@ -150,8 +194,17 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
-    let (hmi_tx, mut hmi_rx) = hmi.split();
-    hmi_rx.listen();
+    let (hmi_tx, mut uart_rx) = hmi.split();
+    uart_rx.listen();
+    // Note: `init` runs once, so the singleton is still free.
+    let Some(gate_queue) = cortex_m::singleton!(: GateQueue = GateQueue::new()) else {
+        fatal()
+    };
+    let (gate_in, gate_out) = gate_queue.split();
+    let hmi_rx = HmiRx {
+        uart: uart_rx,
+        gate: gate_out,
+    };
     DRUM_CCR.store(0, Relaxed);
     DRIVER_ENABLE.store(false, Relaxed);
 
@@ -162,6 +215,12 @@ pub fn init(dp: pac::Peripherals) -> Board {
         .get(..path_len)
         .filter(|p| !p.is_empty())
         .and_then(SettingsFlash::open);
+    // Mode 1 = "rb".
+    let gate = cmd
+        .gate
+        .get(..cmd.gate_len)
+        .filter(|p| !p.is_empty())
+        .and_then(|p| sh::open(p, 1));
 
     let scenario = cmd.scenario;
     let mut config = if scenario.noiseless {
@@ -174,6 +233,11 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }
     if let Some(tau) = scenario.tau_ms {
         config.track_tau_s = tau as f32 / 1000.0;
+    }
+    if let Some(period) = scenario.stop_go_ms {
+        config.terrain_stop_interval_s = period as f32 / 2000.0;
+        config.terrain_stop_duration_s = period as f32 / 2000.0;
+        config.terrain_stops_regular = true;
     }
     if let Some(pct) = scenario.slip_pct {
         config.track_slip_scale = pct as f32 / 100.0;
@@ -211,6 +275,8 @@ pub fn init(dp: pac::Peripherals) -> Board {
             now_ms: 0,
             roller_turns_seen: 0,
             stop_watch: StopWatch::default(),
+            gate,
+            gate_in,
         },
         hall: HallCapture,
         led: StatusLed,
@@ -311,6 +377,10 @@ pub struct Sensors {
     roller_turns_seen: u32,
     /// Profile B: when the steppers came to rest after the tractor stopped.
     stop_watch: StopWatch,
+    /// The lock-step gate: a host FIFO read once per control period.
+    gate: Option<usize>,
+    /// Screen bytes from the gate, to [`HmiRx`].
+    gate_in: heapless::spsc::Producer<'static, u8>,
 }
 
 /// Profile B's stop check, on the simulator's side: after the scenario's
@@ -331,7 +401,37 @@ fn due(at: Option<u32>, from: u32, to: u32) -> bool {
 impl Sensors {
     /// Advances the machine to `now_ms` under the current PWM output and
     /// reads the encoder and the Hall edges that happened meanwhile.
+    ///
+    /// Lock-step (`gate=PATH`, under QEMU's `-icount`): first reads the
+    /// next message from the host FIFO — a count `n` (≤ 32) and `n` bytes
+    /// the screen sent during the period — blocking the whole emulation
+    /// until the test allows one more control period, so that firmware time
+    /// never runs ahead of the virtual touchscreen and a busy host cannot
+    /// make a period late. The screen's bytes then reach the USART1
+    /// interrupt task (pended here) as if the emulated USART had received
+    /// them. At end of file (the test closed its end) the board runs free.
     pub fn sample(&mut self, now_ms: u32) -> SensorSample {
+        if let Some(h) = self.gate {
+            let mut count = [0u8; 1];
+            let mut bytes = [0u8; GATE_BYTES];
+            let ok = sh::read(h, &mut count) && {
+                let n = usize::from(count[0]).min(GATE_BYTES);
+                bytes
+                    .get_mut(..n)
+                    .is_some_and(|b| b.is_empty() || sh::read(h, b))
+            };
+            if ok {
+                let n = usize::from(count[0]).min(GATE_BYTES);
+                for &b in bytes.get(..n).unwrap_or(&[]) {
+                    let _ = self.gate_in.enqueue(b);
+                }
+                if n > 0 {
+                    pac::NVIC::pend(pac::Interrupt::USART1);
+                }
+            } else {
+                self.gate = None;
+            }
+        }
         let mut edges = heapless::Vec::new();
         let (from, to) = (self.now_ms, now_ms);
         let s = self.scenario;
@@ -395,9 +495,30 @@ impl Sensors {
             },
         };
         let dt_us = to.saturating_sub(from).saturating_mul(1000);
-        self.machine.step(dt_us, &inputs, &mut |t| {
-            let _ = edges.push(t);
+        // Plants dropped in this sample: one per 50 mm belt partition, so
+        // at most one per 10 ms sample at any reachable belt speed.
+        let mut plants: heapless::Vec<f64, 4> = heapless::Vec::new();
+        self.machine.step_events(dt_us, &inputs, &mut |e| match e {
+            Event::HallEdge(t) => {
+                let _ = edges.push(t);
+            }
+            Event::Plant { ground_m, .. } => {
+                let _ = plants.push(ground_m);
+            }
         });
+        if s.plant_log {
+            let first = self
+                .machine
+                .plants_dropped()
+                .wrapping_sub(plants.len() as u32);
+            for (i, ground_m) in plants.iter().enumerate() {
+                defmt::info!(
+                    "sim: plant {=u32} at {=u32} um",
+                    first.wrapping_add(i as u32).wrapping_add(1),
+                    (ground_m * 1e6) as u32
+                );
+            }
+        }
         self.now_ms = to;
         let now_ticks = self.machine.capture_ticks();
         HALL_TIMER_NOW.store(now_ticks, Relaxed);
@@ -469,7 +590,7 @@ pub struct HallCapture;
 
 impl HallCapture {
     /// TIM2 never interrupts under QEMU.
-    pub fn on_interrupt(&mut self) -> Option<u32> {
+    pub fn on_interrupt(&mut self) -> Option<super::HallEdge> {
         None
     }
 
@@ -532,6 +653,18 @@ fn now_us() -> u32 {
 pub fn stop_outputs() {
     safe_state();
     STOP_SAFE_US.store(now_us(), Relaxed);
+}
+
+/// Whether the drivers' enable stand-in is on (the settings task erases
+/// flash only while it is off).
+pub fn drivers_enabled() -> bool {
+    DRIVER_ENABLE.load(Relaxed)
+}
+
+/// Whether the clock security system saw the HSE fail: QEMU runs on the
+/// HSI and has no CSS.
+pub fn clock_failed() -> bool {
+    false
 }
 
 /// Zeroes the PWM and step stand-ins and the enable (the model coasts the
@@ -633,6 +766,12 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
                     path_len = value.len();
                 }
             }
+            b"gate" => {
+                if let Some(dst) = cmd.gate.get_mut(..value.len()) {
+                    dst.copy_from_slice(value);
+                    cmd.gate_len = value.len();
+                }
+            }
             b"gear" => s.gear = parse_u32(value).and_then(|g| u8::try_from(g).ok()),
             b"step" => {
                 let slot = s.step.iter_mut().find(|x| x.is_none());
@@ -647,6 +786,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"stop" => s.stop = parse_u32(value),
             b"stop_input" => s.stop_input = parse_u32(value),
             b"stop_input_close" => s.stop_input_close = parse_u32(value),
+            b"stopgo" => s.stop_go_ms = parse_u32(value),
             b"tau" => s.tau_ms = parse_u32(value),
             b"profile" => s.profile_b = value == b"b" || value == b"B",
             b"speed" => s.speed_mm_s = parse_u32(value),
@@ -657,6 +797,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"noise" => s.noiseless = value == b"0",
             b"seed" => s.seed = parse_u32(value),
             b"slip" => s.slip_pct = parse_u32(value),
+            b"plant_log" => s.plant_log = value == b"1",
             _ => {}
         }
     }

@@ -1,5 +1,10 @@
 //! A minimal, deterministic SVG line/bar chart writer (fixed number
 //! formatting, so reruns are byte-identical).
+//!
+//! Each series' path and each bar group carry `data-series="NAME"` (the
+//! run report's test finds every series by it); a point with a non-finite
+//! `y` breaks a line (a gap in the data); the clip path's id is made from
+//! the title, so that several charts can share one HTML page.
 
 use std::fmt::Write as _;
 
@@ -47,10 +52,25 @@ const RIGHT: f64 = 190.0;
 const TOP: f64 = 40.0;
 const BOTTOM: f64 = 55.0;
 
-fn esc(s: &str) -> String {
+/// Escapes text and attribute values (`"` too: names go into attributes).
+pub fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// An id made of the title's ASCII letters and digits.
+fn slug(s: &str) -> String {
+    let mut id = String::from("plot-");
+    for c in s.chars() {
+        if c.is_ascii_alphanumeric() {
+            id.push(c.to_ascii_lowercase());
+        } else if !id.ends_with('-') {
+            id.push('-');
+        }
+    }
+    id
 }
 
 /// A tick label: no trailing zeros beyond what the step needs.
@@ -140,6 +160,7 @@ impl Chart {
         // Bars.
         let mut legend: Vec<(String, &str, bool)> = Vec::new();
         for b in &self.bars {
+            let _ = writeln!(s, "<g data-series=\"{}\">", esc(&b.name));
             for &(l, r, h) in &b.bars {
                 let (xl, xr) = (self.px(l), self.px(r));
                 let yt = self.py(h);
@@ -151,6 +172,7 @@ impl Chart {
                     b.colour
                 );
             }
+            s.push_str("</g>\n");
             legend.push((b.name.clone(), b.colour, false));
         }
         // Reference lines.
@@ -177,26 +199,38 @@ impl Chart {
             );
         }
         // Lines.
+        let clip = slug(&self.title);
         let _ = writeln!(
             s,
-            "<clipPath id=\"plot\"><rect x=\"{x0:.1}\" y=\"{y1:.1}\" width=\"{:.1}\" height=\"{:.1}\"/></clipPath>",
+            "<clipPath id=\"{clip}\"><rect x=\"{x0:.1}\" y=\"{y1:.1}\" width=\"{:.1}\" height=\"{:.1}\"/></clipPath>",
             x1 - x0,
             y0 - y1
         );
         for ser in &self.series {
             let mut d = String::new();
-            for (i, &(x, y)) in ser.points.iter().enumerate() {
+            let mut pen_down = false;
+            for &(x, y) in &ser.points {
+                if !(x.is_finite() && y.is_finite()) {
+                    pen_down = false;
+                    continue;
+                }
                 let _ = write!(
                     d,
                     "{}{:.1} {:.1}",
-                    if i == 0 { "M" } else { " L" },
+                    match (pen_down, d.is_empty()) {
+                        (true, _) => " L",
+                        (false, true) => "M",
+                        (false, false) => " M",
+                    },
                     self.px(x),
                     self.py(y)
                 );
+                pen_down = true;
             }
             let _ = writeln!(
                 s,
-                "<path clip-path=\"url(#plot)\" d=\"{d}\" fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\"{}/>",
+                "<path data-series=\"{}\" clip-path=\"url(#{clip})\" d=\"{d}\" fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\"{}/>",
+                esc(&ser.name),
                 ser.colour,
                 if ser.dashed {
                     " stroke-dasharray=\"6 3\""

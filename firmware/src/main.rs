@@ -47,10 +47,13 @@ const STATUS_PERIOD_MS: u32 = 200;
 const STATUS_LOG_EVERY: u32 = 5;
 /// The HMI task ticks the screen link at least this often.
 const HMI_TICK_MS: u32 = 20;
-/// Bytes queued between the USART interrupt and the HMI task.
-const RX_QUEUE: usize = 64;
-/// Hall edges queued between the capture interrupt and the control task.
-const EDGE_QUEUE: usize = 16;
+/// Bytes queued between the USART interrupt and the HMI task (the QEMU
+/// board's lock-step delivers at most 32 per control period, and its 8 KB of
+/// RAM need every byte for the stack).
+const RX_QUEUE: usize = if cfg!(feature = "board-qemu") { 32 } else { 64 };
+/// Hall edges queued between the capture interrupt and the control task
+/// (the QEMU board's edges come with the sensor sample, not this queue).
+const EDGE_QUEUE: usize = if cfg!(feature = "board-qemu") { 2 } else { 16 };
 
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [CAN_RX1, CAN_SCE, ADC1_2])]
 mod app {

@@ -267,6 +267,8 @@ pub struct Firmware {
     gate: Option<Gate>,
     /// Lock-step: the screen's bytes for the next periods.
     to_firmware: Mutex<std::collections::VecDeque<u8>>,
+    /// QEMU has exited (seen while waiting for a period to be taken).
+    ended: std::sync::atomic::AtomicBool,
 }
 
 fn tool_missing(tool: &str, hint: &str) -> io::Error {
@@ -400,12 +402,17 @@ impl Firmware {
             logs: Mutex::new(Vec::new()),
             gate,
             to_firmware: Mutex::new(std::collections::VecDeque::new()),
+            ended: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
     /// Lock-step: allows the firmware `periods` more control periods.
-    /// Without lock-step, nothing.
+    /// Without lock-step, or once QEMU has ended (its run limit: nobody
+    /// reads the FIFO any more, a full one would block), nothing.
     pub fn allow(&self, periods: usize) -> io::Result<()> {
+        if self.ended.load(std::sync::atomic::Ordering::Relaxed) {
+            return Ok(());
+        }
         match &self.gate {
             Some(g) => {
                 let mut queue = self
@@ -425,6 +432,7 @@ impl Firmware {
         let deadline = Instant::now() + Duration::from_secs(60);
         while self.pending_periods() > 0 {
             if self.qemu.try_wait()?.is_some() {
+                self.ended.store(true, std::sync::atomic::Ordering::Relaxed);
                 return Ok(());
             }
             if Instant::now() > deadline {

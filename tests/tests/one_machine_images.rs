@@ -41,8 +41,9 @@ fn wait_page(bench: &mut Bench, page: u8) {
         bench
             .pump_until(Duration::from_secs(5), |s| s.page() == page)
             .unwrap(),
-        "the screen never reached page {page} (it shows page {})",
-        bench.screen.page()
+        "the screen never reached page {page} (it shows page {}); log:\n{}",
+        bench.screen.page(),
+        bench.fw.logs().join("\n")
     );
 }
 

@@ -239,17 +239,61 @@ fn decode_alone(bytes: &[u8]) -> Frame {
     got.pop().unwrap().unwrap()
 }
 
+/// The length of a whole, valid return frame starting at `bytes[p]`, by the
+/// protocol's own rules (Nextion Instruction Set ch. 7, written here
+/// independently of the decoder): the header fixes the payload length (a
+/// `0x70` string ends at its first `0xFF`), then `FF FF FF`.
+fn protocol_frame_at(bytes: &[u8], p: usize) -> Option<usize> {
+    const ERRORS: [u8; 17] = [
+        0x02, 0x03, 0x04, 0x05, 0x06, 0x09, 0x11, 0x12, 0x1A, 0x1B, 0x1C, 0x1D, 0x1E, 0x1F, 0x20,
+        0x23, 0x24,
+    ];
+    let rest = bytes.get(p..)?;
+    let event_ok = |i: usize| matches!(rest.get(i), Some(0x00 | 0x01));
+    let body = match *rest.first()? {
+        0x00 if rest.get(1) == Some(&0xFF) => 1,
+        0x00 if rest.get(1..3) == Some(&[0x00, 0x00][..]) => 3,
+        0x01 | 0x86..=0x89 | 0xFD | 0xFE => 1,
+        h if ERRORS.contains(&h) => 1,
+        0x65 if event_ok(3) => 4,
+        0x66 => 2,
+        0x67 | 0x68 if event_ok(5) => 6,
+        0x71 => 5,
+        0x70 => {
+            let n = rest.iter().skip(1).position(|&b| b == 0xFF)?;
+            if n > MAX_STRING_LEN {
+                return None;
+            }
+            n + 1
+        }
+        _ => return None,
+    };
+    (rest.get(body..body + 3)? == [0xFF; 3]).then_some(body + 3)
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(20_000))]
+    #![proptest_config(ProptestConfig::with_cases(100_000))]
 
     /// Noise of any length and content, then two valid frames: at least the
-    /// second is decoded, and it is the last thing decoded.
+    /// second is decoded, and it is the last thing decoded — whenever the
+    /// stream allows it. When a whole, valid frame starts in the noise or
+    /// the first frame and runs into the second (e.g. noise `67`, then
+    /// `01 FF FF FF` and `01 FF FF FF`: together a valid `0x67` touch
+    /// coordinate frame, found by this test), no decoder can know the
+    /// second frame is there: such streams are left out, by the protocol's
+    /// rules above, not by the decoder's.
     #[test]
     fn noise_then_two_frames_decodes_the_second(
         noise in proptest::collection::vec(any::<u8>(), 0..300),
         first in any_frame(),
         second in any_frame(),
     ) {
+        let stream: Vec<u8> = [&noise[..], &first[..], &second[..]].concat();
+        let second_at = noise.len() + first.len();
+        let straddled = (0..second_at).any(|p| {
+            protocol_frame_at(&stream, p).is_some_and(|len| p + len > second_at)
+        });
+        prop_assume!(!straddled);
         let want = decode_alone(&second);
         let mut d = Decoder::new();
         let mut frames = Vec::new();

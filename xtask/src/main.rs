@@ -185,26 +185,7 @@ fn have(tool: &str) -> bool {
 /// packages (as root) and `defmt-print` from crates.io.
 fn ensure_tools() -> Result {
     if !have("qemu-system-arm") {
-        let root = Command::new("id")
-            .arg("-u")
-            .output()
-            .map(|o| o.stdout.starts_with(b"0"))
-            .unwrap_or(false);
-        if !root {
-            return Err(
-                "qemu-system-arm is missing: `sudo apt-get install qemu-system-arm`".into(),
-            );
-        }
-        run(
-            "apt-get update",
-            Command::new("apt-get").args(["update", "-qq"]),
-        )?;
-        run(
-            "apt-get install qemu-system-arm",
-            Command::new("apt-get")
-                .args(["install", "-y", "-qq", "qemu-system-arm"])
-                .env("DEBIAN_FRONTEND", "noninteractive"),
-        )?;
+        apt_install(&["qemu-system-arm"], "QEMU")?;
     }
     if !have("defmt-print") {
         run(
@@ -243,24 +224,29 @@ fn ensure_twin_tools() -> Result {
     if have("cmake") && have_libclang() {
         return Ok(());
     }
+    apt_install(&["cmake", "libclang-dev"], "the twin's unicorn build")
+}
+
+/// Installs Debian packages (as root; otherwise says what to run).
+fn apt_install(packages: &[&str], what: &str) -> Result {
     let root = Command::new("id")
         .arg("-u")
         .output()
         .map(|o| o.stdout.starts_with(b"0"))
         .unwrap_or(false);
+    let list = packages.join(" ");
     if !root {
-        return Err(
-            "the twin needs cmake and libclang: `sudo apt-get install cmake libclang-dev`".into(),
-        );
+        return Err(format!("{what} needs `sudo apt-get install {list}`"));
     }
     run(
         "apt-get update",
         Command::new("apt-get").args(["update", "-qq"]),
     )?;
     run(
-        "apt-get install cmake libclang-dev (the twin's unicorn build)",
+        &format!("apt-get install {list} ({what})"),
         Command::new("apt-get")
-            .args(["install", "-y", "-qq", "cmake", "libclang-dev"])
+            .args(["install", "-y", "-qq"])
+            .args(packages)
             .env("DEBIAN_FRONTEND", "noninteractive"),
     )
 }

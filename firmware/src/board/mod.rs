@@ -15,6 +15,8 @@
 //! [`Sensors`], [`HallCapture`] and the free functions [`safe_state`],
 //! [`drivers_enabled`], [`fatal`] and [`run_limit_ms`].
 
+mod fault;
+
 #[cfg(feature = "board-qemu")]
 mod qemu;
 #[cfg(feature = "board-qemu")]

@@ -1,13 +1,14 @@
-//! CRC-32/ISO-HDLC (the zlib, Ethernet and PNG CRC), small and incremental.
+//! CRC-32/ISO-HDLC (the zlib, Ethernet and PNG CRC) of the settings records,
+//! computed by the [`crc`] crate.
 //!
 //! Parameters: polynomial `0x04C11DB7` (processed reflected, `0xEDB88320`),
 //! initial value `0xFFFFFFFF`, input and output reflected, final XOR
 //! `0xFFFFFFFF`; check value `CRC(b"123456789") = 0xCBF43926`.
 //!
-//! The implementation uses a 16-entry nibble table (64 bytes of flash, two
-//! lookups per byte) rather than the usual 1 KB byte table: the firmware has a
-//! 32 KB budget and checks one ~230-byte record at boot and on save, so speed
-//! does not matter.
+//! The crate's table-less implementation ([`crc::NoTable`], a bit at a time)
+//! is used: no 1 KB table in flash, and the firmware checks one ~300-byte
+//! record at boot and on save, so speed does not matter. (Until the flash
+//! budget grew to 56 KB this was a hand-written nibble-table CRC.)
 //!
 //! ```
 //! use supervisor::crc::{crc32, Crc32};
@@ -18,67 +19,40 @@
 //! assert_eq!(c, 0xCBF4_3926);
 //! ```
 
-/// `NIBBLE[n]` is the CRC register after shifting the 4-bit value `n` through
-/// the reflected polynomial `0xEDB88320` four times (a unit test recomputes
-/// every entry bit by bit).
-const NIBBLE: [u32; 16] = [
-    0x0000_0000,
-    0x1DB7_1064,
-    0x3B6E_20C8,
-    0x26D9_30AC,
-    0x76DC_4190,
-    0x6B6B_51F4,
-    0x4DB2_6158,
-    0x5005_713C,
-    0xEDB8_8320,
-    0xF00F_9344,
-    0xD6D6_A3E8,
-    0xCB61_B38C,
-    0x9B64_C2B0,
-    0x86D3_D2D4,
-    0xA00A_E278,
-    0xBDBD_F21C,
-];
+use crc::{Crc, Digest, NoTable, CRC_32_ISO_HDLC};
 
-/// One nibble step: shift the low 4 bits of `crc` out through the table.
-#[inline]
-fn step(crc: u32) -> u32 {
-    let [low, ..] = crc.to_le_bytes();
-    let t = NIBBLE.get(usize::from(low & 0x0F)).copied().unwrap_or(0);
-    (crc >> 4) ^ t
-}
+/// The algorithm, bit-at-a-time (no table in flash).
+static CRC_32: Crc<u32, NoTable> = Crc::<u32, NoTable>::new(&CRC_32_ISO_HDLC);
 
 /// An incremental CRC-32/ISO-HDLC computation.
 ///
 /// `Crc32::new().update(a).update(b).finish() == crc32(a ++ b)`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[derive(Clone)]
 pub struct Crc32 {
-    /// The (non-inverted) shift register.
-    state: u32,
+    /// The crate's running digest.
+    digest: Digest<'static, u32, NoTable>,
 }
 
 impl Crc32 {
-    /// A fresh computation (register `0xFFFFFFFF`).
+    /// A fresh computation.
     #[must_use]
-    pub const fn new() -> Self {
-        Self { state: 0xFFFF_FFFF }
+    pub fn new() -> Self {
+        Self {
+            digest: CRC_32.digest(),
+        }
     }
 
     /// Feeds `bytes`.
     #[must_use]
     pub fn update(mut self, bytes: &[u8]) -> Self {
-        for &b in bytes {
-            let c = self.state ^ u32::from(b);
-            self.state = step(step(c));
-        }
+        self.digest.update(bytes);
         self
     }
 
-    /// The CRC of everything fed so far (the computation can continue).
+    /// The CRC of everything fed so far.
     #[must_use]
-    pub const fn finish(self) -> u32 {
-        !self.state
+    pub fn finish(self) -> u32 {
+        self.digest.finalize()
     }
 }
 
@@ -88,10 +62,18 @@ impl Default for Crc32 {
     }
 }
 
+impl core::fmt::Debug for Crc32 {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Crc32")
+            .field("so_far", &self.clone().finish())
+            .finish()
+    }
+}
+
 /// CRC-32/ISO-HDLC of `bytes` in one call.
 #[must_use]
 pub fn crc32(bytes: &[u8]) -> u32 {
-    Crc32::new().update(bytes).finish()
+    CRC_32.checksum(bytes)
 }
 
 #[cfg(test)]
@@ -115,21 +97,6 @@ mod tests {
             }
         }
         !crc
-    }
-
-    #[test]
-    fn nibble_table_matches_bitwise_construction() {
-        for (n, &entry) in NIBBLE.iter().enumerate() {
-            let mut c = n as u32;
-            for _ in 0..4 {
-                c = if c & 1 == 1 {
-                    (c >> 1) ^ 0xEDB8_8320
-                } else {
-                    c >> 1
-                };
-            }
-            assert_eq!(entry, c, "entry {n}");
-        }
     }
 
     #[test]

@@ -567,6 +567,7 @@ const LIBRARIES: &[&str] = &[
     "hmi-proto",
     "machine-sim",
     "supervisor",
+    "drive-link",
 ];
 
 /// `-p NAME` for each package.
@@ -605,7 +606,7 @@ fn ci() -> Result {
             .args(["-p", "bench"])
             .args([
                 "--features",
-                "kinematics/defmt,fuzzy-pid/defmt,hmi-proto/defmt,supervisor/defmt",
+                "kinematics/defmt,fuzzy-pid/defmt,hmi-proto/defmt,supervisor/defmt,drive-link/defmt",
                 "--target",
                 TARGET,
                 "--",

@@ -1,0 +1,436 @@
+//! The Modbus master's link supervision: what to ask next, when a reply is
+//! late, retries, link loss and recovery, and the counters.
+//!
+//! Sans-IO: the board layer sends the frames [`Link::next_frame`] gives
+//! (driver-enable high before the first bit), calls [`Link::sent`] at the
+//! transmission-complete interrupt (TC, not TXE: the last stop bit has left;
+//! then driver-enable low), hands every received frame (bytes ended by a
+//! 3.5-character silence) to [`Link::received`] and calls [`Link::tick`]
+//! from its timer. Time is in µs of a monotonic clock. Nothing here blocks.
+//!
+//! Rules (docs/drive-link.md):
+//! - one request at a time; the next one no earlier than the 3.5-character
+//!   silent interval after the last frame on the line;
+//! - a reply is due within [`LinkConfig::reply_timeout_us`] of the request's
+//!   end; a corrupted reply (CRC), an exception or no reply is a failed
+//!   attempt and the same request is sent again, up to
+//!   [`LinkConfig::retries`] times;
+//! - when a request's retries are used up the link is **lost**: latched
+//!   ([`Event::Lost`]) until it answers again ([`Event::Restored`]) **and**
+//!   the operator acknowledges ([`Link::acknowledge`]); polling goes on
+//!   meanwhile so that recovery is seen;
+//! - a valid frame that does not answer the outstanding request (a reply
+//!   that arrived after its timeout) is counted as late and ignored.
+//!
+//! The speed read-back is stamped with the time its request ended (the
+//! driver samples after it has the request), so its age at use includes the
+//! reply's own time on the line.
+
+use crate::profile::{ControlWord, DriverProfile};
+use crate::rtu::{self, Reply, ReplyError, Request};
+use crate::timing;
+
+/// Timing of the link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LinkConfig {
+    /// A reply must end within this time of the request's end (µs).
+    pub reply_timeout_us: u32,
+    /// Extra attempts of a failed request before the link is lost.
+    pub retries: u8,
+    /// Every n-th poll reads the fault register instead of the speed.
+    pub fault_poll_every: u8,
+    /// The 3.5-character silence (µs).
+    pub silent_interval_us: u32,
+}
+
+/// The driver's own turnaround allowed on top of the reply's time on the
+/// line: Modbus drivers answer within a few ms; 20 ms covers the slow ones.
+pub const DRIVER_TURNAROUND_US: u32 = 20_000;
+
+impl LinkConfig {
+    /// The timing for a profile's baud rate: the reply timeout is the
+    /// longest reply's time on the line (9 characters) plus
+    /// [`DRIVER_TURNAROUND_US`]; two retries; faults every 4th poll.
+    ///
+    /// ```
+    /// use drive_link::{link::LinkConfig, profile::ZLAC8015D};
+    /// let c = LinkConfig::for_baud(9600).unwrap();
+    /// // 9 × 1145.8 µs = 10 313 µs on the line + 20 ms.
+    /// assert_eq!(c.reply_timeout_us, 30_313);
+    /// assert_eq!(LinkConfig::for_baud(ZLAC8015D.baud).unwrap().reply_timeout_us, 20_860);
+    /// ```
+    #[must_use]
+    pub fn for_baud(baud: u32) -> Option<Self> {
+        let reply = timing::frame_time_us(baud, 9)?;
+        Some(Self {
+            reply_timeout_us: reply.checked_add(DRIVER_TURNAROUND_US)?,
+            retries: 2,
+            fault_poll_every: 4,
+            silent_interval_us: timing::silent_interval_us(baud)?,
+        })
+    }
+}
+
+/// What happened on the link that the supervisor must act on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Event {
+    /// No valid reply within the retry budget: the link is lost (latched).
+    Lost,
+    /// The driver answers again (the alarm stays until acknowledged).
+    Restored,
+    /// The fault word changed; nonzero = the driver reports faults.
+    Faults(u16),
+}
+
+/// Counters since start (wrapping at u32::MAX, never panicking).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Counters {
+    /// Transactions answered correctly.
+    pub replies: u32,
+    /// Replies with a CRC error.
+    pub crc_errors: u32,
+    /// Requests that got no reply in time.
+    pub timeouts: u32,
+    /// Valid frames that answered no outstanding request.
+    pub late_replies: u32,
+    /// Exception replies.
+    pub exceptions: u32,
+    /// Times the link was lost.
+    pub losses: u32,
+}
+
+/// A speed read back from the driver.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SpeedSample {
+    /// Drum speed, milli-r/min.
+    pub drum_milli_rpm: i32,
+    /// When the driver sampled it (the end of the request), µs.
+    pub sampled_at_us: u64,
+}
+
+/// The driver's enable through its control word.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlAction {
+    /// Enable the motor.
+    Enable,
+    /// Disable it.
+    Disable,
+    /// Clear a latched driver alarm.
+    ClearAlarm,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Job {
+    Speed,
+    Faults,
+    Control,
+    Mode,
+    Command,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum State {
+    /// The line is free from `at` on.
+    Idle { at: u64 },
+    /// A frame is on its way out.
+    Sending { job: Job, request: Request },
+    /// Waiting for the reply until `deadline`.
+    Awaiting {
+        job: Job,
+        request: Request,
+        sent_at: u64,
+        deadline: u64,
+    },
+}
+
+/// The master's state.
+#[derive(Debug, Clone)]
+pub struct Link {
+    profile: DriverProfile,
+    config: LinkConfig,
+    state: State,
+    /// The request being retried, with its failures so far.
+    retry: Option<(Job, Request, u8)>,
+    control: Option<u16>,
+    command: Option<u16>,
+    command_sent: Option<u16>,
+    mode_due: bool,
+    polls: u8,
+    lost: bool,
+    answering: bool,
+    counters: Counters,
+    speed: Option<SpeedSample>,
+    faults: u16,
+}
+
+impl Link {
+    /// A link to the driver `profile` describes, with `config`'s timing.
+    #[must_use]
+    pub fn new(profile: DriverProfile, config: LinkConfig) -> Self {
+        Self {
+            profile,
+            config,
+            state: State::Idle { at: 0 },
+            retry: None,
+            control: None,
+            command: None,
+            command_sent: None,
+            mode_due: profile.velocity_mode.is_some(),
+            polls: 0,
+            lost: false,
+            answering: false,
+            counters: Counters::default(),
+            speed: None,
+            faults: 0,
+        }
+    }
+
+    /// Queues a control-word write (ignored when the profile has none; the
+    /// enable pin still acts). The latest request wins.
+    pub fn control(&mut self, action: ControlAction) {
+        if let Some(ControlWord {
+            enable,
+            disable,
+            clear_alarm,
+            ..
+        }) = self.profile.control
+        {
+            self.control = Some(match action {
+                ControlAction::Enable => enable,
+                ControlAction::Disable => disable,
+                ControlAction::ClearAlarm => clear_alarm,
+            });
+        }
+    }
+
+    /// Sets the speed command (drum milli-r/min); written when it changes
+    /// and refreshed on every fault poll. `None` stops commanding.
+    pub fn set_speed_command(&mut self, drum_milli_rpm: Option<i32>) {
+        self.command = drum_milli_rpm.and_then(|s| self.profile.command_counts(s));
+    }
+
+    /// The next frame to send, if the line is free; encodes it into `buf`
+    /// and returns its length.
+    pub fn next_frame(&mut self, now_us: u64, buf: &mut [u8]) -> Option<usize> {
+        let State::Idle { at } = self.state else {
+            return None;
+        };
+        if now_us < at {
+            return None;
+        }
+        let (job, request) = match self.retry {
+            Some((job, request, _)) => (job, request),
+            None => self.choose(),
+        };
+        let n = rtu::encode(self.profile.slave, request, buf).ok()?;
+        self.state = State::Sending { job, request };
+        Some(n)
+    }
+
+    fn choose(&mut self) -> (Job, Request) {
+        if let (Some(value), Some(cw)) = (self.control, self.profile.control) {
+            return (
+                Job::Control,
+                Request::Write {
+                    address: cw.address,
+                    value,
+                },
+            );
+        }
+        if self.mode_due {
+            if let Some((address, value)) = self.profile.velocity_mode {
+                return (Job::Mode, Request::Write { address, value });
+            }
+        }
+        self.polls = self.polls.wrapping_add(1);
+        let fault_turn = self.config.fault_poll_every != 0
+            && self.polls.is_multiple_of(self.config.fault_poll_every);
+        if let (Some(value), Some((address, _))) = (self.command, self.profile.speed_command) {
+            if self.command_sent != Some(value) || fault_turn {
+                return (Job::Command, Request::Write { address, value });
+            }
+        }
+        if fault_turn {
+            return (
+                Job::Faults,
+                Request::Read {
+                    address: self.profile.fault_register,
+                    count: 1,
+                },
+            );
+        }
+        (
+            Job::Speed,
+            Request::Read {
+                address: self.profile.speed_feedback,
+                count: 1,
+            },
+        )
+    }
+
+    /// The request's last bit has left (TC).
+    pub fn sent(&mut self, now_us: u64) {
+        if let State::Sending { job, request } = self.state {
+            let deadline = now_us.saturating_add(u64::from(self.config.reply_timeout_us));
+            self.state = State::Awaiting {
+                job,
+                request,
+                sent_at: now_us,
+                deadline,
+            };
+        }
+    }
+
+    /// A frame came in (ended by the silent interval).
+    pub fn received(&mut self, now_us: u64, frame: &[u8]) -> Option<Event> {
+        let State::Awaiting {
+            job,
+            request,
+            sent_at,
+            ..
+        } = self.state
+        else {
+            // Nothing outstanding: a reply after its timeout.
+            self.counters.late_replies = self.counters.late_replies.wrapping_add(1);
+            return None;
+        };
+        match rtu::parse_reply(self.profile.slave, request, frame) {
+            Ok(reply) => self.answered(now_us, job, sent_at, reply),
+            Err(ReplyError::Crc | ReplyError::Length(_)) => {
+                self.counters.crc_errors = self.counters.crc_errors.wrapping_add(1);
+                self.failed(now_us)
+            }
+            Err(ReplyError::Exception(_)) => {
+                self.counters.exceptions = self.counters.exceptions.wrapping_add(1);
+                self.failed(now_us)
+            }
+            Err(ReplyError::Slave(_) | ReplyError::Mismatch) => {
+                // A late reply to an earlier request: keep waiting.
+                self.counters.late_replies = self.counters.late_replies.wrapping_add(1);
+                None
+            }
+        }
+    }
+
+    /// Timer: ends an unanswered request at its deadline.
+    pub fn tick(&mut self, now_us: u64) -> Option<Event> {
+        match self.state {
+            State::Awaiting { deadline, .. } if now_us >= deadline => {
+                self.counters.timeouts = self.counters.timeouts.wrapping_add(1);
+                self.failed(now_us)
+            }
+            _ => None,
+        }
+    }
+
+    fn line_free(&mut self, now_us: u64) {
+        self.state = State::Idle {
+            at: now_us.saturating_add(u64::from(self.config.silent_interval_us)),
+        };
+    }
+
+    fn answered(&mut self, now_us: u64, job: Job, sent_at: u64, reply: Reply) -> Option<Event> {
+        self.line_free(now_us);
+        self.retry = None;
+        self.counters.replies = self.counters.replies.wrapping_add(1);
+        let mut event = None;
+        match (job, reply) {
+            (Job::Speed, Reply::Registers { first, .. }) => {
+                self.speed = Some(SpeedSample {
+                    drum_milli_rpm: self.profile.speed_from_register(first),
+                    sampled_at_us: sent_at,
+                });
+            }
+            (Job::Faults, Reply::Registers { first, .. }) => {
+                if first != self.faults {
+                    event = Some(Event::Faults(first));
+                }
+                self.faults = first;
+            }
+            (Job::Control, _) => self.control = None,
+            (Job::Mode, _) => self.mode_due = false,
+            (Job::Command, Reply::Written) => self.command_sent = self.command,
+            _ => {}
+        }
+        let was_answering = self.answering;
+        self.answering = true;
+        if self.lost && !was_answering {
+            // The driver may have been power-cycled: select its mode again.
+            self.mode_due = self.profile.velocity_mode.is_some();
+            return Some(Event::Restored);
+        }
+        event
+    }
+
+    fn failed(&mut self, now_us: u64) -> Option<Event> {
+        let State::Awaiting { job, request, .. } = self.state else {
+            return None;
+        };
+        self.line_free(now_us);
+        let failures = self.retry.map_or(1, |(_, _, n)| n.saturating_add(1));
+        if failures <= self.config.retries {
+            self.retry = Some((job, request, failures));
+            return None;
+        }
+        self.retry = None;
+        self.answering = false;
+        self.speed = None;
+        self.command_sent = None;
+        if self.lost {
+            return None;
+        }
+        self.lost = true;
+        self.counters.losses = self.counters.losses.wrapping_add(1);
+        Some(Event::Lost)
+    }
+
+    /// The operator acknowledges a link loss: cleared only when the driver
+    /// answers again. Returns whether the alarm is gone.
+    pub fn acknowledge(&mut self) -> bool {
+        if self.answering {
+            self.lost = false;
+        }
+        !self.lost
+    }
+
+    /// Whether the link is lost (latched until answered and acknowledged).
+    #[must_use]
+    pub fn is_lost(&self) -> bool {
+        self.lost
+    }
+
+    /// Whether the last transaction was answered.
+    #[must_use]
+    pub fn is_answering(&self) -> bool {
+        self.answering
+    }
+
+    /// The last speed read back (none while the link is down).
+    #[must_use]
+    pub fn speed(&self) -> Option<SpeedSample> {
+        self.speed
+    }
+
+    /// The last fault word read.
+    #[must_use]
+    pub fn fault_word(&self) -> u16 {
+        self.faults
+    }
+
+    /// The counters.
+    #[must_use]
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// The profile in use.
+    #[must_use]
+    pub fn profile(&self) -> &DriverProfile {
+        &self.profile
+    }
+}

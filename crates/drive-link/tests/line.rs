@@ -1,0 +1,302 @@
+//! The master against the virtual ZLAC8015D over a simulated half-duplex
+//! line: every frame takes its time on the wire (11 bits a character), the
+//! driver answers after its turnaround, a frame is handed over after the
+//! 3.5-character silence that ends it, and two frames on the wire at once
+//! garble each other. Simulated time in µs; nothing here reads the host's
+//! clock.
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
+#![allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap
+)]
+
+use drive_link::link::{ControlAction, Event, Link, LinkConfig};
+use drive_link::profile::{DriverFault, DriverProfile, ZLAC8015D};
+use drive_link::rtu::MAX_FRAME;
+use drive_link::timing::{frame_time_us, silent_interval_us};
+use drive_link::virtual_driver::VirtualZlac;
+
+/// A frame on the wire.
+struct OnWire {
+    start: u64,
+    end: u64,
+    bytes: Vec<u8>,
+    from_master: bool,
+    garbled: bool,
+}
+
+struct Bench {
+    now: u64,
+    baud: u32,
+    link: Link,
+    driver: VirtualZlac,
+    wire: Vec<OnWire>,
+    /// (time, event)
+    events: Vec<(u64, Event)>,
+    /// Speed samples seen: (time read, sampled_at, milli-r/min).
+    samples: Vec<(u64, u64, i32)>,
+    /// Request start times.
+    requests: Vec<u64>,
+}
+
+const STEP_US: u64 = 50;
+
+impl Bench {
+    fn new(baud: u32) -> Self {
+        let profile = DriverProfile { baud, ..ZLAC8015D };
+        Self {
+            now: 0,
+            baud,
+            link: Link::new(profile, LinkConfig::for_baud(baud).unwrap()),
+            driver: VirtualZlac::default(),
+            wire: Vec::new(),
+            events: Vec::new(),
+            samples: Vec::new(),
+            requests: Vec::new(),
+        }
+    }
+
+    fn put(&mut self, start: u64, bytes: Vec<u8>, from_master: bool) {
+        let end = start + u64::from(frame_time_us(self.baud, bytes.len() as u32).unwrap());
+        let mut garbled = false;
+        for w in &mut self.wire {
+            if w.start < end && start < w.end {
+                w.garbled = true;
+                garbled = true;
+            }
+        }
+        self.wire.push(OnWire {
+            start,
+            end,
+            bytes,
+            from_master,
+            garbled,
+        });
+    }
+
+    fn run_for(&mut self, us: u64) {
+        let stop = self.now + us;
+        let t35 = u64::from(silent_interval_us(self.baud).unwrap());
+        while self.now < stop {
+            self.now += STEP_US;
+            let now = self.now;
+            self.driver.advance(STEP_US as u32);
+            // Frames whose end (or end + t3.5) falls in this step.
+            let mut done = Vec::new();
+            self.wire.retain(|w| {
+                let due = if w.from_master { w.end } else { w.end + t35 };
+                if due <= now {
+                    done.push((w.end, w.bytes.clone(), w.from_master, w.garbled));
+                    false
+                } else {
+                    true
+                }
+            });
+            for (end, bytes, from_master, garbled) in done {
+                if from_master {
+                    self.link.sent(end);
+                    let mut heard = bytes.clone();
+                    if garbled {
+                        heard[1] ^= 0x55;
+                    }
+                    if let Some((reply, delay)) = self.driver.handle(&heard) {
+                        self.put(end + u64::from(delay), reply, false);
+                    }
+                } else {
+                    let mut heard = bytes.clone();
+                    if garbled {
+                        heard[1] ^= 0x55;
+                    }
+                    if let Some(e) = self.link.received(now, &heard) {
+                        self.events.push((now, e));
+                    }
+                    if let Some(s) = self.link.speed() {
+                        if self.samples.last().map(|l| l.1) != Some(s.sampled_at_us) {
+                            self.samples.push((now, s.sampled_at_us, s.drum_milli_rpm));
+                        }
+                    }
+                }
+            }
+            if let Some(e) = self.link.tick(now) {
+                self.events.push((now, e));
+            }
+            let mut buf = [0u8; MAX_FRAME];
+            if let Some(n) = self.link.next_frame(now, &mut buf) {
+                self.requests.push(now);
+                self.put(now, buf[..n].to_vec(), true);
+            }
+        }
+    }
+}
+
+/// One speed poll's cycle by hand from the spec's timing: request (8
+/// characters) + turnaround + reply (7 characters) + the 3.5-character
+/// silence that ends the reply + the 3.5-character gap before the next
+/// request.
+fn poll_cycle_us(baud: u32, turnaround: u32) -> f64 {
+    let c = 11.0e6 / f64::from(baud);
+    let t35 = if baud > 19_200 { 1750.0 } else { 3.5 * c };
+    8.0 * c + f64::from(turnaround) + 7.0 * c + 2.0 * t35
+}
+
+#[test]
+fn polls_at_the_rate_the_line_allows_and_reads_the_speed() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        b.driver.actual_decirpm = 203; // 20.3 r/min
+        b.run_for(2_000_000);
+        // The first request selects velocity mode; then speed and fault
+        // polls (every 4th is the fault register).
+        let n = b.requests.len() as f64;
+        let expected = 2.0e6 / poll_cycle_us(baud, b.driver.turnaround_us);
+        // Within 5 % (the 50 µs simulation step rounds each event).
+        assert!(
+            (n / expected - 1.0).abs() < 0.05,
+            "{baud} baud: {n} requests, expected {expected:.1}"
+        );
+        assert_eq!(b.samples.last().unwrap().2, 20_300);
+        let c = b.link.counters();
+        assert_eq!(
+            (c.crc_errors, c.timeouts, c.late_replies, c.losses),
+            (0, 0, 0, 0),
+            "{baud}: {c:?}"
+        );
+        // Age of a sample when it arrives: reply time + turnaround + t3.5,
+        // well under the 20–50 ms the drive model must tolerate at 9600.
+        let age = b.samples.iter().map(|s| s.0 - s.1).max().unwrap();
+        let c1 = 11.0e6 / f64::from(baud);
+        let t35 = if baud > 19_200 { 1750.0 } else { 3.5 * c1 };
+        let bound = 7.0 * c1 + 2000.0 + t35 + 2.0 * STEP_US as f64;
+        assert!((age as f64) <= bound, "{baud}: age {age} µs > {bound:.0}");
+        eprintln!(
+            "{baud} baud: {:.1} ms a poll, read-back age ≤ {:.1} ms",
+            2000.0 / n,
+            age as f64 / 1000.0
+        );
+    }
+}
+
+#[test]
+fn enable_and_speed_command_drive_the_motor() {
+    let mut b = Bench::new(115_200);
+    b.driver.own_motor = true;
+    b.link.control(ControlAction::Enable);
+    b.link.set_speed_command(Some(20_000));
+    b.run_for(1_000_000);
+    assert!(b.driver.enabled && b.driver.velocity_mode);
+    assert_eq!(b.driver.command_rpm, 20);
+    // τ = 100 ms: after ~1 s the motor is at the command, and the read-back shows it.
+    assert_eq!(b.samples.last().unwrap().2, 20_000);
+    b.link.control(ControlAction::Disable);
+    b.run_for(50_000);
+    assert!(!b.driver.enabled);
+}
+
+#[test]
+fn crc_errors_within_the_retry_budget_are_counted_and_survived() {
+    let mut b = Bench::new(9600);
+    b.driver.actual_decirpm = 100;
+    b.run_for(200_000);
+    // Two corrupted replies in a row: both retried, no loss.
+    b.driver.inject.corrupt_replies = 2;
+    b.run_for(500_000);
+    let c = b.link.counters();
+    assert_eq!(c.crc_errors, 2);
+    assert_eq!(c.losses, 0);
+    assert!(b.events.is_empty(), "{:?}", b.events);
+    // Three in a row (1 + 2 retries) lose the link.
+    b.driver.inject.corrupt_replies = 3;
+    b.run_for(500_000);
+    assert_eq!(b.link.counters().crc_errors, 5);
+    assert!(matches!(b.events.first(), Some((_, Event::Lost))));
+    // It answers again at once: restored, and the operator's ack clears it.
+    assert!(matches!(b.events.get(1), Some((_, Event::Restored))));
+    assert!(b.link.acknowledge());
+}
+
+#[test]
+fn a_cut_link_is_lost_within_the_retry_budget_and_recovers() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        b.run_for(300_000);
+        let cut = b.now;
+        b.driver.inject.silent = true;
+        b.run_for(1_000_000);
+        let (t_lost, e) = b.events[0];
+        assert_eq!(e, Event::Lost);
+        // By hand: the request in flight at the cut and 2 retries, each a
+        // request (8 characters) + the reply timeout + the gap; at most one
+        // more cycle for the transaction already under way at the cut.
+        let c = LinkConfig::for_baud(baud).unwrap();
+        let attempt =
+            f64::from(frame_time_us(baud, 8).unwrap() + c.reply_timeout_us + c.silent_interval_us);
+        let bound = 3.0 * attempt + poll_cycle_us(baud, 2000) + STEP_US as f64;
+        let took = (t_lost - cut) as f64;
+        assert!(
+            took <= bound,
+            "{baud}: lost {took} µs after the cut, bound {bound:.0}"
+        );
+        assert!(b.link.is_lost() && b.link.speed().is_none());
+        assert!(!b.link.acknowledge(), "no ack while the driver is silent");
+        // The operator cannot clear it; the driver comes back: restored.
+        b.driver.inject.silent = false;
+        b.run_for(200_000);
+        assert!(b.events.iter().any(|(_, e)| *e == Event::Restored));
+        assert!(b.link.is_lost(), "latched until acknowledged");
+        assert!(b.link.acknowledge());
+        assert!(b.link.speed().is_some());
+        eprintln!(
+            "{baud} baud: link lost {:.1} ms after the cut",
+            took / 1000.0
+        );
+    }
+}
+
+#[test]
+fn a_late_reply_is_counted_and_ignored() {
+    let mut b = Bench::new(115_200);
+    b.driver.actual_decirpm = 55;
+    b.run_for(100_000);
+    // One reply 25 ms late: past the 20.9 ms timeout. The master retries;
+    // the late frame lands on the retry's request or after it.
+    b.driver.inject.late_replies = 1;
+    b.driver.inject.extra_delay_us = 25_000;
+    b.run_for(300_000);
+    let c = b.link.counters();
+    assert_eq!(c.timeouts, 1, "{c:?}");
+    assert!(c.late_replies + c.crc_errors >= 1, "{c:?}");
+    assert_eq!(c.losses, 0);
+    assert_eq!(b.samples.last().unwrap().2, 5_500);
+}
+
+#[test]
+fn driver_faults_are_read_and_named() {
+    let mut b = Bench::new(115_200);
+    b.run_for(100_000);
+    b.driver.fault_bits = 0x0004 | 0x0400;
+    let set = b.now;
+    b.run_for(200_000);
+    let (t, e) = *b
+        .events
+        .iter()
+        .find(|(_, e)| matches!(e, Event::Faults(_)))
+        .unwrap();
+    assert_eq!(e, Event::Faults(0x0404));
+    // Within 4 polls + one (every 4th poll reads the faults).
+    assert!(
+        (t - set) as f64 <= 5.0 * poll_cycle_us(115_200, 2000),
+        "{} µs",
+        t - set
+    );
+    let names: Vec<_> = ZLAC8015D.faults(0x0404).collect();
+    assert_eq!(
+        names,
+        [DriverFault::OverCurrent, DriverFault::OverTemperature]
+    );
+    assert_eq!(names[0].to_string(), "driver over-current");
+}

@@ -145,12 +145,15 @@ fn twin_section(doc: &mut String) -> Result {
 }
 
 /// `cargo xtask bench --only NAME`: one section (`tables`) alone, printed
-/// and written to target/bench-NAME.md; docs/PERFORMANCE.md is left as it is.
+/// and written to target/bench-NAME.md (its plots to target/img/);
+/// docs/PERFORMANCE.md and docs/img/ are left as they are.
 fn only(name: &str) -> Result {
     let started = std::time::Instant::now();
+    let img = root().join("target").join("img");
+    std::fs::create_dir_all(&img).map_err(|e| format!("{}: {e}", img.display()))?;
     let mut doc = String::new();
     match name {
-        "tables" => tables::section(&mut doc)?,
+        "tables" => tables::section(&mut doc, &img)?,
         other => {
             return Err(format!(
                 "bench --only: unknown section `{other}` (known: tables)"
@@ -291,7 +294,7 @@ pub fn run(args: &[String]) -> Result {
     }
     twin_section(&mut doc)?;
     eprintln!("xtask: bench 8 paper A Tables 14 and 15");
-    tables::section(&mut doc)?;
+    tables::section(&mut doc, &img)?;
     let path = root().join("docs").join("PERFORMANCE.md");
     write_file(&path, &doc)?;
     eprintln!(

@@ -296,6 +296,20 @@ pub fn step_plant() -> Config {
     }
 }
 
+/// The product's settings for Table 15: Speed-Adaptive at
+/// [`STEP_SPACING_MM`], the Low 1 preset, everything else the defaults
+/// (so the Speed-Adaptive control law is whichever the product ships as its
+/// default; paper A's is speed following, the drum speed following the
+/// measured travel speed).
+pub fn step_settings() -> Result<Settings> {
+    Ok(Settings {
+        mode: Mode::SpeedAdaptive,
+        spacing: Spacing::new(i32::from(STEP_SPACING_MM)).map_err(|e| format!("{e:?}"))?,
+        gear: Gear::Low1,
+        ..Settings::default()
+    })
+}
+
 /// A step run's record.
 pub struct StepRun {
     /// `(t ms, true drum speed r/min)` after each millisecond from 500 ms
@@ -328,13 +342,7 @@ pub fn step_run(increment_kmh: f64, k: u32) -> Result<StepRun> {
     let mut m = step_plant().build().map_err(|e| format!("machine: {e}"))?;
     #[allow(clippy::cast_possible_truncation)]
     m.set_travel_speed_m_s((PAPER_BASE_KMH / 3.6) as f32);
-    let settings = Settings {
-        mode: Mode::SpeedAdaptive,
-        spacing: Spacing::new(i32::from(STEP_SPACING_MM)).map_err(|e| format!("{e:?}"))?,
-        gear: Gear::Low1,
-        ..Settings::default()
-    };
-    let mut sup = Supervisor::new(HW, settings).map_err(|e| format!("supervisor: {e}"))?;
+    let mut sup = Supervisor::new(HW, step_settings()?).map_err(|e| format!("supervisor: {e}"))?;
     let mut act = Actuation::OFF;
     sup.command(Command::Start);
     let change_ms = STEP_AT_MS + k * STEP_OFFSET_MS;
@@ -698,7 +706,9 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
         "\n### Table 15: response to travel-speed steps (Speed-Adaptive mode)\n\n\
          The product runs in **Speed-Adaptive mode** (the paper: \"the system controls the \
          motor's operation based on the feedback of the traveling speed\"), spacing \
-         {spacing} cm, gear preset Low 1, the calibration defaults (paper A's tables). Paper A \
+         {spacing} cm, gear preset Low 1, every other setting at its default (the calibration: \
+         paper A's tables; the Speed-Adaptive control law: the product's default, speed \
+         following when this section was written, as paper A's). Paper A \
          does not print the spacing; {spacing} cm is the smallest round spacing at which the \
          largest step (0.30 + 2.5 = 2.80 km/h) stays below the drum's 44.7 r/min (`cargo xtask \
          plan --spacing 25cm --speed 2.8km/h`: 40.9 r/min; at the paper's 18 cm the drum \

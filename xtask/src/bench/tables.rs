@@ -970,4 +970,31 @@ mod tests {
             );
         }
     }
+
+    #[test]
+    fn product_table_15_drum_loop_and_causality() {
+        // Table 15 as `cargo xtask bench` runs it (25 steps, about 0.1 s of
+        // host time). Independent reference for (c): once the target has
+        // moved, the drum is a first-order drive with the model's 5 ms dead
+        // time and τ = 25 ms (`Config::default()`), so 90 % of a step takes
+        // 5 + 25·ln 10 = 62.6 ms, plus at most one 10 ms control period
+        // before the new duty is applied: 72.6 ms. A product whose drum
+        // loop only followed through the PID (no feed-forward) would be far
+        // slower. Causality: the drum cannot make 90 % of the change before
+        // the first Hall edge tells the firmware of it.
+        let bound = 5.0 + 25.0 * 10f64.ln() + 10.0;
+        for (p, reps) in PAPER_TABLE_15.iter().zip(table15().expect("Table 15 runs")) {
+            for (k, r) in reps.iter().enumerate() {
+                let c = r.from_target.rise_ms.expect("rises after the target moved");
+                assert!(c <= bound, "+{} k {k}: (c) t90 {c} ms", p.increment_kmh);
+                let a = r.from_change.rise_ms.expect("rises");
+                let edge = r.run.first_edge_ms.expect("an edge") - r.run.change_ms;
+                assert!(
+                    a >= edge,
+                    "+{} k {k}: t90 {a} ms before the edge at {edge}",
+                    p.increment_kmh
+                );
+            }
+        }
+    }
 }

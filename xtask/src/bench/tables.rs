@@ -646,7 +646,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
     let t15 = table15()?;
     let _ = write!(
         doc,
-        "## 8. Paper A Tables 14 and 15: drum speed accuracy and response time\n\n\
+        "\n## 8. Paper A Tables 14 and 15: drum speed accuracy and response time\n\n\
          What paper A measured (section 3.6). **Table 14** (\"Motor accuracy table\"): \"the \
          control board is used as the lower-level controller to drive the motor. The motor is \
          connected to a photoelectric encoder through coupling to detect the actual speed during \

@@ -157,21 +157,16 @@ fn period(
     *act = sup.control_step(Ticks(m.capture_ticks()), m.drum_encoder_count());
 }
 
-/// One reading of Table 14: the product in Fixed mode at `set_rpm`
+/// One reading of Table 14: the product in Fixed mode at `set_centi_rpm`
 /// (hundredths of r/min, as the screen enters it) on the default noisy
-/// machine with `seed`; the mean *true* drum speed (the model's shaft, not
-/// the product's encoder estimate) over [`ACCURACY_READING_MS`] after
-/// [`ACCURACY_SETTLE_MS`], r/min.
-pub fn accuracy_reading(
-    set_centi_rpm: u16,
-    seed: u64,
-    phase: f32,
-    settle_ms: u32,
-    reading_ms: u32,
-) -> Result<f64> {
+/// machine with `seed`, the belt starting `belt_phase` (0 … 1) of a
+/// partition pitch along (where the seedlings' load cycle starts); the mean
+/// *true* drum speed (the model's shaft, not the product's encoder estimate)
+/// over [`ACCURACY_READING_MS`] after [`ACCURACY_SETTLE_MS`], r/min.
+pub fn accuracy_reading(set_centi_rpm: u16, seed: u64, belt_phase: f32) -> Result<f64> {
     let mut m = Config {
         seed,
-        belt_initial_phase: phase,
+        belt_initial_phase: belt_phase,
         ..Config::default()
     }
     .build()
@@ -185,11 +180,11 @@ pub fn accuracy_reading(
     let mut act = Actuation::OFF;
     sup.command(Command::Start);
     let mut none = |_: &mut Machine, _: &[u32]| {};
-    for _ in 0..settle_ms / 10 {
+    for _ in 0..ACCURACY_SETTLE_MS / 10 {
         period(&mut m, &mut sup, &mut act, &mut none);
     }
     let turns0 = m.drum_turns();
-    for _ in 0..reading_ms / 10 {
+    for _ in 0..ACCURACY_READING_MS / 10 {
         period(&mut m, &mut sup, &mut act, &mut none);
     }
     if sup.run_state() != RunState::Running {
@@ -198,16 +193,19 @@ pub fn accuracy_reading(
             sup.alarm()
         ));
     }
-    Ok((m.drum_turns() - turns0) * 60_000.0 / f64::from(reading_ms))
+    Ok((m.drum_turns() - turns0) * 60_000.0 / f64::from(ACCURACY_READING_MS))
 }
 
 /// One product row of Table 14.
 pub struct AccuracyRow {
+    /// The set drum speed, r/min.
     pub desired_rpm: f64,
+    /// The five readings, r/min.
     pub readings: [f64; REPEATS],
 }
 
 impl AccuracyRow {
+    /// Mean of the readings, r/min.
     pub fn mean(&self) -> f64 {
         self.readings.iter().sum::<f64>() / REPEATS as f64
     }
@@ -243,13 +241,7 @@ pub fn table14() -> Result<Vec<AccuracyRow>> {
         for (r, slot) in readings.iter_mut().enumerate() {
             #[allow(clippy::cast_precision_loss)]
             let phase = r as f32 / REPEATS as f32;
-            *slot = accuracy_reading(
-                centi,
-                accuracy_seed(i, r),
-                phase,
-                ACCURACY_SETTLE_MS,
-                ACCURACY_READING_MS,
-            )?;
+            *slot = accuracy_reading(centi, accuracy_seed(i, r), phase)?;
         }
         rows.push(AccuracyRow {
             desired_rpm: p.desired_rpm,
@@ -272,7 +264,7 @@ pub const STEP_SPACING_MM: u16 = 250;
 /// Time at 0.30 km/h before the step (drum and estimator settled), ms.
 pub const STEP_AT_MS: u32 = 8_000;
 /// The five repeats put the step `k · STEP_OFFSET_MS` later (k = 0 … 4):
-/// a fifth of the ≈ 301 ms Hall period at 0.30 km/h plus 1 ms, so the
+/// a fifth of the Hall period at 0.30 km/h (311 ms in the runs) plus 1 ms, so the
 /// steps fall at five phases of the tooth period and of the 10 ms control
 /// period.
 pub const STEP_OFFSET_MS: u32 = 61;
@@ -465,6 +457,7 @@ pub fn response(
 
 /// One repeat of Table 15, measured both ways.
 pub struct StepResult {
+    /// The run.
     pub run: StepRun,
     /// (a) from the physical change of travel speed.
     pub from_change: Response,
@@ -477,7 +470,7 @@ pub struct StepResult {
     pub target_moved_ms: Option<f64>,
 }
 
-/// Measures one step run both ways. `from` of the rise is the true drum
+/// Measures one step run from the three instants. `from` of the rise is the true drum
 /// speed at the change, `to` the product's new target.
 pub fn measure(run: StepRun) -> StepResult {
     let from = run

@@ -264,7 +264,7 @@ pub const STEP_SPACING_MM: u16 = 250;
 /// Time at 0.30 km/h before the step (drum and estimator settled), ms.
 pub const STEP_AT_MS: u32 = 8_000;
 /// The five repeats put the step `k · STEP_OFFSET_MS` later (k = 0 … 4):
-/// a fifth of the Hall period at 0.30 km/h (311 ms in the runs) plus 1 ms, so the
+/// about a fifth of the Hall period at 0.30 km/h (311 ms in the runs), so the
 /// steps fall at five phases of the tooth period and of the 10 ms control
 /// period.
 pub const STEP_OFFSET_MS: u32 = 61;
@@ -743,8 +743,8 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
          with the seedlings' load (5 % droop per partition): a bench run, so that the five \
          repeats differ only by where the step falls. The track rolls at 0.30 km/h (the \
          model's wheel speed; Table 12's slip applies on top) and the product is started; at \
-         {at_s} s + k·{off} ms (k = 0 … 4: a fifth of the Hall period at 0.30 km/h, measured \
-         {hall:.0} ms in the runs, plus 1 ms, so the five steps fall at five phases of the tooth \
+         {at_s} s + k·{off} ms (k = 0 … 4: about a fifth of the Hall period at 0.30 km/h, measured \
+         {hall:.0} ms in the runs, and not a multiple of 10 ms, so the five steps fall at five phases of the tooth \
          period and of the 10 ms control period) the wheel speed **jumps** to 0.30 + increment: \
          `machine_sim`'s chassis has no lag by default (`track_tau_s` 0) and the paper does not \
          say how its increments were applied; an instantaneous step is the hardest case for a \

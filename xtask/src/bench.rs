@@ -8,6 +8,7 @@ mod drum;
 mod field;
 mod speed;
 pub(crate) mod svg;
+mod tables;
 
 use crate::{cargo, ensure_tools, footprint, root, Board, Result, TARGET};
 
@@ -143,8 +144,45 @@ fn twin_section(doc: &mut String) -> Result {
     Ok(())
 }
 
-/// `cargo xtask bench`: regenerates docs/PERFORMANCE.md and docs/img/.
-pub fn run() -> Result {
+/// `cargo xtask bench --only NAME`: one section (`tables`) alone, printed
+/// and written to target/bench-NAME.md (its plots to target/img/);
+/// docs/PERFORMANCE.md and docs/img/ are left as they are.
+fn only(name: &str) -> Result {
+    let started = std::time::Instant::now();
+    let img = root().join("target").join("img");
+    std::fs::create_dir_all(&img).map_err(|e| format!("{}: {e}", img.display()))?;
+    let mut doc = String::new();
+    match name {
+        "tables" => tables::section(&mut doc, &img)?,
+        other => {
+            return Err(format!(
+                "bench --only: unknown section `{other}` (known: tables)"
+            ))
+        }
+    }
+    let path = root().join("target").join(format!("bench-{name}.md"));
+    write_file(&path, &doc)?;
+    print!("{doc}");
+    eprintln!(
+        "xtask: wrote {} in {:.1} s",
+        path.display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// `cargo xtask bench [--only NAME]`: regenerates docs/PERFORMANCE.md and
+/// docs/img/ (or runs one section, [`only`]).
+pub fn run(args: &[String]) -> Result {
+    match args {
+        [] => {}
+        [flag, name] if flag == "--only" => return only(name),
+        _ => {
+            return Err(format!(
+                "bench: unexpected arguments {args:?} (usage: bench [--only tables])"
+            ))
+        }
+    }
     ensure_tools()?;
     let started = std::time::Instant::now();
     let costs = target_costs()?;
@@ -255,6 +293,8 @@ pub fn run() -> Result {
         doc.push_str(&format!("| {} | {flash} B | {ram} B |\n", board.name()));
     }
     twin_section(&mut doc)?;
+    eprintln!("xtask: bench 8 paper A Tables 14 and 15");
+    tables::section(&mut doc, &img)?;
     let path = root().join("docs").join("PERFORMANCE.md");
     write_file(&path, &doc)?;
     eprintln!(

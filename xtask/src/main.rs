@@ -8,7 +8,7 @@
 //! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
 //! cargo xtask size                 flash and RAM of both boards against their budgets
 //! cargo xtask flash                build and flash a real board with probe-rs
-//! cargo xtask bench                regenerate docs/PERFORMANCE.md (QEMU instruction counts, sizes)
+//! cargo xtask bench [--only tables] regenerate docs/PERFORMANCE.md (QEMU instruction counts, sizes)
 //! cargo xtask plan --spacing 7cm --speed 0.51km/h [--gear low2] [--arr N]
 //! ```
 
@@ -52,7 +52,7 @@ fn main() -> ExitCode {
         "flash" => flash(),
         "plan" => plan::run(rest),
         "report" => report::run(rest),
-        "bench" => bench::run(),
+        "bench" => bench::run(rest),
         "help" | "--help" | "-h" => {
             println!("{}", include_str!("usage.txt"));
             Ok(())

@@ -39,7 +39,10 @@
 //! speed after a stop needs two edges).
 //!
 //! *Glitches*: an edge closer than `min_edge_gap` or than 1/2^`glitch_shift`
-//! of the last period (default ¼) is dropped and counted.
+//! of the last period (default ¼) is dropped and counted. That reference
+//! period grows by at most 2× an edge, so the gap that spans a pause shorter
+//! than `stop_timeout` (stop-and-go) does not turn the next full-speed edges
+//! into glitches (each dropped real edge is a tooth of distance lost).
 //!
 //! # Hall silence: a stop or a lost signal?
 //!
@@ -303,6 +306,7 @@ impl EstimatorSettings {
             edges_total: 0,
             valid_run: 0,
             last_gap: 0,
+            glitch_ref: 0,
             ref_stamp: 0,
             ref_edges: 0,
             ref_valid: false,
@@ -503,6 +507,9 @@ pub struct MtEstimator {
     /// Accepted edges since the last restart (saturating).
     valid_run: u32,
     last_gap: u32,
+    /// The period glitches are judged against (µs): the last gap, but grown
+    /// by at most 2× an edge.
+    glitch_ref: u32,
     ref_stamp: u32,
     ref_edges: u32,
     ref_valid: bool,
@@ -733,10 +740,10 @@ impl MtEstimator {
         if self.has_last {
             let last = self.stamps.get(self.head).copied().unwrap_or(0);
             let dt = t.wrapping_sub(last);
-            let expected_min = if self.last_gap == 0 {
+            let expected_min = if self.glitch_ref == 0 {
                 0
             } else {
-                self.last_gap >> self.cfg.glitch_shift
+                self.glitch_ref >> self.cfg.glitch_shift
             };
             if dt < self.cfg.min_edge_gap_ticks || dt < expected_min {
                 self.glitches = self.glitches.wrapping_add(1);
@@ -748,6 +755,14 @@ impl MtEstimator {
             } else if !self.lost {
                 // (A gap with lost edges in it is not a tooth period.)
                 self.last_gap = dt;
+                // The glitch reference grows by at most 2× an edge: a gap
+                // that spans a short pause must not make the next
+                // full-speed gaps look like glitches.
+                self.glitch_ref = if self.glitch_ref == 0 {
+                    dt
+                } else {
+                    dt.min(self.glitch_ref.saturating_mul(2))
+                };
             }
         } else {
             verdict = EdgeVerdict::Restart;
@@ -840,6 +855,7 @@ impl MtEstimator {
         self.rev_steady = false;
         self.valid_run = 0;
         self.last_gap = 0;
+        self.glitch_ref = 0;
         self.ref_valid = false;
         self.history_len = 0;
         self.held = 0;

@@ -62,6 +62,14 @@
 //! ([`BeltPlanter::set_radius_compensation`]): `n2` is then computed with `r`
 //! for every `j`, as eq. 7, which the benchmark uses to show what eq. 9 buys.
 //!
+//! # Position-locked feeding
+//!
+//! On by default ([`BeltPlanter::set_position_lock`]): the belt fed since
+//! Start (the pulses sent × `2π·(r + h·j)` per roller turn) is kept at
+//! `ground · B / X` by adding the lag, taken up over
+//! [`POSITION_LOCK_TIME_MS`], to eq. 9's rate, within
+//! ±[`POSITION_LOCK_MAX_PERMILLE`] ‰ of it (docs/profile-b.md).
+//!
 //! # Faults
 //!
 //! A step rate above [`ProfileBHardware::max_step_hz`] is clamped there and
@@ -78,6 +86,12 @@ use kinematics::units::{Hertz, Metres, MetresPerSecond, RevPerMin};
 
 /// Longest speed window, control periods.
 pub const SPEED_WINDOW_MAX: usize = 32;
+
+/// Position-locked feeding: the belt's lag is taken up over this time.
+pub const POSITION_LOCK_TIME_MS: u32 = 250;
+/// Position-locked feeding: the correction is at most this share of the
+/// linkage's rate, ‰ (so no seedling is fed closer than ≈ 0.9 B apart).
+pub const POSITION_LOCK_MAX_PERMILLE: u32 = 100;
 
 /// Fixed facts of the profile B board.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -434,6 +448,11 @@ pub struct BeltPlanter {
     silent: u8,
     /// Ground counts since Start.
     counts_since_start: u64,
+    /// Position-locked feeding on (the default) or the paper's speed
+    /// linkage alone.
+    position_lock: bool,
+    /// Seedling belt fed since Start by the pulses already sent, nm.
+    belt_fed_nm: u64,
     feed: Hertz,
     plant: Hertz,
     snapshot: ProfileBSnapshot,
@@ -473,6 +492,8 @@ impl BeltPlanter {
             head: 0,
             silent: 0,
             counts_since_start: 0,
+            position_lock: true,
+            belt_fed_nm: 0,
             feed: Hertz::ZERO,
             plant: Hertz::ZERO,
             snapshot: ProfileBSnapshot {
@@ -524,6 +545,34 @@ impl BeltPlanter {
         self.compensation = on;
     }
 
+    /// Switches position-locked feeding on (the default) or off (paper B's
+    /// speed linkage alone; for comparison). See [`BeltPlanter::control_step`].
+    pub fn set_position_lock(&mut self, on: bool) {
+        self.position_lock = on;
+    }
+
+    /// Whether feeding is position-locked.
+    #[must_use]
+    pub const fn position_lock(&self) -> bool {
+        self.position_lock
+    }
+
+    /// Seedling belt the feeding roller should have fed since Start for the
+    /// ground covered (`ground · B / X`) minus what the pulses sent have fed,
+    /// in µm (positive: the belt is behind).
+    #[must_use]
+    pub fn belt_lag_um(&self) -> i64 {
+        self.belt_lag_nm() / 1000
+    }
+
+    /// `belt_target_nm − belt_fed_nm`, saturated (both < 2^63 for any
+    /// reachable row).
+    fn belt_lag_nm(&self) -> i64 {
+        let target = i64::try_from(self.belt_target_nm()).unwrap_or(i64::MAX);
+        let fed = i64::try_from(self.belt_fed_nm).unwrap_or(i64::MAX);
+        target.saturating_sub(fed)
+    }
+
     /// Whether the radius compensation is on.
     #[must_use]
     pub const fn radius_compensation(&self) -> bool {
@@ -535,6 +584,7 @@ impl BeltPlanter {
         if self.state == PlanterState::Stopped {
             self.state = PlanterState::Running;
             self.counts_since_start = 0;
+            self.belt_fed_nm = 0;
             self.restart_measurement();
         }
     }
@@ -650,6 +700,9 @@ impl BeltPlanter {
         let mut alarm = None;
         if self.state == PlanterState::Running {
             self.counts_since_start = self.counts_since_start.saturating_add(u64::from(delta));
+            // The pulses sent last period have fed this much belt.
+            let fed = self.belt_per_period_nm(self.feed, self.radius_turns(roller_turns));
+            self.belt_fed_nm = self.belt_fed_nm.saturating_add(fed);
             if full_now && !full_before {
                 // First full-resolution estimate: compute the speeds from it.
                 self.linkage = Linkage::new(*self.config.plan());
@@ -662,8 +715,13 @@ impl BeltPlanter {
                         alarm = Some(PlanterAlarm::TooFast);
                     }
                     let tf = m.feeding_step_hz.min(max);
+                    let fed = if self.position_lock {
+                        self.locked_feed(tf, j).min(max)
+                    } else {
+                        tf
+                    };
                     let tp = m.planting_step_hz.min(max);
-                    self.feed = self.slew(self.feed, tf);
+                    self.feed = self.slew(self.feed, fed);
                     self.plant = self.slew(self.plant, tp);
                     self.snapshot.action = m.action;
                     self.snapshot.computed_for = m.computed_for;
@@ -716,6 +774,74 @@ impl BeltPlanter {
         self.snapshot.feeding_speed = RevPerMin::ZERO;
         self.snapshot.target_feed_step_hz = Hertz::ZERO;
         self.snapshot.target_plant_step_hz = Hertz::ZERO;
+    }
+
+    /// The roller turns the radius is computed for: `j`, or 0 without the
+    /// radius compensation (the belt geometry the firmware believes in).
+    const fn radius_turns(&self, roller_turns: u32) -> u32 {
+        if self.compensation {
+            roller_turns
+        } else {
+            0
+        }
+    }
+
+    /// Belt per feeding step at roller turn `j`, nm: `2π·(r + h·j) / steps`
+    /// (π as 355/113). `None` for an impossible radius.
+    fn belt_per_step_nm(&self, j: u32) -> Option<u64> {
+        let r = self.config.plan().roller_radius(j).ok()?;
+        let spr = u64::from(self.config.settings().feeding_steps_per_rev);
+        // r ≤ 4096 m as U12F20 bits < 2^32; × 710 × 10^9 < 2^72 would
+        // overflow: r is validated ≤ 0.2 m + h·j, so r_bits < 2^28 and the
+        // product < 2^68 — divide by 2^20 first (loses < 1 nm).
+        let r_nm = u64::from(r.to_bits())
+            .checked_mul(1_000_000_000)?
+            .checked_shr(20)?;
+        r_nm.checked_mul(710)?
+            .checked_div(113_u64.checked_mul(spr)?)
+    }
+
+    /// Belt fed by `rate` over one control period at roller turn `j`, nm.
+    fn belt_per_period_nm(&self, rate: Hertz, j: u32) -> u64 {
+        // Steps × 10^6 = rate_bits · T_us / 2^16 (≤ 2^32 · 2^20 / 2^16).
+        let micro_steps =
+            u64::from(rate.to_bits()).saturating_mul(u64::from(self.hw.control_period_us)) >> 16;
+        self.belt_per_step_nm(j)
+            .map_or(0, |nm| micro_steps.saturating_mul(nm) / 1_000_000)
+    }
+
+    /// The belt the ground covered since Start asks for, nm: `ground·B/X`.
+    fn belt_target_nm(&self) -> u64 {
+        let ground_nm = self.counts_since_start.saturating_mul(self.nm_per_count);
+        let s = self.config.settings();
+        ground_nm
+            .saturating_mul(u64::from(s.belt_pitch.to_bits()))
+            .checked_div(u64::from(s.plant_spacing.to_bits()))
+            .unwrap_or(0)
+    }
+
+    /// Position lock: the linkage's feeding rate `ff` plus the belt's lag
+    /// behind `ground·B/X` taken up over [`POSITION_LOCK_TIME_MS`], the
+    /// correction limited to ±[`POSITION_LOCK_MAX_PERMILLE`] ‰ of `ff` (no
+    /// correction at rest: the stop stays immediate).
+    fn locked_feed(&self, ff: Hertz, j: u32) -> Hertz {
+        let Some(per_step) = self.belt_per_step_nm(j).filter(|&n| n > 0) else {
+            return ff;
+        };
+        let per_step = i64::try_from(per_step).unwrap_or(i64::MAX);
+        // Steps behind × 1000 / lock time (ms) = Hz; in U16F16 bits.
+        let hz_bits = self
+            .belt_lag_nm()
+            .saturating_mul(1 << 16)
+            .checked_div(per_step)
+            .unwrap_or(0)
+            .saturating_mul(1000)
+            .checked_div(i64::from(POSITION_LOCK_TIME_MS))
+            .unwrap_or(0);
+        let ff_bits = i64::from(ff.to_bits());
+        let bound = ff_bits.saturating_mul(i64::from(POSITION_LOCK_MAX_PERMILLE)) / 1000;
+        let rate = ff_bits.saturating_add(hz_bits.clamp(bound.saturating_neg(), bound));
+        Hertz::from_bits(u32::try_from(rate.max(0)).unwrap_or(u32::MAX))
     }
 
     /// Ground since Start, mm.

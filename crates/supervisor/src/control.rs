@@ -536,15 +536,6 @@ pub fn scheduled_config(model: &DriveModel, period_us: u32) -> fuzzy_pid::Config
     config
 }
 
-/// [`scheduled_config`], built. Not inlined: the configuration and the
-/// controller it builds (≈ 1 KB of stack) stay in this frame.
-#[inline(never)]
-fn scheduled_controller(model: &DriveModel, period_us: u32) -> Result<Controller, Error> {
-    scheduled_config(model, period_us)
-        .build()
-        .map_err(|_| Error::Controller)
-}
-
 /// The scale `s` of [`scheduled_config`], in (0, 1].
 pub fn schedule_scale(model: &DriveModel, period_us: u32) -> I16F16 {
     // In 0.1 ms: τ₀ = 250, θ₀ = 50 + 100 (5 ms dead time + 10 ms period).
@@ -1539,18 +1530,22 @@ impl Supervisor {
 
     /// The drive model in force, with the controller scheduled from it (or
     /// the given controller kept, for [`Supervisor::with_controller`]).
+    ///
+    /// The controller is not built here but by the next control step
+    /// ([`Supervisor::ensure_controller`], in the control task): built here,
+    /// in the screen task (the operator's *Save* on page 9), its frames
+    /// (≈ 2.6 KB: the command, the build, the fuzzy tuner) overflowed the
+    /// QEMU board's stack when the control task preempted it
+    /// (tests/tests/identify.rs). Every model [`DriveModel`] accepts builds
+    /// (`scheduled_configs_build_for_extreme_models`).
     #[inline(never)]
     fn use_drive(&mut self, model: DriveModel) -> Result<(), Error> {
-        if self.scheduled {
-            let mut c = scheduled_controller(&model, self.hw.control_period_us)?;
-            if self.run == RunState::Running {
-                c.start();
-            }
-            self.drum = Drum::Control(c);
-        }
-        self.law = DriveLaw::of(&model, self.hw.control_period_us);
         self.settings.drive = model;
         self.fallback = false;
+        if self.scheduled {
+            self.drum = Drum::Unbuilt;
+        }
+        self.law = DriveLaw::of(&model, self.hw.control_period_us);
         self.monitor = Monitor::default();
         Ok(())
     }
@@ -1559,6 +1554,10 @@ impl Supervisor {
     fn ensure_controller(&mut self) {
         if matches!(self.drum, Drum::Unbuilt) {
             self.restore_controller();
+            // A drive model changed while running (`apply_settings`).
+            if let (RunState::Running, Drum::Control(c)) = (self.run, &mut self.drum) {
+                c.start();
+            }
         }
     }
 
@@ -1566,15 +1565,26 @@ impl Supervisor {
     /// one scheduled from the drive model in force (a controller given to
     /// [`Supervisor::with_controller`] is not kept across an
     /// identification).
-    #[inline(never)]
     fn restore_controller(&mut self) {
+        let _ = self.rebuild_controller();
+    }
+
+    /// Builds the controller for the drive model in force (or the fallback)
+    /// into `self.drum`; false (and `self.drum` unchanged) if it cannot be
+    /// built.
+    #[inline(never)]
+    fn rebuild_controller(&mut self) -> bool {
         let config = if self.fallback {
             fallback_config(&self.settings.drive)
         } else {
             scheduled_config(&self.settings.drive, self.hw.control_period_us)
         };
-        if let Ok(c) = config.build() {
-            self.drum = Drum::Control(c);
+        match config.build() {
+            Ok(c) => {
+                self.drum = Drum::Control(c);
+                true
+            }
+            Err(_) => false,
         }
     }
 

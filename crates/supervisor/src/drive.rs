@@ -220,8 +220,11 @@ pub const IDENTIFY_DUTY_HIGH_PERMILLE: u16 = 750;
 pub enum IdentifyError {
     /// The drum did not move, or did not follow the duty steps.
     NoMotion,
-    /// The speed was still changing at the end of a hold (a drive slower
-    /// than τ + dead time ≈ 0.4 s cannot be identified in 1 s holds).
+    /// The speed was still changing at the end of a hold: a drive slower
+    /// than τ + dead time ≈ 0.4 s (it cannot be identified in 1 s holds),
+    /// or a belt with seedlings on it, whose load moves the speed by a few
+    /// % as each partition passes (the QEMU board's default 5 % load fails
+    /// here; the screen asks for an empty belt).
     NotSettled,
     /// No step gave a usable time constant (the response is noise).
     Noisy,
@@ -236,7 +239,7 @@ impl IdentifyError {
     pub const fn text(self) -> &'static str {
         match self {
             Self::NoMotion => "Identify: drum did not follow",
-            Self::NotSettled => "Identify: drive too slow to settle",
+            Self::NotSettled => "Identify: speed not steady (belt empty?)",
             Self::Noisy => "Identify: response too noisy",
             Self::OutOfRange => "Identify: result out of range",
             Self::Aborted => "Identify: stopped",

@@ -151,7 +151,10 @@ const GATE_PATH_MAX: usize = 32;
 /// to P % (a machine whose calibration is not the paper's); `plant_log=1`
 /// logs every plant the model drops (`sim: plant N at P um`, the main job's
 /// report plots each spacing from them; off by default to keep the long
-/// accelerated runs' logs short).
+/// accelerated runs' logs short); `drive_tau=MS`, `drive_dead=MS` (0–15) and
+/// `drive_nmax=N` (r/min × 100) give the drum another drive than the
+/// default 25 ms / 5 ms / 44.70 r/min (the drive identification's test);
+/// `load=P` sets the seedlings' load droop to P ‰ (`load=0`: an empty belt).
 #[derive(Default, Clone, Copy)]
 struct Scenario {
     gear: Option<u8>,
@@ -177,6 +180,14 @@ struct Scenario {
     slip_pct: Option<u32>,
     /// Log every plant's ground position (`plant_log=1`).
     plant_log: bool,
+    /// The drum drive's time constant, ms (`drive_tau=MS`).
+    drive_tau_ms: Option<u32>,
+    /// Its dead time, ms (`drive_dead=MS`).
+    drive_dead_ms: Option<u32>,
+    /// Its speed at 100 % duty, r/min × 100 (`drive_nmax=N`).
+    drive_nmax_centi: Option<u32>,
+    /// The seedlings' load droop, ‰ (`load=P`).
+    load_permille: Option<u32>,
 }
 
 /// Brings up the emulated peripherals. Called once from `init`.
@@ -233,6 +244,18 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }
     if let Some(tau) = scenario.tau_ms {
         config.track_tau_s = tau as f32 / 1000.0;
+    }
+    if let Some(tau) = scenario.drive_tau_ms {
+        config.motor_tau_s = tau as f32 / 1000.0;
+    }
+    if let Some(dead) = scenario.drive_dead_ms.and_then(|d| u8::try_from(d).ok()) {
+        config.transport_delay_ms = dead.min(machine_sim::MAX_TRANSPORT_DELAY_MS);
+    }
+    if let Some(n) = scenario.drive_nmax_centi {
+        config.n_max_rpm = n as f32 / 100.0;
+    }
+    if let Some(p) = scenario.load_permille {
+        config.load_droop = p as f32 / 1000.0;
     }
     if let Some(period) = scenario.stop_go_ms {
         config.terrain_stop_interval_s = period as f32 / 2000.0;
@@ -798,6 +821,10 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"seed" => s.seed = parse_u32(value),
             b"slip" => s.slip_pct = parse_u32(value),
             b"plant_log" => s.plant_log = value == b"1",
+            b"drive_tau" => s.drive_tau_ms = parse_u32(value),
+            b"drive_dead" => s.drive_dead_ms = parse_u32(value),
+            b"drive_nmax" => s.drive_nmax_centi = parse_u32(value),
+            b"load" => s.load_permille = parse_u32(value),
             _ => {}
         }
     }

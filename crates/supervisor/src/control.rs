@@ -41,7 +41,8 @@ use kinematics::{
 };
 
 use crate::drive::{exp_neg_q30, DriveModel, Identifier, IdentifyError, IdentifyState};
-use crate::settings::{self, Settings};
+use crate::phase::{first_plant_place_um, Phase, PlantEvent};
+use crate::settings::{self, Placement, Settings};
 
 /// Fixed facts of the board the supervisor runs on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -349,6 +350,9 @@ pub struct Supervisor {
     monitor: Monitor,
     predictor: Predictor,
     snapshot: Snapshot,
+    /// Distance-locked placement: ground and belt positions, the phase
+    /// loop and the partitions' events ([`crate::phase`]).
+    phase: Phase,
 }
 
 /// Bridges the Hall sensor's sparse updates (one edge every 170 ms at Low 2)
@@ -750,6 +754,7 @@ impl Supervisor {
         .map_err(|_| Error::Estimator)?;
         let plan = Self::plan_for(&settings, hw)?;
         let law = DriveLaw::of(&settings.drive, hw.control_period_us);
+        let phase = Phase::new(hw.encoder_counts_per_drum_rev, settings.spacing.raw());
         Ok(Self {
             hw,
             settings,
@@ -779,6 +784,7 @@ impl Supervisor {
             monitor: Monitor::default(),
             predictor: Predictor::default(),
             snapshot: Snapshot::default(),
+            phase,
         })
     }
 
@@ -884,8 +890,38 @@ impl Supervisor {
             self.stall_us = 0;
             self.distance_um = 0;
             self.belt_counts_k3_milli = 0;
+            self.phase.start(self.edges);
+            self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
         }
         Effect::None
+    }
+
+    /// Ground distance since Start, µm: Hall edges since the first one
+    /// after Start × the calibrated distance per edge, extrapolated between
+    /// edges ([`crate::phase`]).
+    pub fn ground_distance_um(&self) -> u64 {
+        self.phase.ground_um()
+    }
+
+    /// The next partition to leave shall leave at ground distance
+    /// `at_ground_distance_um` (since Start), then one every spacing; a new
+    /// pass. Start calls it with [`first_plant_place_um`] (the spacing plus
+    /// one Hall pitch, docs/placement.md).
+    pub fn realign_next_plant(&mut self, at_ground_distance_um: u64) {
+        self.phase.realign(at_ground_distance_um);
+    }
+
+    /// The partitions that left in the last control step, each with the
+    /// ground distance at that moment.
+    pub fn plants_left(&self) -> impl Iterator<Item = PlantEvent> + '_ {
+        self.phase.events()
+    }
+
+    /// The phase error after the last step, µm of ground (positive: the belt
+    /// is ahead, plants land short of their places). Also computed in
+    /// speed-following placement, where nothing corrects it.
+    pub fn phase_error_um(&self) -> i64 {
+        self.phase.error_ground_um()
     }
 
     fn latch(&mut self, alarm: Alarm) {
@@ -920,6 +956,14 @@ impl Supervisor {
                     Ok(plan) => {
                         self.plan = plan;
                         self.settings = next;
+                        self.phase.set_spacing(spacing.raw());
+                        if self.run == RunState::Running {
+                            // The new spacing from one spacing ahead.
+                            let at = self
+                                .ground_distance_um()
+                                .saturating_add(u64::from(spacing.raw()).saturating_mul(1000));
+                            self.realign_next_plant(at);
+                        }
                         Effect::SettingsChanged
                     }
                     Err(_) => Effect::Message("Spacing rejected"),
@@ -1072,6 +1116,7 @@ impl Supervisor {
         let drive = settings.drive;
         let old = self.settings.drive;
         self.plan = plan;
+        self.phase.set_spacing(settings.spacing.raw());
         self.settings = settings;
         if drive != old {
             self.use_drive(drive)?;
@@ -1326,6 +1371,7 @@ impl Supervisor {
             None => 0,
         };
         self.last_encoder = Some(drum_encoder);
+        self.phase.clear_events();
         let elapsed_us = self.elapsed_us(now);
         self.last_step_at = Some(now);
         let measured = self.drum_speed_of(delta, elapsed_us);
@@ -1344,6 +1390,25 @@ impl Supervisor {
         let travel_kmh_x1000 = travel
             .and_then(|t| t.travel_speed_kmh().ok())
             .map_or(0, |v| v.to_milli());
+
+        // k3 at the drum speed these counts were turned at (this period's
+        // measurement, exact over the whole range: `milli`), not at the
+        // target: the belt slips at the speed it turns, and after a Stop
+        // the counts still coasting in keep the k3 of their own speed.
+        let k3_x1000 = self
+            .settings
+            .calibration
+            .k3_at(RevPerMin::from_ratio(milli(measured), 1000).unwrap_or(RevPerMin::ZERO))
+            .to_milli();
+        // Positions for the phase loop: the ground while running, the belt
+        // always (a coasting drum still moves partitions).
+        if self.run == RunState::Running {
+            let k1k2 = travel
+                .map(|t| u64::from(t.k1.to_milli()).saturating_mul(u64::from(t.k2.to_milli())));
+            self.phase
+                .advance_ground(self.edges, m.since_edge_ticks, travel_kmh_x1000, k1k2);
+        }
+        self.phase.advance_belt(delta, k3_x1000);
 
         let mut too_fast = None;
         let target = match self.settings.mode {
@@ -1370,7 +1435,16 @@ impl Supervisor {
                                 max_kmh_x100: self.max_travel_kmh_x100(),
                             });
                         }
-                        n.min(cap)
+                        let n = n.min(cap);
+                        let correction = if self.settings.placement == Placement::DistanceLocked
+                            && self.run == RunState::Running
+                        {
+                            self.phase.correction(n)
+                        } else {
+                            self.phase.update_error();
+                            I16F16::ZERO
+                        };
+                        n.saturating_add(correction).max(I16F16::ZERO).min(cap)
                     }
                     _ => I16F16::ZERO,
                 }
@@ -1457,15 +1531,6 @@ impl Supervisor {
             self.monitor = Monitor::default();
         }
 
-        // k3 at the drum speed these counts were turned at (this period's
-        // measurement, exact over the whole range: `milli`), not at the
-        // target: the belt slips at the speed it turns, and after a Stop
-        // the counts still coasting in keep the k3 of their own speed.
-        let k3_x1000 = self
-            .settings
-            .calibration
-            .k3_at(RevPerMin::from_ratio(milli(measured), 1000).unwrap_or(RevPerMin::ZERO))
-            .to_milli();
         self.belt_counts_k3_milli = self
             .belt_counts_k3_milli
             .saturating_add(u64::from(delta).saturating_mul(u64::from(k3_x1000)));

@@ -284,6 +284,17 @@ const STALL_TIME_US: u32 = 200_000;
 /// (9.81 / 0.934 = 10.5; paper A's Table 11 has k1 = 0.966 … 1.031), so
 /// that no stop the chassis can make reads as a lost signal.
 pub const HALL_SILENCE_DECEL_MM_S2: u32 = 10_500;
+/// Ground distance: a Hall edge the speed estimator drops as a glitch for
+/// its ¼-period rule still counts as a tooth when it comes at least this
+/// long (µs) after the previous counted edge. The ¼ rule protects the speed
+/// estimate, but it also drops real teeth: a tractor pulling away from a
+/// crawl (a last gap of 1 s or more) makes its next gap shorter than a
+/// quarter of it, and each dropped tooth cost the distance 25 mm
+/// (measured on the stop-and-go profile: 86 mm lost in 60 s at Low 2, test
+/// `the_ground_distance_keeps_every_tooth_through_stops`; docs/placement.md). 5 ms is ten times the switch's
+/// hard glitch limit (500 µs) and below the shortest real gap (9 ms at
+/// 10 km/h).
+pub const DISTANCE_EDGE_MIN_GAP_US: u32 = 5_000;
 /// Hall silence: the tolerance on a gap's length, % — pitch errors of
 /// teeth whose share is not learned yet (±2 % of a pitch per tooth, so
 /// ±4 % per gap) and the capture jitter.
@@ -321,6 +332,11 @@ pub struct Supervisor {
     reported: I16F16,
     /// Hall edges since boot.
     edges: u32,
+    /// Hall edges counted for the ground distance since boot (the accepted
+    /// ones and the plausible teeth the estimator dropped), and the time of
+    /// the last one.
+    teeth: u32,
+    last_tooth_at: Option<u32>,
     /// Ground distance since Start (∫ V1 dt), µm.
     distance_um: u64,
     /// The chassis's deceleration limit at the Hall gear, for the silence
@@ -772,6 +788,8 @@ impl Supervisor {
             stall_us: 0,
             reported: I16F16::ZERO,
             edges: 0,
+            teeth: 0,
+            last_tooth_at: None,
             distance_um: 0,
             hall_silence,
             belt_counts_k3_milli: 0,
@@ -845,11 +863,21 @@ impl Supervisor {
 
     /// Takes one Hall edge (1 MHz capture ticks, extended to 32 bits).
     pub fn hall_edge(&mut self, t: Ticks) {
-        if matches!(
-            self.estimator.push_edge(t),
+        let verdict = self.estimator.push_edge(t);
+        let accepted = matches!(
+            verdict,
             kinematics::speed::EdgeVerdict::Accepted | kinematics::speed::EdgeVerdict::Restart
-        ) {
+        );
+        if accepted {
             self.edges = self.edges.wrapping_add(1);
+        }
+        // The ground distance counts the teeth, also one the estimator
+        // drops for its ¼-period rule when it is a plausible tooth
+        // ([`DISTANCE_EDGE_MIN_GAP_US`]).
+        let gap = self.last_tooth_at.map_or(u32::MAX, |l| t.0.wrapping_sub(l));
+        if accepted || gap >= DISTANCE_EDGE_MIN_GAP_US {
+            self.teeth = self.teeth.wrapping_add(1);
+            self.last_tooth_at = Some(t.0);
         }
     }
 
@@ -890,7 +918,7 @@ impl Supervisor {
             self.stall_us = 0;
             self.distance_um = 0;
             self.belt_counts_k3_milli = 0;
-            self.phase.start(self.edges);
+            self.phase.start(self.teeth);
             self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
         }
         Effect::None
@@ -1406,7 +1434,7 @@ impl Supervisor {
             let k1k2 = travel
                 .map(|t| u64::from(t.k1.to_milli()).saturating_mul(u64::from(t.k2.to_milli())));
             self.phase
-                .advance_ground(self.edges, m.since_edge_ticks, travel_kmh_x1000, k1k2);
+                .advance_ground(self.teeth, m.since_edge_ticks, travel_kmh_x1000, k1k2);
         }
         self.phase.advance_belt(delta, k3_x1000);
 

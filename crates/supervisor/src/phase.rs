@@ -82,7 +82,7 @@ const ROLLING_START_NM: u64 = 1_000_000;
 const MAX_EVENTS: usize = 4;
 
 /// The drum speed offset per nm of phase error, I16F16 bits × 2¹⁶:
-/// `2³² · 60 / (T · π·0.070 m)` = 2343.8 → 2344 (`T` = 0.4999 s).
+/// `2³² · 60 / (T · π·0.070 m)` = 2343.65 → 2344 (`T` = 0.4999 s).
 // Note: evaluated at compile time; 60·2³²·1000 < 2⁶⁴ and the result
 // (2344) fits any integer type.
 #[allow(clippy::cast_possible_wrap, clippy::arithmetic_side_effects)]
@@ -377,7 +377,10 @@ impl Phase {
         }
         // |e| ≤ 2⁴¹, gain < 2¹²: the product < 2⁵³; ff < 2³¹, the bound
         // factors < 2¹⁷: < 2⁴⁸. The bounds in Q16 (no division).
-        let raw = e.wrapping_mul(GAIN_Q16).wrapping_neg() >> 16;
+        // Before the pass's first plant: twice the gain (T/2), to absorb
+        // the start lag within the first spacing.
+        let shift = if self.pass_started { 16 } else { 15 };
+        let raw = e.wrapping_mul(GAIN_Q16).wrapping_neg() >> shift;
         let ff = i64::from(n_ff.to_bits());
         let up = if self.pass_started {
             ff.wrapping_mul(UP_Q16) >> 16
@@ -401,12 +404,22 @@ mod tests {
         // T = 0.5 s, 0.001/0.5 · 60 / 0.219 911 486 = 0.545 674 r/min.
         let mut p = Phase::new(47_200, 70);
         p.armed = true;
-        p.pass_started = false;
+        p.pass_started = true;
         p.belt_nm = PARTITION_NM - 1_000_000; // 1 mm behind the line at g_ref
         p.ref_ground_nm = 0;
+        // Tolerance: the gain is 2343.65 rounded to 2344 (+0.015 %), plus
+        // one I16F16 step.
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         let expect = 0.001 / 0.5 * 60.0 / 0.219_911_486;
-        assert!((c - expect).abs() < 1e-4, "{c} vs {expect}");
+        assert!((c / expect - 1.0).abs() < 2e-4, "{c} vs {expect}");
+        // Before the pass's first plant: T/2, twice the offset.
+        p.pass_started = false;
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!(
+            (c / (2.0 * expect) - 1.0).abs() < 2e-4,
+            "{c} vs {}",
+            2.0 * expect
+        );
     }
 
     #[test]

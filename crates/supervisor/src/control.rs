@@ -290,7 +290,8 @@ pub const HALL_SILENCE_DECEL_MM_S2: u32 = 10_500;
 /// estimate, but it also drops real teeth: a tractor pulling away from a
 /// crawl (a last gap of 1 s or more) makes its next gap shorter than a
 /// quarter of it, and each dropped tooth cost the distance 25 mm
-/// (measured on the stop-and-go profile: 86 mm lost in 60 s at Low 2, test
+/// (measured on the stop-and-go profile: 86 mm lost in 60 s at Low 2, 61 mm
+/// with the estimator's bounded glitch reference of aa1e4a8, test
 /// `the_ground_distance_keeps_every_tooth_through_stops`; docs/placement.md). 5 ms is ten times the switch's
 /// hard glitch limit (500 µs) and below the shortest real gap (9 ms at
 /// 10 km/h).

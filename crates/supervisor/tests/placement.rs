@@ -164,9 +164,10 @@ fn distance_locked_first_plant_at_its_place_and_no_drift_after_a_speed_step() {
 /// profile (rest for 2 s every 10 s, chassis τ 0.5 s) pulls away from a
 /// crawl with a gap shorter than ¼ of the last one, which the speed
 /// estimator drops as a glitch; the distance must still count that tooth.
-/// Before `DISTANCE_EDGE_MIN_GAP_US` it lost up to one tooth (25 mm) per
+/// Without `DISTANCE_EDGE_MIN_GAP_US` it lost up to one tooth (25 mm) per
 /// stop: measured 6982 mm against 7068 mm true after 60 s at Low 2 (this
-/// test failed by 86 mm). Expected: the simulator's true
+/// test failed by 86 mm), and still 7007 mm (61 mm short) with the
+/// estimator's glitch reference bounded (kinematics, commit aa1e4a8). Expected: the simulator's true
 /// ground since the first Hall edge, within 30 mm (the k1·k2 tables against
 /// the model's slip: −0.13 % in bench §8, 9 mm of 7 m; plus one tooth's
 /// extrapolation at most at a stop).

@@ -6,6 +6,7 @@ use std::process::Command;
 mod belt;
 mod drum;
 mod field;
+mod placement;
 mod speed;
 pub(crate) mod svg;
 mod tables;
@@ -144,7 +145,7 @@ fn twin_section(doc: &mut String) -> Result {
     Ok(())
 }
 
-/// `cargo xtask bench --only NAME`: one section (`tables`) alone, printed
+/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`) alone, printed
 /// and written to target/bench-NAME.md (its plots to target/img/);
 /// docs/PERFORMANCE.md and docs/img/ are left as they are.
 fn only(name: &str) -> Result {
@@ -154,9 +155,12 @@ fn only(name: &str) -> Result {
     let mut doc = String::new();
     match name {
         "tables" => tables::section(&mut doc, &img)?,
+        "placement" => {
+            placement::section(&mut doc, &img)?;
+        }
         other => {
             return Err(format!(
-                "bench --only: unknown section `{other}` (known: tables)"
+                "bench --only: unknown section `{other}` (known: tables, placement)"
             ))
         }
     }
@@ -179,7 +183,7 @@ pub fn run(args: &[String]) -> Result {
         [flag, name] if flag == "--only" => return only(name),
         _ => {
             return Err(format!(
-                "bench: unexpected arguments {args:?} (usage: bench [--only tables])"
+                "bench: unexpected arguments {args:?} (usage: bench [--only tables|placement])"
             ))
         }
     }
@@ -295,6 +299,9 @@ pub fn run(args: &[String]) -> Result {
     twin_section(&mut doc)?;
     eprintln!("xtask: bench 8 paper A Tables 14 and 15");
     tables::section(&mut doc, &img)?;
+    eprintln!("xtask: bench 9 placement");
+    let secs = placement::section(&mut doc, &img)?;
+    eprintln!("xtask: bench 9 took {secs:.0} s");
     let path = root().join("docs").join("PERFORMANCE.md");
     write_file(&path, &doc)?;
     eprintln!(

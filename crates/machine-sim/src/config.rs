@@ -201,6 +201,37 @@ impl Default for Config {
     }
 }
 
+impl Config {
+    /// Travel-speed profile "hills" (issue 19): the speed swings ±20 %
+    /// around the gear's speed in random steps (uniform ±20 %, one every 3 s
+    /// on average, drawn from the seeded RNG), through the chassis's 0.5 s
+    /// time constant; the slow terrain sinusoid is off. Other fields kept.
+    #[must_use]
+    pub fn hills(self) -> Self {
+        Self {
+            terrain_amplitude: 0.0,
+            terrain_step_amplitude: 0.2,
+            terrain_step_interval_s: 3.0,
+            track_tau_s: 0.5,
+            ..self
+        }
+    }
+
+    /// Travel-speed profile "stop-and-go" (issue 19): every 10 s the
+    /// tractor comes to rest for 2 s and drives on (regular stops), through
+    /// the chassis's 0.5 s time constant; the default terrain stays on.
+    #[must_use]
+    pub fn stop_and_go(self) -> Self {
+        Self {
+            terrain_stop_interval_s: 10.0,
+            terrain_stop_duration_s: 2.0,
+            terrain_stops_regular: true,
+            track_tau_s: 0.5,
+            ..self
+        }
+    }
+}
+
 /// A configuration field out of its documented range.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Error {

@@ -41,7 +41,8 @@ use kinematics::{
 };
 
 use crate::drive::{exp_neg_q30, DriveModel, Identifier, IdentifyError, IdentifyState};
-use crate::settings::{self, Settings};
+use crate::phase::{first_plant_place_um, Phase, PlantEvent};
+use crate::settings::{self, Placement, Settings};
 
 /// Fixed facts of the board the supervisor runs on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -283,6 +284,18 @@ const STALL_TIME_US: u32 = 200_000;
 /// (9.81 / 0.934 = 10.5; paper A's Table 11 has k1 = 0.966 … 1.031), so
 /// that no stop the chassis can make reads as a lost signal.
 pub const HALL_SILENCE_DECEL_MM_S2: u32 = 10_500;
+/// Ground distance: a Hall edge the speed estimator drops as a glitch for
+/// its ¼-period rule still counts as a tooth when it comes at least this
+/// long (µs) after the previous counted edge. The ¼ rule protects the speed
+/// estimate, but it also drops real teeth: a tractor pulling away from a
+/// crawl (a last gap of 1 s or more) makes its next gap shorter than a
+/// quarter of it, and each dropped tooth cost the distance 25 mm
+/// (measured on the stop-and-go profile: 86 mm lost in 60 s at Low 2, 61 mm
+/// with the estimator's bounded glitch reference of aa1e4a8, test
+/// `the_ground_distance_keeps_every_tooth_through_stops`; docs/placement.md). 5 ms is ten times the switch's
+/// hard glitch limit (500 µs) and below the shortest real gap (9 ms at
+/// 10 km/h).
+pub const DISTANCE_EDGE_MIN_GAP_US: u32 = 5_000;
 /// Hall silence: the tolerance on a gap's length, % — pitch errors of
 /// teeth whose share is not learned yet (±2 % of a pitch per tooth, so
 /// ±4 % per gap) and the capture jitter.
@@ -320,6 +333,11 @@ pub struct Supervisor {
     reported: I16F16,
     /// Hall edges since boot.
     edges: u32,
+    /// Hall edges counted for the ground distance since boot (the accepted
+    /// ones and the plausible teeth the estimator dropped), and the time of
+    /// the last one.
+    teeth: u32,
+    last_tooth_at: Option<u32>,
     /// Ground distance since Start (∫ V1 dt), µm.
     distance_um: u64,
     /// The chassis's deceleration limit at the Hall gear, for the silence
@@ -349,6 +367,9 @@ pub struct Supervisor {
     monitor: Monitor,
     predictor: Predictor,
     snapshot: Snapshot,
+    /// Distance-locked placement: ground and belt positions, the phase
+    /// loop and the partitions' events ([`crate::phase`]).
+    phase: Phase,
 }
 
 /// Bridges the Hall sensor's sparse updates (one edge every 170 ms at Low 2)
@@ -741,6 +762,7 @@ impl Supervisor {
         .map_err(|_| Error::Estimator)?;
         let plan = Self::plan_for(&settings, hw)?;
         let law = DriveLaw::of(&settings.drive, hw.control_period_us);
+        let phase = Phase::new(hw.encoder_counts_per_drum_rev, settings.spacing.raw());
         Ok(Self {
             hw,
             settings,
@@ -758,6 +780,8 @@ impl Supervisor {
             stall_us: 0,
             reported: I16F16::ZERO,
             edges: 0,
+            teeth: 0,
+            last_tooth_at: None,
             distance_um: 0,
             hall_silence,
             belt_counts_k3_milli: 0,
@@ -770,6 +794,7 @@ impl Supervisor {
             monitor: Monitor::default(),
             predictor: Predictor::default(),
             snapshot: Snapshot::default(),
+            phase,
         })
     }
 
@@ -830,11 +855,21 @@ impl Supervisor {
 
     /// Takes one Hall edge (1 MHz capture ticks, extended to 32 bits).
     pub fn hall_edge(&mut self, t: Ticks) {
-        if matches!(
-            self.estimator.push_edge(t),
+        let verdict = self.estimator.push_edge(t);
+        let accepted = matches!(
+            verdict,
             kinematics::speed::EdgeVerdict::Accepted | kinematics::speed::EdgeVerdict::Restart
-        ) {
+        );
+        if accepted {
             self.edges = self.edges.wrapping_add(1);
+        }
+        // The ground distance counts the teeth, also one the estimator
+        // drops for its ¼-period rule when it is a plausible tooth
+        // ([`DISTANCE_EDGE_MIN_GAP_US`]).
+        let gap = self.last_tooth_at.map_or(u32::MAX, |l| t.0.wrapping_sub(l));
+        if accepted || gap >= DISTANCE_EDGE_MIN_GAP_US {
+            self.teeth = self.teeth.wrapping_add(1);
+            self.last_tooth_at = Some(t.0);
         }
     }
 
@@ -875,8 +910,38 @@ impl Supervisor {
             self.stall_us = 0;
             self.distance_um = 0;
             self.belt_counts_k3_milli = 0;
+            self.phase.start(self.teeth);
+            self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
         }
         Effect::None
+    }
+
+    /// Ground distance since Start, µm: Hall edges since the first one
+    /// after Start × the calibrated distance per edge, extrapolated between
+    /// edges ([`crate::phase`]).
+    pub fn ground_distance_um(&self) -> u64 {
+        self.phase.ground_um()
+    }
+
+    /// The next partition to leave shall leave at ground distance
+    /// `at_ground_distance_um` (since Start), then one every spacing; a new
+    /// pass. Start calls it with [`first_plant_place_um`] (the spacing plus
+    /// one Hall pitch, docs/placement.md).
+    pub fn realign_next_plant(&mut self, at_ground_distance_um: u64) {
+        self.phase.realign(at_ground_distance_um);
+    }
+
+    /// The partitions that left in the last control step, each with the
+    /// ground distance at that moment.
+    pub fn plants_left(&self) -> impl Iterator<Item = PlantEvent> + '_ {
+        self.phase.events()
+    }
+
+    /// The phase error after the last step, µm of ground (positive: the belt
+    /// is ahead, plants land short of their places). Also computed in
+    /// speed-following placement, where nothing corrects it.
+    pub fn phase_error_um(&self) -> i64 {
+        self.phase.error_ground_um()
     }
 
     fn latch(&mut self, alarm: Alarm) {
@@ -911,6 +976,14 @@ impl Supervisor {
                     Ok(plan) => {
                         self.plan = plan;
                         self.settings = next;
+                        self.phase.set_spacing(spacing.raw());
+                        if self.run == RunState::Running {
+                            // The new spacing from one spacing ahead.
+                            let at = self
+                                .ground_distance_um()
+                                .saturating_add(u64::from(spacing.raw()).saturating_mul(1000));
+                            self.realign_next_plant(at);
+                        }
                         Effect::SettingsChanged
                     }
                     Err(_) => Effect::Message("Spacing rejected"),
@@ -1063,6 +1136,7 @@ impl Supervisor {
         let drive = settings.drive;
         let old = self.settings.drive;
         self.plan = plan;
+        self.phase.set_spacing(settings.spacing.raw());
         self.settings = settings;
         if drive != old {
             self.use_drive(drive)?;
@@ -1317,6 +1391,7 @@ impl Supervisor {
             None => 0,
         };
         self.last_encoder = Some(drum_encoder);
+        self.phase.clear_events();
         let elapsed_us = self.elapsed_us(now);
         self.last_step_at = Some(now);
         let measured = self.drum_speed_of(delta, elapsed_us);
@@ -1335,6 +1410,25 @@ impl Supervisor {
         let travel_kmh_x1000 = travel
             .and_then(|t| t.travel_speed_kmh().ok())
             .map_or(0, |v| v.to_milli());
+
+        // k3 at the drum speed these counts were turned at (this period's
+        // measurement, exact over the whole range: `milli`), not at the
+        // target: the belt slips at the speed it turns, and after a Stop
+        // the counts still coasting in keep the k3 of their own speed.
+        let k3_x1000 = self
+            .settings
+            .calibration
+            .k3_at(RevPerMin::from_ratio(milli(measured), 1000).unwrap_or(RevPerMin::ZERO))
+            .to_milli();
+        // Positions for the phase loop: the ground while running, the belt
+        // always (a coasting drum still moves partitions).
+        if self.run == RunState::Running {
+            let k1k2 = travel
+                .map(|t| u64::from(t.k1.to_milli()).saturating_mul(u64::from(t.k2.to_milli())));
+            self.phase
+                .advance_ground(self.teeth, m.since_edge_ticks, travel_kmh_x1000, k1k2);
+        }
+        self.phase.advance_belt(delta, k3_x1000);
 
         let mut too_fast = None;
         let target = match self.settings.mode {
@@ -1361,7 +1455,16 @@ impl Supervisor {
                                 max_kmh_x100: self.max_travel_kmh_x100(),
                             });
                         }
-                        n.min(cap)
+                        let n = n.min(cap);
+                        let correction = if self.settings.placement == Placement::DistanceLocked
+                            && self.run == RunState::Running
+                        {
+                            self.phase.correction(n)
+                        } else {
+                            self.phase.update_error();
+                            I16F16::ZERO
+                        };
+                        n.saturating_add(correction).max(I16F16::ZERO).min(cap)
                     }
                     _ => I16F16::ZERO,
                 }
@@ -1448,15 +1551,6 @@ impl Supervisor {
             self.monitor = Monitor::default();
         }
 
-        // k3 at the drum speed these counts were turned at (this period's
-        // measurement, exact over the whole range: `milli`), not at the
-        // target: the belt slips at the speed it turns, and after a Stop
-        // the counts still coasting in keep the k3 of their own speed.
-        let k3_x1000 = self
-            .settings
-            .calibration
-            .k3_at(RevPerMin::from_ratio(milli(measured), 1000).unwrap_or(RevPerMin::ZERO))
-            .to_milli();
         self.belt_counts_k3_milli = self
             .belt_counts_k3_milli
             .saturating_add(u64::from(delta).saturating_mul(u64::from(k3_x1000)));

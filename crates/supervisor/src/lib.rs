@@ -14,6 +14,7 @@ pub mod control;
 pub mod crc;
 pub mod drive;
 pub mod machine;
+pub mod phase;
 pub mod profile_b;
 pub mod settings;
 pub mod stop_input;

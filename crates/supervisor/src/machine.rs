@@ -108,8 +108,12 @@ pub struct BeltMachine {
 impl BeltMachine {
     /// A stopped planter with these settings (their profile B part).
     pub fn new(settings: Settings, hw: ProfileBHardware) -> Result<Self, BeltError> {
+        let mut planter = BeltPlanter::new(settings.belt, hw)?;
+        // The placement setting chooses profile B's feeding too:
+        // distance-locked is its position-locked feeding (docs/profile-b.md).
+        planter.set_position_lock(settings.placement == crate::settings::Placement::DistanceLocked);
         Ok(Self {
-            planter: BeltPlanter::new(settings.belt, hw)?,
+            planter,
             settings,
             roller_turns: 0,
         })

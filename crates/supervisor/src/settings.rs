@@ -1,8 +1,10 @@
 //! The persisted settings and their versioned byte format.
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
-//! multi-byte number is little endian. Format version 3. [`decode`] still
-//! reads the older formats: version 2 is version 3 without its last 7 bytes
+//! multi-byte number is little endian. Format version 4. [`decode`] still
+//! reads the older formats: version 3 has the same layout without flag bit 1
+//! (read as [`Placement::DistanceLocked`], the default; a version-3 record
+//! with bit 1 set is invalid, as before); version 2 is version 3 without its last 7 bytes
 //! (written before the drum encoder direction and the drive model existed;
 //! read with the encoder not reversed and [`DriveModel::DEFAULT`]), version 1
 //! is version 2 without its last 34 bytes (written before profile B existed;
@@ -10,7 +12,7 @@
 //!
 //! | offset | size | field | encoding |
 //! |---|---|---|---|
-//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 3 |
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 4 |
 //! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
 //! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
 //! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
@@ -20,10 +22,10 @@
 //! | 10 | 199 | [`Settings::calibration`] | [`Calibration::to_bytes`] (its own version byte, then k1, k2, k3 tables padded to 66 bytes each) |
 //! | 209 | 1 | [`Settings::profile`] | 1 = A (drum belt), 2 = B (seedling belt) |
 //! | 210 | 33 | [`Settings::belt`] | [`ProfileBConfig::to_bytes`] |
-//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bits 1–7 zero |
+//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1: [`Settings::placement`] is [`Placement::SpeedFollowing`] (format 4 only); bits 2–7 zero |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
 //!
-//! Total 250 bytes (version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! Total 250 bytes (version 3 too; version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -39,12 +41,12 @@
 //! s.spacing = Spacing::new(120).unwrap();
 //! let bytes = s.encode();
 //! assert_eq!(bytes.len(), SETTINGS_BYTES);
-//! // version 3, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // version 4, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
 //! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
 //! // brightness 100 (0x64).
 //! assert_eq!(
 //!     bytes[..10],
-//!     [3, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//!     [4, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
 //! );
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
@@ -60,7 +62,10 @@ use crate::drive::{DriveModel, DriveModelError, DRIVE_MODEL_BYTES};
 use crate::profile_b::{ProfileBConfig, CONFIG_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
-pub const SETTINGS_FORMAT_VERSION: u8 = 3;
+pub const SETTINGS_FORMAT_VERSION: u8 = 4;
+
+/// The previous format (same layout, flag bit 1 not defined).
+const SETTINGS_V3: u8 = 3;
 
 /// Bytes before the calibration block: version, mode, spacing, drum speed,
 /// motor coefficient, gear, brightness.
@@ -72,11 +77,28 @@ pub const SETTINGS_V1_BYTES: usize = HEAD_BYTES + CALIBRATION_BYTES;
 /// Size of a format-2 record: 209 + 1 + 33 = 243.
 pub const SETTINGS_V2_BYTES: usize = SETTINGS_V1_BYTES + 1 + CONFIG_BYTES;
 
-/// Size of an encoded [`Settings`] (format version 3): 243 + 1 + 6 = 250.
+/// Size of an encoded [`Settings`] (format versions 3 and 4): 243 + 1 + 6 = 250.
 pub const SETTINGS_BYTES: usize = SETTINGS_V2_BYTES + 1 + DRIVE_MODEL_BYTES;
 
 /// Flags byte (offset 243), bit 0: the drum encoder counts backwards.
 const FLAG_ENCODER_REVERSED: u8 = 1;
+/// Flags byte, bit 1 (format 4): speed-following placement.
+const FLAG_SPEED_FOLLOWING: u8 = 2;
+
+/// How profile A's drum places the plants in Speed-Adaptive mode
+/// (issue 19, docs/placement.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Placement {
+    /// Partition `n` leaves at ground distance `origin + n·X`: a phase loop
+    /// around the speed loop ([`crate::phase`]). The default.
+    #[default]
+    DistanceLocked,
+    /// The drum's speed follows the travel speed (eq. 7 + the fuzzy PID)
+    /// and position errors stay in the row: the behaviour before issue 19,
+    /// kept for comparison.
+    SpeedFollowing,
+}
 
 /// Which machine the firmware runs (SPEC §1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -133,6 +155,9 @@ pub struct Settings {
     /// The drum drive's model (feed-forward gain, controller's drum model).
     /// Default: [`DriveModel::DEFAULT`], until an identification is saved.
     pub drive: DriveModel,
+    /// Distance-locked or speed-following placement (Speed-Adaptive mode).
+    /// Default: [`Placement::DistanceLocked`].
+    pub placement: Placement,
 }
 
 impl Default for Settings {
@@ -149,6 +174,7 @@ impl Default for Settings {
             belt: ProfileBConfig::default(),
             drum_encoder_reversed: false,
             drive: DriveModel::DEFAULT,
+            placement: Placement::DistanceLocked,
         }
     }
 }
@@ -251,7 +277,7 @@ const fn mode_from_byte(b: u8) -> Option<Mode> {
 }
 
 impl Settings {
-    /// Serialises in format version 3 (layout in the [module docs](self)).
+    /// Serialises in format version 4 (layout in the [module docs](self)).
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
@@ -259,6 +285,10 @@ impl Settings {
         if let Some((flags, drive)) = v3.split_first_mut() {
             *flags = if self.drum_encoder_reversed {
                 FLAG_ENCODER_REVERSED
+            } else {
+                0
+            } | if self.placement == Placement::SpeedFollowing {
+                FLAG_SPEED_FOLLOWING
             } else {
                 0
             };
@@ -303,7 +333,7 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
     let expected = match version {
         1 => SETTINGS_V1_BYTES,
         2 => SETTINGS_V2_BYTES,
-        SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
+        SETTINGS_V3 | SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
         other => return Err(SettingsError::UnsupportedVersion(other)),
     };
     if bytes.len() != expected {
@@ -345,15 +375,25 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
             )
         }
     };
-    let (drum_encoder_reversed, drive) = match v3.split_first() {
-        None => (false, DriveModel::DEFAULT),
+    let known = if version == SETTINGS_FORMAT_VERSION {
+        FLAG_ENCODER_REVERSED | FLAG_SPEED_FOLLOWING
+    } else {
+        FLAG_ENCODER_REVERSED
+    };
+    let (drum_encoder_reversed, placement, drive) = match v3.split_first() {
+        None => (false, Placement::DistanceLocked, DriveModel::DEFAULT),
         Some((&flags, drive)) => {
-            if flags & !FLAG_ENCODER_REVERSED != 0 {
+            if flags & !known != 0 {
                 return Err(SettingsError::Flags(flags));
             }
             let drive: &[u8; DRIVE_MODEL_BYTES] = drive.try_into().map_err(|_| length)?;
             (
                 flags & FLAG_ENCODER_REVERSED != 0,
+                if flags & FLAG_SPEED_FOLLOWING != 0 {
+                    Placement::SpeedFollowing
+                } else {
+                    Placement::DistanceLocked
+                },
                 DriveModel::from_bytes(drive).map_err(SettingsError::Drive)?,
             )
         }
@@ -370,6 +410,7 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         belt,
         drum_encoder_reversed,
         drive,
+        placement,
     })
 }
 
@@ -423,17 +464,19 @@ mod tests {
             belt: ProfileBConfig::default(),
             drum_encoder_reversed: true,
             drive: DriveModel::new(5811, 875, 600).unwrap(),
+            placement: Placement::SpeedFollowing,
         };
         let b = s.encode();
         // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
-        assert_eq!(b[..10], [3, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
+        assert_eq!(b[..10], [4, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
         assert_eq!(b[10..209], Calibration::identity().to_bytes());
         // Profile B (2) and its parameters.
         assert_eq!(b[209], 2);
         assert_eq!(b[210..243], s.belt.to_bytes());
-        // Flags: encoder reversed (bit 0); drive 58.11 r/min = 5811 =
-        // 0x16B3, τ 87.5 ms = 875 = 0x036B, dead time 60 ms = 600 = 0x0258.
-        assert_eq!(b[243..], [1, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02]);
+        // Flags: encoder reversed (bit 0), speed-following (bit 1); drive
+        // 58.11 r/min = 5811 = 0x16B3, τ 87.5 ms = 875 = 0x036B, dead time
+        // 60 ms = 600 = 0x0258.
+        assert_eq!(b[243..], [3, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02]);
         assert_eq!(decode(&b).unwrap(), s);
     }
 
@@ -481,6 +524,25 @@ mod tests {
     }
 
     #[test]
+    fn a_version_3_record_reads_distance_locked_and_knows_no_bit_1() {
+        // Format 3 (before the placement setting): the same 250 bytes, flag
+        // bit 1 undefined. Read with the default placement; bit 1 set is
+        // invalid there, as it was for the firmware that wrote format 3.
+        let s = Settings {
+            drum_encoder_reversed: true,
+            spacing: Spacing::new(180).unwrap(),
+            ..Settings::default()
+        };
+        let mut v3 = s.encode();
+        v3[0] = 3;
+        assert_eq!(decode(&v3), Ok(s.clone()));
+        v3[243] = 3;
+        assert_eq!(decode(&v3), Err(SettingsError::Flags(3)));
+        // The default placement is distance-locked.
+        assert_eq!(Settings::default().placement, Placement::DistanceLocked);
+    }
+
+    #[test]
     fn rejects_unknown_flags_and_a_bad_drive_model() {
         let good = Settings::default().encode();
         let with = |i: usize, v: u8| {
@@ -488,9 +550,11 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(243, 2), Err(SettingsError::Flags(2)));
+        assert_eq!(with(243, 4), Err(SettingsError::Flags(4)));
         assert_eq!(with(243, 0xFF), Err(SettingsError::Flags(0xFF)));
         assert!(with(243, 1).unwrap().drum_encoder_reversed);
+        assert_eq!(with(243, 2).unwrap().placement, Placement::SpeedFollowing);
+        assert_eq!(with(243, 0).unwrap().placement, Placement::DistanceLocked);
         // n_max 0x1100 + low byte: 4352 + 0xFF… → 0xFF_xx > 9000.
         assert_eq!(
             with(245, 0xFF),
@@ -548,7 +612,7 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(0, 4), Err(SettingsError::UnsupportedVersion(4)));
+        assert_eq!(with(0, 5), Err(SettingsError::UnsupportedVersion(5)));
         assert_eq!(with(0, 0xFF), Err(SettingsError::UnsupportedVersion(0xFF)));
         assert_eq!(with(1, 0), Err(SettingsError::Mode(0)));
         assert_eq!(with(1, 3), Err(SettingsError::Mode(3)));
@@ -672,14 +736,14 @@ mod tests {
             (table(), table(), table()),
             (any::<bool>(), 110u32..=990),
             (
-                any::<bool>(),
+                (any::<bool>(), any::<bool>()),
                 DriveModel::N_MAX_RANGE,
                 DriveModel::TAU_RANGE,
                 0..=DriveModel::DEAD_TIME_MAX,
             ),
         )
             .prop_map(
-                |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm), (rev, n, tau, dead))| {
+                |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm), ((rev, sf), n, tau, dead))| {
                     Settings {
                         mode: if fixed {
                             Mode::Fixed
@@ -704,6 +768,11 @@ mod tests {
                         .unwrap(),
                         drum_encoder_reversed: rev,
                         drive: DriveModel::new(n, tau, dead).unwrap(),
+                        placement: if sf {
+                            Placement::SpeedFollowing
+                        } else {
+                            Placement::DistanceLocked
+                        },
                     }
                 },
             )

@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | 0 | 4 | magic [`MAGIC`] = `"TPS1"` |
 //! | 4 | 4 | sequence, u32; the newer record has the higher sequence, compared with wrap-around |
-//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 250 for settings format 3; 243 and 209 for formats 2 and 1) |
+//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 250 for settings formats 4 and 3; 243 and 209 for formats 2 and 1) |
 //! | 10 | 2 | `!n` (guards the length before the CRC is known) |
 //! | 12 | `n` | payload: [`Settings::encode`] |
 //! | 12 + n | 0–3 | zero padding to a multiple of 4 |
@@ -78,7 +78,7 @@
 //! // The bytes in flash follow the documented layout.
 //! let flash = store.into_inner();
 //! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xFA\x00\x05\xFF"); // magic, seq 1, n = 250, !n
-//! assert_eq!(flash.0[12], 3); // settings format version
+//! assert_eq!(flash.0[12], 4); // settings format version
 //! assert_eq!(&flash.0[268..272], b"DONE");
 //! assert_eq!(flash.0[272], 0xFF); // the record ends there
 //! # Ok::<(), supervisor::store::StoreError<NorFlashErrorKind>>(())
@@ -665,7 +665,7 @@ impl<F: NorFlash> SettingsStore<F> {
         if self.crc(slot, 4, lay.crc_off)? != u32::from_le_bytes(word) {
             return Ok(Slot::Corrupt);
         }
-        // This format, format 2 (written before the drive model) or format
+        // This format (or format 3, same length), format 2 (written before the drive model) or format
         // 1 (before profile B): the decoder reads all three.
         if lay.len == SETTINGS_BYTES || lay.len == SETTINGS_V2_BYTES || lay.len == SETTINGS_V1_BYTES
         {

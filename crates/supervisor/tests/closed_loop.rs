@@ -215,7 +215,15 @@ fn fixed_mode_settles_on_a_drive_twice_as_fast_as_the_model() {
 /// speed swings and fails this.
 #[test]
 fn a_jittered_control_schedule_does_not_disturb_the_drum() {
-    let mut rig = Rig::new(chassis(low2(Config::noiseless()), 2.5), adaptive(70));
+    // The speed loop alone (speed-following placement): distance-locked
+    // placement moves the drum speed on purpose to hold the phase (by up to
+    // 1.04 % here, on the Hall extrapolation's error at each edge), which
+    // is not what this test is about; tests/placement.rs covers it.
+    let settings = Settings {
+        placement: supervisor::settings::Placement::SpeedFollowing,
+        ..adaptive(70)
+    };
+    let mut rig = Rig::new(chassis(low2(Config::noiseless()), 2.5), settings);
     rig.run_ms(10_000);
     rig.sup.command(Command::Start);
     let start = rig.t_ms;

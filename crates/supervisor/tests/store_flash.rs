@@ -282,6 +282,7 @@ fn settings_b() -> Settings {
         .unwrap(),
         drum_encoder_reversed: true,
         drive: supervisor::drive::DriveModel::new(5000, 400, 200).unwrap(),
+        placement: supervisor::settings::Placement::SpeedFollowing,
     }
 }
 
@@ -681,7 +682,7 @@ fn a_record_written_before_profile_b_still_loads() {
     // Format 1: the first 209 bytes of today's payload, version byte 1
     // (docs of supervisor::settings). It loads as profile A with profile B's
     // defaults (and format 2's defaults: encoder forward, the default
-    // drive), and the next save writes format 3 into the other slot.
+    // drive), and the next save writes format 4 into the other slot.
     let b = settings_b();
     let mut v1 = b.encode()[..209].to_vec();
     v1[0] = 1;
@@ -692,6 +693,7 @@ fn a_record_written_before_profile_b_still_loads() {
         belt: ProfileBConfig::default(),
         drum_encoder_reversed: false,
         drive: supervisor::drive::DriveModel::DEFAULT,
+        placement: supervisor::settings::Placement::DistanceLocked,
         ..b.clone()
     };
     assert_eq!(
@@ -716,7 +718,7 @@ fn a_record_written_before_profile_b_still_loads() {
 fn a_record_written_before_the_drive_model_still_loads() {
     // Format 2: the first 243 bytes of today's payload, version byte 2
     // (docs of supervisor::settings). It loads with the encoder forward and
-    // the default drive model, and the next save writes format 3.
+    // the default drive model, and the next save writes format 4.
     // settings_b: encoder reversed, a drive model other than the default.
     let b = settings_b();
     let mut v2 = b.encode()[..243].to_vec();
@@ -726,6 +728,7 @@ fn a_record_written_before_the_drive_model_still_loads() {
     let expected = Settings {
         drum_encoder_reversed: false,
         drive: supervisor::drive::DriveModel::DEFAULT,
+        placement: supervisor::settings::Placement::DistanceLocked,
         ..b.clone()
     };
     assert_eq!(
@@ -749,8 +752,8 @@ fn a_record_written_before_the_drive_model_still_loads() {
 #[test]
 fn unsupported_version_falls_back_or_is_reported() {
     let a = settings_a();
-    // A record of a future format 4 (payload version byte 4, longer payload).
-    let mut v2 = vec![4u8; 300];
+    // A record of a future format 5 (payload version byte 5, longer payload).
+    let mut v2 = vec![5u8; 300];
     v2[1] = 7;
     // Alone: defaults, reason UnsupportedVersion.
     let mut f = SimFlash::new();
@@ -780,7 +783,7 @@ fn unsupported_version_falls_back_or_is_reported() {
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(5, &a.encode()));
     let mut same_len = settings_b().encode();
-    same_len[0] = 4;
+    same_len[0] = 5;
     put_raw(&mut f, 1, &raw_record(6, &same_len));
     assert_eq!(
         boot(&f),
@@ -789,7 +792,7 @@ fn unsupported_version_falls_back_or_is_reported() {
             sequence: 5
         }
     );
-    // The next save overwrites the v4 record (slot 1) with sequence 7.
+    // The next save overwrites the v5 record (slot 1) with sequence 7.
     let mut st = store(f);
     assert_eq!(st.save(&settings_b()), Ok(7));
     assert_eq!(
@@ -930,6 +933,11 @@ fn settings() -> impl Strategy<Value = Settings> {
                 .unwrap(),
                 drum_encoder_reversed: rev,
                 drive: supervisor::drive::DriveModel::new(n, tau, dead).unwrap(),
+                placement: if rev {
+                    supervisor::settings::Placement::SpeedFollowing
+                } else {
+                    supervisor::settings::Placement::DistanceLocked
+                },
             },
         )
 }

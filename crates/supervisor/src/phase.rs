@@ -1,0 +1,485 @@
+//! Distance-locked planting (issue 19): a phase loop around the drum's speed
+//! loop (profile A, Speed-Adaptive).
+//!
+//! The speed loop (eq. 7 feed-forward + the fuzzy PID) matches the drum's
+//! *speed* to the travel speed; any lag or bias of it stays in the row as a
+//! position error. The phase loop knows two positions, both since Start:
+//!
+//! - the **ground distance** `g`: Hall edges × the calibrated distance per
+//!   edge (π·0.20 m / 25 · k1 · k2 at the current speed), extrapolated
+//!   between edges with the current travel speed, never more than one edge's
+//!   distance beyond the last edge (so it never runs ahead of the next edge by
+//!   more than one edge) and never backwards. The first Hall edge after Start
+//!   is the origin (`g` = 0): where the wheel stood between two teeth at Start
+//!   is unknown, so counting that first edge as a whole pitch would put up to
+//!   25 mm of error into every plant of the pass.
+//! - the **belt position** `b`: drum encoder counts × belt per count
+//!   (π·0.070 m / counts per turn) × k3 at the speed they were turned.
+//!   Partition `n` leaves when `b` passes `n · Lclap` (the belt is taken to be
+//!   at a partition boundary at Start, as the plant count always assumed).
+//!
+//! A reference line ties them: the next partition (belt boundary `b_ref`)
+//! shall leave at ground `g_ref`, then one every `X`. The phase error is the
+//! belt's distance from that line, `e = (b − b_ref) − (g − g_ref)·Lclap/X`
+//! (positive: the belt is ahead), and the drum's set point becomes
+//! `n = n_ff − e / T · 60 / (π·0.070 m)` with `T` = [`PHASE_TIME_CONSTANT_MS`]:
+//! a proportional position loop whose output is a speed offset on top of the
+//! feed-forward; the fuzzy PID still holds the drum on that set point.
+//!
+//! **Bounded recovery.** The offset is limited to +[`MAX_SPEED_UP_PCT`] %
+//! and −[`MAX_SLOW_DOWN_PCT`] % of the feed-forward speed. A drum running
+//! `1 + u` times the matched speed sets plants `X / (1 + u)` apart, so +10 %
+//! keeps every spacing ≥ X / 1.1 = 0.909 X (the rule: no spacing below
+//! 0.9 X); −33 % keeps it ≤ X / 0.67 = 1.49 X, below the 1.5 X of a miss
+//! (ISO 7256-1). Before the first partition of a pass leaves there is no
+//! earlier plant to crowd, so the drum may sprint up to +100 % to reach the
+//! first place. At rest (feed-forward 0) there is no correction: the drum
+//! waits for the ground.
+//!
+//! **First plant.** Start calls [`Phase::realign`] with the place of the
+//! first plant, [`first_plant_place_um`]: `X` plus one Hall pitch past the
+//! origin, i.e. `X` after the second Hall edge after Start — the first point
+//! at which the firmware knows the travel speed (the first M/T window
+//! closes). Placing it at `X` after the origin would ask the drum to make up
+//! a whole edge of lag in less than a spacing (at 7 cm and Low 2 beyond
+//! `n_max`).
+//!
+//! All arithmetic is integer (nm, u64/i64, saturating); the ground distance
+//! in nm wraps after 1.8·10¹⁰ m, 380 000 working days of 12 h at 4 km/h.
+
+use fuzzy_pid::I16F16;
+
+/// Track per Hall edge at k1 = k2 = 1: π·0.20 m / 25 = 25 132 741 nm.
+pub const EDGE_NM: u64 = 25_132_741;
+/// Belt per partition, `Lclap` = 50 mm.
+pub const PARTITION_NM: u64 = 50_000_000;
+/// Belt per drum turn: π·(D2 + 2·H2) = π·0.070 m = 219 911 486 nm.
+pub const BELT_PER_TURN_NM: u64 = 219_911_486;
+/// Time constant of the phase loop, ms: a phase error decays as
+/// `e^(−t/T)` while the correction is within its bounds. 0.5 s: five times
+/// the speed loop's settling (bench §1, 0.10 s), so the two loops do not
+/// fight, and short enough that a phase lost at a speed step is back within
+/// 1 mm in about two spacings at Low 2 and 7 cm.
+pub const PHASE_TIME_CONSTANT_MS: u64 = 500;
+/// Largest speed-up of the drum over the feed-forward, % (no spacing below
+/// X / 1.1 = 0.909 X; module docs).
+pub const MAX_SPEED_UP_PCT: i32 = 10;
+/// Largest slow-down of the drum below the feed-forward, % (no spacing above
+/// X / 0.67 = 1.49 X; module docs).
+pub const MAX_SLOW_DOWN_PCT: i32 = 33;
+/// [`MAX_SPEED_UP_PCT`] and [`MAX_SLOW_DOWN_PCT`] in Q16, rounded down (the
+/// bounds come out at most 0.002 % tighter).
+#[allow(clippy::arithmetic_side_effects)]
+const UP_Q16: i64 = (MAX_SPEED_UP_PCT as i64) * 65_536 / 100;
+#[allow(clippy::arithmetic_side_effects)]
+const DOWN_Q16: i64 = (MAX_SLOW_DOWN_PCT as i64) * 65_536 / 100;
+/// Belt run before the origin that marks a Start on the move (the drum
+/// already turning on the feed-forward), nm: 1 mm, far above an encoder
+/// count's 4.7 µm and a standing drum's jitter.
+const ROLLING_START_NM: u64 = 1_000_000;
+/// Events kept per control step: at most one partition leaves per 10 ms
+/// below 150 r/min; four leave room for a step released late.
+const MAX_EVENTS: usize = 4;
+
+/// The drum speed offset per nm of phase error, I16F16 bits × 2¹⁶:
+/// `2³² · 60 / (T · π·0.070 m)` = 2343.65 → 2344 (`T` = 0.4999 s).
+// Note: evaluated at compile time; 60·2³²·1000 < 2⁶⁴ and the result
+// (2344) fits any integer type.
+#[allow(clippy::cast_possible_wrap, clippy::arithmetic_side_effects)]
+const GAIN_Q16: i64 = {
+    let g = (60u64 << 32) * 1000 / PHASE_TIME_CONSTANT_MS;
+    ((g + BELT_PER_TURN_NM / 2) / BELT_PER_TURN_NM) as i64
+};
+
+/// A partition that left the drum, with the ground distance since Start at
+/// that moment (µm).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PlantEvent {
+    /// Ground distance since Start, µm ([`Phase::ground_um`]).
+    pub ground_distance_um: u64,
+}
+
+/// The place of the first plant after Start, µm of ground since Start:
+/// one spacing plus one Hall pitch (module docs).
+pub fn first_plant_place_um(spacing_mm: u16) -> u64 {
+    u64::from(spacing_mm)
+        .saturating_mul(1000)
+        .saturating_add(EDGE_NM / 1000)
+}
+
+/// The phase loop's state (module docs).
+#[derive(Clone, Copy, Debug)]
+pub struct Phase {
+    /// Belt nm per (count · k3 × 1000), × 2¹⁶ / 1000: precomputed per
+    /// hardware ([`Phase::new`]).
+    belt_q16_per_count: u64,
+    /// Plant spacing, nm, and `Lclap / X` × 2²⁴ (per setting).
+    x_nm: u64,
+    l_over_x_q24: u64,
+    /// The first Hall edge after Start passed (the origin).
+    armed: bool,
+    /// The supervisor's edge counter at the last step.
+    edges_seen: u32,
+    /// Distance of one edge at the last known speed, nm.
+    edge_nm: u64,
+    /// Ground at the last edge, and now (extrapolated), nm.
+    ground_edges_nm: u64,
+    ground_nm: u64,
+    /// Belt since Start, nm, and the remainder of its division.
+    belt_nm: u64,
+    belt_rem: u64,
+    /// Partitions that left since Start.
+    left: u32,
+    /// The reference line: belt boundary `b_ref` leaves at ground `g_ref`.
+    ref_belt_nm: u64,
+    ref_ground_nm: u64,
+    /// A partition left since the last realignment (the +10 % bound holds).
+    pass_started: bool,
+    /// The last phase error, belt nm (positive: belt ahead).
+    error_nm: i64,
+    /// The last step's events (ground µm).
+    events: [u64; MAX_EVENTS],
+    n_events: u8,
+}
+
+impl Phase {
+    /// A phase loop for `counts_per_turn` encoder counts per drum turn and a
+    /// spacing of `spacing_mm`.
+    pub fn new(counts_per_turn: u32, spacing_mm: u16) -> Self {
+        // 219 911 486 · 65 536 / 1000 / counts: ≤ 10¹⁰ for ≥ 2 counts.
+        let q16 = BELT_PER_TURN_NM
+            .saturating_mul(1 << 16)
+            .checked_div(u64::from(counts_per_turn.max(2)).saturating_mul(1000))
+            .unwrap_or(0);
+        let mut p = Self {
+            belt_q16_per_count: q16,
+            x_nm: 0,
+            l_over_x_q24: 0,
+            armed: false,
+            edges_seen: 0,
+            edge_nm: EDGE_NM,
+            ground_edges_nm: 0,
+            ground_nm: 0,
+            belt_nm: 0,
+            belt_rem: 0,
+            left: 0,
+            ref_belt_nm: PARTITION_NM,
+            ref_ground_nm: 0,
+            pass_started: false,
+            error_nm: 0,
+            events: [0; MAX_EVENTS],
+            n_events: 0,
+        };
+        p.set_spacing(spacing_mm);
+        p
+    }
+
+    /// A new spacing (precomputes `Lclap / X`).
+    #[inline(never)]
+    pub fn set_spacing(&mut self, spacing_mm: u16) {
+        self.x_nm = u64::from(spacing_mm).saturating_mul(1_000_000).max(1);
+        self.l_over_x_q24 = (PARTITION_NM << 24).checked_div(self.x_nm).unwrap_or(0);
+    }
+
+    /// Start: positions from zero; `edges` is the supervisor's edge
+    /// counter. The caller then places the first plant ([`Phase::realign`]
+    /// with [`first_plant_place_um`]).
+    #[inline(never)]
+    pub fn start(&mut self, edges: u32) {
+        *self = Self {
+            edges_seen: edges,
+            ..Self::new_like(self)
+        };
+    }
+
+    fn new_like(other: &Self) -> Self {
+        Self {
+            armed: false,
+            edges_seen: 0,
+            edge_nm: EDGE_NM,
+            ground_edges_nm: 0,
+            ground_nm: 0,
+            belt_nm: 0,
+            belt_rem: 0,
+            left: 0,
+            ref_belt_nm: PARTITION_NM,
+            ref_ground_nm: 0,
+            pass_started: false,
+            error_nm: 0,
+            events: [0; MAX_EVENTS],
+            n_events: 0,
+            ..*other
+        }
+    }
+
+    /// The next partition to leave shall leave at ground `at_um` (µm since
+    /// Start), then one every `X`; a new pass (the first plant may be
+    /// reached with a sprint, module docs).
+    #[inline(never)]
+    pub fn realign(&mut self, at_um: u64) {
+        self.ref_belt_nm = u64::from(self.left)
+            .saturating_add(1)
+            .saturating_mul(PARTITION_NM);
+        self.ref_ground_nm = at_um.saturating_mul(1000);
+        self.pass_started = false;
+    }
+
+    /// Ground distance since Start, µm.
+    pub fn ground_um(&self) -> u64 {
+        self.ground_nm / 1000
+    }
+
+    /// The last phase error in ground µm (positive: the belt is ahead of the
+    /// ground, plants land short of their places).
+    pub fn error_ground_um(&self) -> i64 {
+        // e · X / Lclap: |e| ≤ 2⁴⁰ nm after the clamp, X ≤ 10⁹ nm / 5·10⁷.
+        let x_per_l = i64::try_from(self.x_nm / 1000).unwrap_or(i64::MAX);
+        self.error_nm
+            .clamp(-(1 << 40), 1 << 40)
+            .saturating_mul(x_per_l)
+            / 50_000_000
+    }
+
+    /// Partitions that left since Start.
+    pub fn partitions_left(&self) -> u32 {
+        self.left
+    }
+
+    /// The last step's events.
+    pub fn events(&self) -> impl Iterator<Item = PlantEvent> + '_ {
+        self.events
+            .iter()
+            .take(usize::from(self.n_events))
+            .map(|&g| PlantEvent {
+                ground_distance_um: g,
+            })
+    }
+
+    /// Clears the last step's events (at the start of a control step).
+    pub fn clear_events(&mut self) {
+        self.n_events = 0;
+    }
+
+    /// Advances the ground: `edges` is the supervisor's edge counter,
+    /// `since_edge_us` the time since the newest edge, `travel_mh` the
+    /// travel speed (m/h) and `k1k2_x1e6` the product of k1 and k2 × 10⁶ at
+    /// it (`None` when no speed is known: the last is kept).
+    #[inline(never)]
+    pub fn advance_ground(
+        &mut self,
+        edges: u32,
+        since_edge_us: u32,
+        travel_mh: u32,
+        k1k2_x1e6: Option<u64>,
+    ) {
+        if let Some(k) = k1k2_x1e6 {
+            // EDGE_NM / 10⁶ = 25.132 741 ≈ 1 647 095 / 2¹⁶ (error 2·10⁻⁷);
+            // k1·k2 ≤ 4·10⁶ after the clamp: the product < 2⁴³.
+            self.edge_nm = k.min(4_000_000).wrapping_mul(1_647_095) >> 16;
+        }
+        let new = edges.wrapping_sub(self.edges_seen);
+        self.edges_seen = edges;
+        let mut new = u64::from(new);
+        if !self.armed && new > 0 {
+            // The origin: the first edge counts nothing.
+            self.armed = true;
+            new = new.saturating_sub(1);
+            if self.belt_nm > ROLLING_START_NM && !self.pass_started {
+                // Started on the move: the drum ran on the feed-forward
+                // before the origin. Its phase here is kept (the next
+                // partition's place is where the matched belt puts it), so
+                // a rolling Start neither stalls nor sprints the drum.
+                let to_boundary = self.ref_belt_nm.saturating_sub(self.belt_nm);
+                self.ref_ground_nm = to_boundary.saturating_mul(self.x_nm) / PARTITION_NM;
+            }
+        }
+        if !self.armed {
+            return;
+        }
+        // new < 2³², edge_nm < 2²⁷: the product < 2⁵⁹.
+        self.ground_edges_nm = self
+            .ground_edges_nm
+            .saturating_add(new.wrapping_mul(self.edge_nm));
+        // m/h · µs = nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶). The
+        // time clamped to 16.7 s (beyond any edge at any speed that moves
+        // the ground) and the speed to 1000 km/h keep the product < 2⁶¹.
+        let extra = u64::from(travel_mh.min(1 << 20))
+            .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
+            .wrapping_mul(72_818)
+            >> 18;
+        let g = self.ground_edges_nm.saturating_add(extra.min(self.edge_nm));
+        self.ground_nm = self.ground_nm.max(g);
+    }
+
+    /// Advances the belt by `counts` encoder counts turned at belt slip
+    /// `k3_milli`; records the partitions that left.
+    #[inline(never)]
+    pub fn advance_belt(&mut self, counts: u16, k3_milli: u32) {
+        // counts · k3 · q16 ≤ 65 535 · 2000 · 10¹⁰ < 2⁶⁴ (k3 clamped to
+        // 2; a table holds 0.8 … 1.2; q16 ≤ 10¹⁰ for ≥ 2 counts per turn).
+        let acc = u64::from(counts)
+            .wrapping_mul(u64::from(k3_milli.min(2000)))
+            .wrapping_mul(self.belt_q16_per_count)
+            .wrapping_add(self.belt_rem);
+        self.belt_nm = self.belt_nm.saturating_add(acc >> 16);
+        self.belt_rem = acc & 0xFFFF;
+        for _ in 0..MAX_EVENTS {
+            let boundary = u64::from(self.left)
+                .saturating_add(1)
+                .saturating_mul(PARTITION_NM);
+            if self.belt_nm < boundary {
+                break;
+            }
+            self.left = self.left.saturating_add(1);
+            let g = self.ground_um();
+            if let Some(slot) = self.events.get_mut(usize::from(self.n_events)) {
+                *slot = g;
+                self.n_events = self.n_events.saturating_add(1);
+            }
+            if self.belt_nm >= self.ref_belt_nm {
+                self.ref_belt_nm = self.ref_belt_nm.saturating_add(PARTITION_NM);
+                self.ref_ground_nm = self.ref_ground_nm.saturating_add(self.x_nm);
+                self.pass_started = true;
+            }
+        }
+    }
+
+    /// The phase error now (belt nm, positive: ahead), kept for
+    /// [`Phase::error_ground_um`].
+    pub fn update_error(&mut self) -> i64 {
+        // Positions below 2⁶³ nm (9·10⁹ km): the differences are exact as
+        // two's complement.
+        let db = self.belt_nm.wrapping_sub(self.ref_belt_nm).cast_signed();
+        let dg = self
+            .ground_nm
+            .wrapping_sub(self.ref_ground_nm)
+            .cast_signed()
+            .clamp(-(1 << 36), 1 << 36);
+        // |dg| ≤ 2³⁶ nm (68 m: the correction is saturated long before),
+        // l/x ≤ 2²⁴ · 50/10 (spacing ≥ 10 mm): the product < 2⁶³.
+        let lx = self.l_over_x_q24.min(5 << 24).cast_signed();
+        let target = dg.wrapping_mul(lx) >> 24;
+        self.error_nm = db
+            .clamp(-(1 << 40), 1 << 40)
+            .wrapping_sub(target.clamp(-(1 << 40), 1 << 40));
+        self.error_nm
+    }
+
+    /// The drum speed offset for the feed-forward speed `n_ff` (r/min):
+    /// proportional to the phase error, within the bounds (module docs).
+    #[inline(never)]
+    pub fn correction(&mut self, n_ff: I16F16) -> I16F16 {
+        // |e| ≤ 2⁴¹ ([`Phase::update_error`]).
+        let e = self.update_error();
+        if !self.armed || n_ff <= I16F16::ZERO {
+            return I16F16::ZERO;
+        }
+        // |e| ≤ 2⁴¹, gain < 2¹²: the product < 2⁵³; ff < 2³¹, the bound
+        // factors < 2¹⁷: < 2⁴⁸. The bounds in Q16 (no division).
+        // Before the pass's first plant: twice the gain (T/2), to absorb
+        // the start lag within the first spacing.
+        let shift = if self.pass_started { 16 } else { 15 };
+        let raw = e.wrapping_mul(GAIN_Q16).wrapping_neg() >> shift;
+        let ff = i64::from(n_ff.to_bits());
+        let up = if self.pass_started {
+            ff.wrapping_mul(UP_Q16) >> 16
+        } else {
+            ff
+        };
+        let down = ff.wrapping_mul(DOWN_Q16) >> 16;
+        let bits = raw.max(down.wrapping_neg()).min(up);
+        I16F16::from_bits(i32::try_from(bits).unwrap_or(0))
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::cast_precision_loss)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_gain_is_the_documented_time_constant() {
+        // Δn = e / T · 60 / (π·0.070 m): for 1 mm of belt error and
+        // T = 0.5 s, 0.001/0.5 · 60 / 0.219 911 486 = 0.545 674 r/min.
+        let mut p = Phase::new(47_200, 70);
+        p.armed = true;
+        p.pass_started = true;
+        p.belt_nm = PARTITION_NM - 1_000_000; // 1 mm behind the line at g_ref
+        p.ref_ground_nm = 0;
+        // Tolerance: the gain is 2343.65 rounded to 2344 (+0.015 %), plus
+        // one I16F16 step.
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        let expect = 0.001 / 0.5 * 60.0 / 0.219_911_486;
+        assert!((c / expect - 1.0).abs() < 2e-4, "{c} vs {expect}");
+        // Before the pass's first plant: T/2, twice the offset.
+        p.pass_started = false;
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!(
+            (c / (2.0 * expect) - 1.0).abs() < 2e-4,
+            "{c} vs {}",
+            2.0 * expect
+        );
+    }
+
+    #[test]
+    fn the_correction_is_bounded_by_the_spacing_rule() {
+        // A partition already left: +10 % of 20 r/min at most (2 r/min),
+        // −33 % (6.6 r/min) at most.
+        let mut p = Phase::new(47_200, 70);
+        p.armed = true;
+        p.pass_started = true;
+        p.belt_nm = 0; // 50 mm behind: wants +27 r/min
+                       // (Tolerance: the bounds' Q16 factors are rounded down, ≤ 0.002 %
+                       // of 20 r/min = 4·10⁻⁴, plus one I16F16 step.)
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
+        p.belt_nm = 3 * PARTITION_NM; // far ahead
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!((-6.6..-6.6 + 5e-4).contains(&c), "{c}");
+        // At rest: nothing.
+        assert_eq!(p.correction(I16F16::ZERO), I16F16::ZERO);
+    }
+
+    #[test]
+    fn ground_counts_edges_after_the_origin_and_extrapolates_at_most_one_edge() {
+        let mut p = Phase::new(47_200, 70);
+        p.start(7);
+        p.realign(first_plant_place_um(70));
+        // First edge: the origin.
+        p.advance_ground(8, 0, 500, Some(1_000_000));
+        assert_eq!(p.ground_um(), 0);
+        // 0.5 km/h = 500 m/h for 100 ms = 13 888.9 µm.
+        p.advance_ground(8, 100_000, 500, Some(1_000_000));
+        assert_eq!(p.ground_um(), 13_888);
+        // A second without an edge: capped at one edge (25 132 µm).
+        p.advance_ground(8, 1_000_000, 500, Some(1_000_000));
+        assert_eq!(p.ground_um(), 25_132);
+        // Two edges at k1·k2 = 0.98: 2 · 25 132 741 · 0.98 = 49 260 172 nm.
+        p.advance_ground(10, 0, 500, Some(980_000));
+        assert_eq!(p.ground_um(), 49_260);
+    }
+
+    #[test]
+    fn belt_events_carry_the_ground_distance() {
+        // 47 200 counts per turn at k3 = 1: 219 911 486 / 47 200 =
+        // 4659.14 nm per count; 50 mm is 10 731.5 counts.
+        let mut p = Phase::new(47_200, 70);
+        p.start(0);
+        p.realign(first_plant_place_um(70));
+        p.advance_ground(1, 0, 0, None);
+        p.advance_ground(2, 0, 0, Some(1_000_000));
+        p.clear_events();
+        p.advance_belt(10_731, 1000);
+        assert_eq!(p.events().count(), 0);
+        p.advance_belt(1, 1000);
+        let ev: std::vec::Vec<_> = p.events().collect();
+        assert_eq!(
+            ev,
+            [PlantEvent {
+                ground_distance_um: 25_132
+            }]
+        );
+        assert_eq!(p.partitions_left(), 1);
+    }
+}

@@ -269,6 +269,8 @@ pub struct Firmware {
     to_firmware: Mutex<std::collections::VecDeque<u8>>,
     /// QEMU has exited (seen while waiting for a period to be taken).
     ended: std::sync::atomic::AtomicBool,
+    /// Lock-step: control periods allowed since boot.
+    allowed: std::sync::atomic::AtomicUsize,
 }
 
 fn tool_missing(tool: &str, hint: &str) -> io::Error {
@@ -403,6 +405,7 @@ impl Firmware {
             gate,
             to_firmware: Mutex::new(std::collections::VecDeque::new()),
             ended: std::sync::atomic::AtomicBool::new(false),
+            allowed: std::sync::atomic::AtomicUsize::new(0),
         })
     }
 
@@ -419,9 +422,44 @@ impl Firmware {
                     .to_firmware
                     .lock()
                     .map_err(|_| io::Error::other("poisoned"))?;
+                self.allowed
+                    .fetch_add(periods, std::sync::atomic::Ordering::Relaxed);
                 g.allow(periods, &mut queue)
             }
             None => Ok(()),
+        }
+    }
+
+    /// Lock-step: the decoded log lines up to the firmware time the test
+    /// has allowed, waiting (without allowing more) for the decoder to
+    /// deliver them. The log reaches the test through QEMU's semihosting,
+    /// `defmt-print` and a reader thread: on a busy host it trails the
+    /// firmware, and [`Firmware::logs`] right after a pump may miss the
+    /// last lines (a test of the Stop saw no line after it under load).
+    /// The QEMU board logs at least every 100 ms (its `sim:` lines), so
+    /// this waits for a line within 150 ms of the allowed time; up to 30 s
+    /// of host time, then returns what it has. Without lock-step (or once
+    /// QEMU has ended), [`Firmware::logs`].
+    pub fn logs_caught_up(&self) -> Vec<String> {
+        let allowed = self.allowed.load(std::sync::atomic::Ordering::Relaxed);
+        if self.gate.is_none() || self.ended.load(std::sync::atomic::Ordering::Relaxed) {
+            return self.logs();
+        }
+        let target_ms = u32::try_from(allowed.saturating_mul(10))
+            .unwrap_or(u32::MAX)
+            .saturating_sub(150);
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            let newest = self
+                .logs()
+                .iter()
+                .rev()
+                .find_map(|l| log_time_ms(l))
+                .unwrap_or(0);
+            if newest >= target_ms || Instant::now() > deadline {
+                return self.logs();
+            }
+            let _ = self.drain_logs(Duration::from_millis(5));
         }
     }
 

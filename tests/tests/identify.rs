@@ -109,7 +109,11 @@ fn a_slower_drive_is_identified_on_the_screen_saved_used_and_kept_after_a_reboot
     // stack overflowed).
     assert_eq!(bench.screen.text("tmsg"), Some("Settings saved"));
     assert!(
-        !bench.fw.logs().iter().any(|l| l.contains("HardFault")),
+        !bench
+            .fw
+            .logs_caught_up()
+            .iter()
+            .any(|l| l.contains("HardFault")),
         "{:#?}",
         bench
             .fw
@@ -125,7 +129,7 @@ fn a_slower_drive_is_identified_on_the_screen_saved_used_and_kept_after_a_reboot
     bench.enter("nspeed", 2000, "bapply").unwrap();
     bench.tap("bstart").unwrap();
     bench.pump(Duration::from_secs(6)).unwrap();
-    let logs = bench.fw.logs();
+    let logs = bench.fw.logs_caught_up();
     assert!(
         !logs.iter().any(|l| l.contains("unstable")),
         "instability on the identified drive: {:?}",

@@ -123,7 +123,7 @@ fn a_stop_touch_right_after_a_corrupted_frame_stops_the_drum_within_one_control_
         );
         // The simulated drive saw compare value 0 from then on.
         bench.pump(Duration::from_millis(300)).unwrap();
-        let after: Vec<_> = sim_samples(&bench.fw.logs())
+        let after: Vec<_> = sim_samples(&bench.fw.logs_caught_up())
             .into_iter()
             .filter(|s| s.t_ms > stopped_at)
             .collect();
@@ -250,7 +250,11 @@ fn start_is_refused_while_the_stop_input_is_open() {
     );
     bench.pump(Duration::from_millis(200)).unwrap();
     assert!(
-        !bench.fw.logs().iter().any(|l| l.contains("drum: Running")),
+        !bench
+            .fw
+            .logs_caught_up()
+            .iter()
+            .any(|l| l.contains("drum: Running")),
         "the drum started with the stop input open"
     );
 }

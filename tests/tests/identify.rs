@@ -54,6 +54,16 @@ fn to_drive_page(bench: &mut Bench) {
     assert_eq!(bench.screen.page(), 9);
 }
 
+/// The firmware's log without the simulator's lines, for failure messages.
+fn events(bench: &Bench) -> Vec<String> {
+    bench
+        .fw
+        .logs()
+        .into_iter()
+        .filter(|l| !l.contains("sim:"))
+        .collect()
+}
+
 /// The drive shown on page 9: (n_max r/min, τ ms, dead time ms).
 fn shown(bench: &Bench) -> (f64, f64, f64) {
     let v = |n: &str| f64::from(bench.screen.value(n).unwrap_or(-1));
@@ -88,12 +98,7 @@ fn a_slower_drive_is_identified_on_the_screen_saved_used_and_kept_after_a_reboot
         Some(2),
         "page {}, log: {:#?}",
         bench.screen.page(),
-        bench
-            .fw
-            .logs()
-            .iter()
-            .filter(|l| !l.contains("sim:"))
-            .collect::<Vec<_>>()
+        events(&bench)
     );
     let (n, tau, dead) = shown(&bench);
     eprintln!("identified: n_max {n:.2} r/min, tau {tau:.1} ms, dead time {dead:.1} ms");
@@ -115,12 +120,7 @@ fn a_slower_drive_is_identified_on_the_screen_saved_used_and_kept_after_a_reboot
             .iter()
             .any(|l| l.contains("HardFault")),
         "{:#?}",
-        bench
-            .fw
-            .logs()
-            .iter()
-            .filter(|l| !l.contains("sim:"))
-            .collect::<Vec<_>>()
+        events(&bench)
     );
     bench.tap("bback").unwrap();
     bench.tap("bback").unwrap();

@@ -112,8 +112,20 @@ fn row(v: f32, ground_m: f64, compensation: bool, seed: u64) -> Row {
     while rig.m.ground_position_m() < ground_m + 1.0 {
         rig.period();
     }
-    let s: Vec<f64> = rig
-        .plants
+    let (mean, sd, spacings) = spacing_stats(&rig.plants);
+    Row {
+        feed_err_pct: (mean - 0.25).abs() / 0.25 * 100.0,
+        cv_pct: sd / mean * 100.0,
+        mean_m: mean,
+        spacings,
+    }
+}
+
+/// Mean, sample SD (n − 1) and count of the spacings between consecutive
+/// plants after the first metre (the start-up), in `f64` from the
+/// simulator's plant positions.
+fn spacing_stats(plants: &[f64]) -> (f64, f64, usize) {
+    let s: Vec<f64> = plants
         .windows(2)
         .filter(|w| w[0] >= 1.0)
         .map(|w| w[1] - w[0])
@@ -121,12 +133,7 @@ fn row(v: f32, ground_m: f64, compensation: bool, seed: u64) -> Row {
     let n = s.len() as f64;
     let mean = s.iter().sum::<f64>() / n;
     let sd = (s.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    Row {
-        feed_err_pct: (mean - 0.25).abs() / 0.25 * 100.0,
-        cv_pct: sd / mean * 100.0,
-        mean_m: mean,
-        spacings: s.len(),
-    }
+    (mean, sd, s.len())
 }
 
 #[test]
@@ -515,15 +522,7 @@ fn position_lock_keeps_the_belt_with_the_ground_and_tightens_the_spacing() {
                 lags.push(rig.p.belt_lag_um().abs());
             }
         }
-        let s: Vec<f64> = rig
-            .plants
-            .windows(2)
-            .filter(|w| w[0] >= 1.0)
-            .map(|w| w[1] - w[0])
-            .collect();
-        let n = s.len() as f64;
-        let mean = s.iter().sum::<f64>() / n;
-        let sd = (s.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        let (mean, sd, _) = spacing_stats(&rig.plants);
         lags.sort_unstable();
         let p95 = lags[lags.len() * 95 / 100];
         let max = *lags.last().unwrap();

@@ -321,7 +321,7 @@ pub struct Supervisor {
     /// Hall edges since boot.
     edges: u32,
     /// Ground distance since Start (∫ V1 dt), µm.
-    distance_um: u64,
+    pub(crate) distance_um: u64,
     /// The chassis's deceleration limit at the Hall gear, for the silence
     /// rule.
     hall_silence: DecelerationBound,
@@ -349,6 +349,11 @@ pub struct Supervisor {
     monitor: Monitor,
     predictor: Predictor,
     snapshot: Snapshot,
+    /// The work switch's effect on the drum and the count
+    /// ([`crate::planting`]).
+    pub(crate) work: crate::planting::Work,
+    /// Live planting quality ([`crate::quality`]).
+    pub(crate) quality: crate::quality::Quality,
 }
 
 /// Bridges the Hall sensor's sparse updates (one edge every 170 ms at Low 2)
@@ -779,6 +784,8 @@ impl Supervisor {
             monitor: Monitor::default(),
             predictor: Predictor::default(),
             snapshot: Snapshot::default(),
+            work: crate::planting::Work::new(),
+            quality: crate::quality::Quality::new(),
         })
     }
 
@@ -856,6 +863,10 @@ impl Supervisor {
 
     /// Stops the drum (no alarm).
     pub fn stop(&mut self) {
+        if self.run == RunState::Running {
+            // The pass in progress ends here.
+            self.quality.end_pass(self.distance_um);
+        }
         self.run = RunState::Stopped;
         match &mut self.drum {
             Drum::Control(c) => c.stop(),
@@ -884,6 +895,7 @@ impl Supervisor {
             self.stall_us = 0;
             self.distance_um = 0;
             self.belt_counts_k3_milli = 0;
+            self.start_planting();
         }
         Effect::None
     }
@@ -1304,6 +1316,7 @@ impl Supervisor {
     /// ```
     #[inline(never)]
     pub fn control_step(&mut self, now: Ticks, drum_encoder: u16) -> Actuation {
+        let before = (self.partitions_x1e6(), self.distance_um);
         self.ensure_controller();
         self.snapshot.steps = self.snapshot.steps.wrapping_add(1);
         let delta = match self.last_encoder {
@@ -1385,6 +1398,8 @@ impl Supervisor {
             (Some(Alarm::TooFast { .. }), _) => self.alarm = None,
             _ => {}
         }
+        // The work switch up: the target ramps to rest (crate::planting).
+        let target = self.work_ramp(target, elapsed_us);
 
         let mut actuation = Actuation::OFF;
         if self.run == RunState::Identifying {
@@ -1487,6 +1502,7 @@ impl Supervisor {
             );
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
+        self.count_plants(before.0, before.1);
         actuation
     }
 
@@ -1636,16 +1652,20 @@ impl Supervisor {
     /// / Lclap, each turn with the belt slip k3 at the drum speed it was
     /// turned at.
     fn plants_since_start(&self) -> u32 {
+        u32::try_from(self.partitions_x1e6() / 1_000_000).unwrap_or(u32::MAX)
+    }
+
+    /// Belt partitions passed since Start × 10⁶ (the plant count is its
+    /// integer part).
+    pub(crate) fn partitions_x1e6(&self) -> u64 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
         // Σ Δcounts·k3·1000 / counts per turn = turns · k3 · 1000.
         self.belt_counts_k3_milli
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .map(|turns_k3_x1000| {
-                turns_k3_x1000.saturating_mul(PARTITIONS_PER_TURN_X1E6) / 1_000_000_000
+            .map_or(u64::MAX, |turns_k3_x1000| {
+                turns_k3_x1000.saturating_mul(PARTITIONS_PER_TURN_X1E6) / 1000
             })
-            .and_then(|v| u32::try_from(v).ok())
-            .unwrap_or(u32::MAX)
     }
 
     /// The status as the screen shows it.

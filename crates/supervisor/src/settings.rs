@@ -1,8 +1,10 @@
 //! The persisted settings and their versioned byte format.
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
-//! multi-byte number is little endian. Format version 3. [`decode`] still
-//! reads the older formats: version 2 is version 3 without its last 7 bytes
+//! multi-byte number is little endian. Format version 4. [`decode`] still
+//! reads the older formats: version 3 is version 4 without its last 2 bytes
+//! (written before the work switch; read with no work switch fitted and
+//! [`FirstPlantDistance::DEFAULT`]), version 2 is version 3 without its last 7 bytes
 //! (written before the drum encoder direction and the drive model existed;
 //! read with the encoder not reversed and [`DriveModel::DEFAULT`]), version 1
 //! is version 2 without its last 34 bytes (written before profile B existed;
@@ -10,7 +12,7 @@
 //!
 //! | offset | size | field | encoding |
 //! |---|---|---|---|
-//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 3 |
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 4 |
 //! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
 //! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
 //! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
@@ -20,10 +22,11 @@
 //! | 10 | 199 | [`Settings::calibration`] | [`Calibration::to_bytes`] (its own version byte, then k1, k2, k3 tables padded to 66 bytes each) |
 //! | 209 | 1 | [`Settings::profile`] | 1 = A (drum belt), 2 = B (seedling belt) |
 //! | 210 | 33 | [`Settings::belt`] | [`ProfileBConfig::to_bytes`] |
-//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bits 1–7 zero |
+//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1 (format 4): [`Settings::work_switch_fitted`]; bits 2–7 zero |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
+//! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`]) |
 //!
-//! Total 250 bytes (version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! Total 252 bytes (version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -60,7 +63,7 @@ use crate::drive::{DriveModel, DriveModelError, DRIVE_MODEL_BYTES};
 use crate::profile_b::{ProfileBConfig, CONFIG_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
-pub const SETTINGS_FORMAT_VERSION: u8 = 3;
+pub const SETTINGS_FORMAT_VERSION: u8 = 4;
 
 /// Bytes before the calibration block: version, mode, spacing, drum speed,
 /// motor coefficient, gear, brightness.
@@ -72,11 +75,54 @@ pub const SETTINGS_V1_BYTES: usize = HEAD_BYTES + CALIBRATION_BYTES;
 /// Size of a format-2 record: 209 + 1 + 33 = 243.
 pub const SETTINGS_V2_BYTES: usize = SETTINGS_V1_BYTES + 1 + CONFIG_BYTES;
 
-/// Size of an encoded [`Settings`] (format version 3): 243 + 1 + 6 = 250.
-pub const SETTINGS_BYTES: usize = SETTINGS_V2_BYTES + 1 + DRIVE_MODEL_BYTES;
+/// Size of a format-3 record: 243 + 1 + 6 = 250.
+pub const SETTINGS_V3_BYTES: usize = SETTINGS_V2_BYTES + 1 + DRIVE_MODEL_BYTES;
+
+/// Size of an encoded [`Settings`] (format version 4): 250 + 2 = 252.
+pub const SETTINGS_BYTES: usize = SETTINGS_V3_BYTES + 2;
 
 /// Flags byte (offset 243), bit 0: the drum encoder counts backwards.
 const FLAG_ENCODER_REVERSED: u8 = 1;
+/// Flags byte, bit 1 (format 4): a work switch is fitted.
+const FLAG_WORK_SWITCH: u8 = 2;
+
+/// Where the first plant of a pass lands, mm of ground after the point where
+/// the work switch closed (docs/firmware.md, "Work switch"). 0–1000 mm;
+/// default 100 mm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FirstPlantDistance(u16);
+
+impl FirstPlantDistance {
+    /// Smallest accepted value, mm.
+    pub const MIN: u16 = 0;
+    /// Largest accepted value, mm: a unit that needs more than a metre to
+    /// reach the soil is mis-set.
+    pub const MAX: u16 = 1000;
+    /// 100 mm: the drum needs ≈ 0.1 s (≈ 15 mm at Low 2) to reach speed
+    /// from rest, so the first plant can be placed there at every gear.
+    pub const DEFAULT: Self = Self(100);
+
+    /// Validates `mm` (0–1000).
+    pub const fn new(mm: u16) -> Option<Self> {
+        if mm <= Self::MAX {
+            Some(Self(mm))
+        } else {
+            None
+        }
+    }
+
+    /// The distance, mm.
+    pub const fn mm(self) -> u16 {
+        self.0
+    }
+}
+
+impl Default for FirstPlantDistance {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
 
 /// Which machine the firmware runs (SPEC §1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -133,6 +179,13 @@ pub struct Settings {
     /// The drum drive's model (feed-forward gain, controller's drum model).
     /// Default: [`DriveModel::DEFAULT`], until an identification is saved.
     pub drive: DriveModel,
+    /// A work switch is wired to PB11 (docs/firmware.md, "Work switch").
+    /// Without one (the default) the unit counts as always down: the machine
+    /// plants from Start to Stop as before.
+    pub work_switch_fitted: bool,
+    /// Where the first plant of a pass lands after the work switch closes.
+    /// Default: [`FirstPlantDistance::DEFAULT`].
+    pub first_plant_distance: FirstPlantDistance,
 }
 
 impl Default for Settings {
@@ -149,6 +202,8 @@ impl Default for Settings {
             belt: ProfileBConfig::default(),
             drum_encoder_reversed: false,
             drive: DriveModel::DEFAULT,
+            work_switch_fitted: false,
+            first_plant_distance: FirstPlantDistance::DEFAULT,
         }
     }
 }
@@ -182,6 +237,8 @@ pub enum SettingsError {
     Flags(u8),
     /// The drive model (offset 244) failed validation.
     Drive(DriveModelError),
+    /// The first-plant distance (offset 250) is above 1000 mm.
+    FirstPlantDistance(u16),
 }
 
 impl fmt::Display for SettingsError {
@@ -199,6 +256,9 @@ impl fmt::Display for SettingsError {
             Self::Belt => f.write_str("invalid profile B parameters"),
             Self::Flags(b) => write!(f, "invalid flags byte {b}"),
             Self::Drive(e) => write!(f, "{e}"),
+            Self::FirstPlantDistance(d) => {
+                write!(f, "first-plant distance {d} mm is above 1000 mm")
+            }
         }
     }
 }
@@ -251,14 +311,20 @@ const fn mode_from_byte(b: u8) -> Option<Mode> {
 }
 
 impl Settings {
-    /// Serialises in format version 3 (layout in the [module docs](self)).
+    /// Serialises in format version 4 (layout in the [module docs](self)).
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
-        let (v2, v3) = out.split_at_mut(SETTINGS_V2_BYTES);
+        let (v3, v4) = out.split_at_mut(SETTINGS_V3_BYTES);
+        v4.copy_from_slice(&self.first_plant_distance.mm().to_le_bytes());
+        let (v2, v3) = v3.split_at_mut(SETTINGS_V2_BYTES);
         if let Some((flags, drive)) = v3.split_first_mut() {
             *flags = if self.drum_encoder_reversed {
                 FLAG_ENCODER_REVERSED
+            } else {
+                0
+            } | if self.work_switch_fitted {
+                FLAG_WORK_SWITCH
             } else {
                 0
             };
@@ -303,6 +369,7 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
     let expected = match version {
         1 => SETTINGS_V1_BYTES,
         2 => SETTINGS_V2_BYTES,
+        3 => SETTINGS_V3_BYTES,
         SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
         other => return Err(SettingsError::UnsupportedVersion(other)),
     };
@@ -312,7 +379,16 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
             found: bytes.len(),
         });
     }
-    let (v2, v3) = bytes.split_at(bytes.len().min(SETTINGS_V2_BYTES));
+    let (v3, v4) = bytes.split_at(bytes.len().min(SETTINGS_V3_BYTES));
+    let first_plant_distance = match v4 {
+        [] => FirstPlantDistance::DEFAULT,
+        [a, b] => {
+            let mm = u16::from_le_bytes([*a, *b]);
+            FirstPlantDistance::new(mm).ok_or(SettingsError::FirstPlantDistance(mm))?
+        }
+        _ => return Err(length),
+    };
+    let (v2, v3) = v3.split_at(v3.len().min(SETTINGS_V2_BYTES));
     let (v1, tail) = v2.split_at(v2.len().min(SETTINGS_V1_BYTES));
     let tail = if tail.is_empty() { None } else { Some(tail) };
     let (head, cal) = v1.split_at(HEAD_BYTES);
@@ -345,10 +421,16 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
             )
         }
     };
+    // Bit 1 is known from format 4 on.
+    let known = if v4.is_empty() {
+        FLAG_ENCODER_REVERSED
+    } else {
+        FLAG_ENCODER_REVERSED | FLAG_WORK_SWITCH
+    };
     let (drum_encoder_reversed, drive) = match v3.split_first() {
         None => (false, DriveModel::DEFAULT),
         Some((&flags, drive)) => {
-            if flags & !FLAG_ENCODER_REVERSED != 0 {
+            if flags & !known != 0 {
                 return Err(SettingsError::Flags(flags));
             }
             let drive: &[u8; DRIVE_MODEL_BYTES] = drive.try_into().map_err(|_| length)?;
@@ -370,6 +452,10 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         belt,
         drum_encoder_reversed,
         drive,
+        work_switch_fitted: v3
+            .first()
+            .is_some_and(|&flags| flags & FLAG_WORK_SWITCH != 0),
+        first_plant_distance,
     })
 }
 
@@ -392,7 +478,9 @@ mod tests {
         // + profile byte + ProfileBConfig::to_bytes (33).
         assert_eq!(SETTINGS_V2_BYTES, 243);
         // + flags byte + DriveModel::to_bytes (3 × u16).
-        assert_eq!(SETTINGS_BYTES, 250);
+        assert_eq!(SETTINGS_V3_BYTES, 250);
+        // + the first-plant distance (u16).
+        assert_eq!(SETTINGS_BYTES, 252);
     }
 
     #[test]
@@ -423,17 +511,23 @@ mod tests {
             belt: ProfileBConfig::default(),
             drum_encoder_reversed: true,
             drive: DriveModel::new(5811, 875, 600).unwrap(),
+            work_switch_fitted: true,
+            first_plant_distance: FirstPlantDistance::new(1000).unwrap(),
         };
         let b = s.encode();
         // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
-        assert_eq!(b[..10], [3, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
+        assert_eq!(b[..10], [4, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
         assert_eq!(b[10..209], Calibration::identity().to_bytes());
         // Profile B (2) and its parameters.
         assert_eq!(b[209], 2);
         assert_eq!(b[210..243], s.belt.to_bytes());
-        // Flags: encoder reversed (bit 0); drive 58.11 r/min = 5811 =
-        // 0x16B3, τ 87.5 ms = 875 = 0x036B, dead time 60 ms = 600 = 0x0258.
-        assert_eq!(b[243..], [1, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02]);
+        // Flags: encoder reversed (bit 0), work switch (bit 1); drive 58.11
+        // r/min = 5811 = 0x16B3, τ 87.5 ms = 875 = 0x036B, dead time 60 ms =
+        // 600 = 0x0258; first plant 1000 mm = 0x03E8.
+        assert_eq!(
+            b[243..],
+            [3, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02, 0xE8, 0x03]
+        );
         assert_eq!(decode(&b).unwrap(), s);
     }
 
@@ -460,7 +554,8 @@ mod tests {
             })
         );
         // A version-2 record must be 243 bytes long, a version-3 one 250.
-        let mut v2_long = s.encode();
+        let mut v2_long = [0u8; SETTINGS_V3_BYTES];
+        v2_long.copy_from_slice(&s.encode()[..SETTINGS_V3_BYTES]);
         v2_long[0] = 2;
         assert_eq!(
             decode(&v2_long),
@@ -481,6 +576,57 @@ mod tests {
     }
 
     #[test]
+    fn a_version_3_record_reads_without_a_work_switch_and_the_default_first_plant() {
+        // A record written before the work switch: version 3, the first 250
+        // bytes; its flags byte knows bit 0 only.
+        let s = Settings {
+            drum_encoder_reversed: true,
+            work_switch_fitted: true,
+            first_plant_distance: FirstPlantDistance::new(350).unwrap(),
+            ..Settings::default()
+        };
+        let mut v3 = [0u8; SETTINGS_V3_BYTES];
+        v3.copy_from_slice(&s.encode()[..SETTINGS_V3_BYTES]);
+        v3[0] = 3;
+        // Bit 1 is unknown in format 3.
+        assert_eq!(decode(&v3), Err(SettingsError::Flags(3)));
+        v3[243] = 1;
+        assert_eq!(
+            decode(&v3),
+            Ok(Settings {
+                work_switch_fitted: false,
+                first_plant_distance: FirstPlantDistance::DEFAULT,
+                ..s.clone()
+            })
+        );
+        // A version-4 record is 252 bytes long.
+        let mut v4_short = v3;
+        v4_short[0] = 4;
+        assert_eq!(
+            decode(&v4_short),
+            Err(SettingsError::Length {
+                expected: 252,
+                found: 250
+            })
+        );
+    }
+
+    #[test]
+    fn rejects_a_first_plant_distance_above_a_metre() {
+        let mut b = Settings::default().encode();
+        // 1001 = 0x03E9.
+        b[250] = 0xE9;
+        b[251] = 0x03;
+        assert_eq!(decode(&b), Err(SettingsError::FirstPlantDistance(1001)));
+        b[250] = 0xE8;
+        assert_eq!(decode(&b).map(|s| s.first_plant_distance.mm()), Ok(1000));
+        assert_eq!(
+            std::format!("{}", SettingsError::FirstPlantDistance(1001)),
+            "first-plant distance 1001 mm is above 1000 mm"
+        );
+    }
+
+    #[test]
     fn rejects_unknown_flags_and_a_bad_drive_model() {
         let good = Settings::default().encode();
         let with = |i: usize, v: u8| {
@@ -488,7 +634,8 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(243, 2), Err(SettingsError::Flags(2)));
+        assert_eq!(with(243, 4), Err(SettingsError::Flags(4)));
+        assert!(with(243, 2).unwrap().work_switch_fitted);
         assert_eq!(with(243, 0xFF), Err(SettingsError::Flags(0xFF)));
         assert!(with(243, 1).unwrap().drum_encoder_reversed);
         // n_max 0x1100 + low byte: 4352 + 0xFF… → 0xFF_xx > 9000.
@@ -548,7 +695,7 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(0, 4), Err(SettingsError::UnsupportedVersion(4)));
+        assert_eq!(with(0, 5), Err(SettingsError::UnsupportedVersion(5)));
         assert_eq!(with(0, 0xFF), Err(SettingsError::UnsupportedVersion(0xFF)));
         assert_eq!(with(1, 0), Err(SettingsError::Mode(0)));
         assert_eq!(with(1, 3), Err(SettingsError::Mode(3)));
@@ -590,19 +737,19 @@ mod tests {
         assert_eq!(
             decode(&[]),
             Err(SettingsError::Length {
-                expected: 250,
+                expected: 252,
                 found: 0
             })
         );
         assert_eq!(
-            decode(&good[..249]),
+            decode(&good[..251]),
             Err(SettingsError::Length {
-                expected: 250,
-                found: 249
+                expected: 252,
+                found: 251
             })
         );
-        let mut long = [0u8; 251];
-        long[..250].copy_from_slice(&good);
+        let mut long = [0u8; 253];
+        long[..252].copy_from_slice(&good);
         assert!(matches!(decode(&long), Err(SettingsError::Length { .. })));
         // A version-1 record must be 209 bytes long.
         let mut v1_short = good;
@@ -611,7 +758,7 @@ mod tests {
             decode(&v1_short),
             Err(SettingsError::Length {
                 expected: 209,
-                found: 250
+                found: 252
             })
         );
         assert_eq!(
@@ -677,9 +824,24 @@ mod tests {
                 DriveModel::TAU_RANGE,
                 0..=DriveModel::DEAD_TIME_MAX,
             ),
+            (
+                any::<bool>(),
+                FirstPlantDistance::MIN..=FirstPlantDistance::MAX,
+            ),
         )
             .prop_map(
-                |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm), (rev, n, tau, dead))| {
+                |(
+                    fixed,
+                    sp,
+                    ds,
+                    mc,
+                    g,
+                    br,
+                    (k1, k2, k3),
+                    (b, x_mm),
+                    (rev, n, tau, dead),
+                    (work, first),
+                )| {
                     Settings {
                         mode: if fixed {
                             Mode::Fixed
@@ -704,6 +866,8 @@ mod tests {
                         .unwrap(),
                         drum_encoder_reversed: rev,
                         drive: DriveModel::new(n, tau, dead).unwrap(),
+                        work_switch_fitted: work,
+                        first_plant_distance: FirstPlantDistance::new(first).unwrap(),
                     }
                 },
             )
@@ -718,7 +882,7 @@ mod tests {
         }
 
         #[test]
-        fn decode_arbitrary_bytes_never_panics(b in proptest::collection::vec(any::<u8>(), 0..260)) {
+        fn decode_arbitrary_bytes_never_panics(b in proptest::collection::vec(any::<u8>(), 0..262)) {
             let _ = decode(&b);
         }
 

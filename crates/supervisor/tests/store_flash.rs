@@ -282,6 +282,8 @@ fn settings_b() -> Settings {
         .unwrap(),
         drum_encoder_reversed: true,
         drive: supervisor::drive::DriveModel::new(5000, 400, 200).unwrap(),
+        work_switch_fitted: true,
+        first_plant_distance: supervisor::settings::FirstPlantDistance::new(250).unwrap(),
     }
 }
 
@@ -425,8 +427,8 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&a).unwrap();
     let only_a = st.into_inner();
     let total = sweep(&only_a, &a, &b);
-    // One erase + 272 bytes / 2 = 136 half-word programs (250-byte payload:
-    // header 12, payload padded to 252, CRC 4, commit 4).
+    // One erase + 272 bytes / 2 = 136 half-word programs (252-byte payload:
+    // header 12, payload 252, CRC 4, commit 4).
     assert_eq!(total, 137);
 
     // 2. X (seq 1) in slot 0, A (seq 2) in slot 1; B overwrites X's slot.
@@ -515,12 +517,12 @@ fn record_bytes_follow_the_documented_layout() {
     assert_eq!(&slot0[..272], &rec[..]);
     assert!(slot0[272..].iter().all(|&b| b == 0xFF));
     assert!(slot_bytes(&f, 1).iter().all(|&b| b == 0xFF));
-    // Header bytes spelled out: "TPS1", seq 1, n = 250 = 0x00FA, !n = 0xFF05.
+    // Header bytes spelled out: "TPS1", seq 1, n = 252 = 0x00FC, !n = 0xFF03.
     assert_eq!(
         &slot0[..12],
-        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xFA, 0x00, 0x05, 0xFF]
+        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xFC, 0x00, 0x03, 0xFF]
     );
-    assert_eq!(SETTINGS_BYTES, 250);
+    assert_eq!(SETTINGS_BYTES, 252);
 }
 
 #[test]
@@ -692,6 +694,8 @@ fn a_record_written_before_profile_b_still_loads() {
         belt: ProfileBConfig::default(),
         drum_encoder_reversed: false,
         drive: supervisor::drive::DriveModel::DEFAULT,
+        work_switch_fitted: false,
+        first_plant_distance: supervisor::settings::FirstPlantDistance::DEFAULT,
         ..b.clone()
     };
     assert_eq!(
@@ -713,6 +717,41 @@ fn a_record_written_before_profile_b_still_loads() {
 }
 
 #[test]
+fn a_record_written_before_the_work_switch_still_loads() {
+    // Format 3: the first 250 bytes of today's payload, version byte 3,
+    // flags bit 1 (unknown then) clear. It loads without a work switch
+    // and with the default first-plant distance; the next save writes
+    // format 4.
+    let b = settings_b();
+    let mut v3 = b.encode()[..250].to_vec();
+    v3[0] = 3;
+    v3[243] &= 1;
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 0, &raw_record(5, &v3));
+    let expected = Settings {
+        work_switch_fitted: false,
+        first_plant_distance: supervisor::settings::FirstPlantDistance::DEFAULT,
+        ..b.clone()
+    };
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: expected,
+            sequence: 5
+        }
+    );
+    let mut st = store(f);
+    assert_eq!(st.save(&b), Ok(6));
+    assert_eq!(
+        boot(&st.into_inner()),
+        Loaded::Saved {
+            settings: b,
+            sequence: 6
+        }
+    );
+}
+
+#[test]
 fn a_record_written_before_the_drive_model_still_loads() {
     // Format 2: the first 243 bytes of today's payload, version byte 2
     // (docs of supervisor::settings). It loads with the encoder forward and
@@ -726,6 +765,8 @@ fn a_record_written_before_the_drive_model_still_loads() {
     let expected = Settings {
         drum_encoder_reversed: false,
         drive: supervisor::drive::DriveModel::DEFAULT,
+        work_switch_fitted: false,
+        first_plant_distance: supervisor::settings::FirstPlantDistance::DEFAULT,
         ..b.clone()
     };
     assert_eq!(
@@ -749,8 +790,8 @@ fn a_record_written_before_the_drive_model_still_loads() {
 #[test]
 fn unsupported_version_falls_back_or_is_reported() {
     let a = settings_a();
-    // A record of a future format 4 (payload version byte 4, longer payload).
-    let mut v2 = vec![4u8; 300];
+    // A record of a future format 5 (payload version byte 5, longer payload).
+    let mut v2 = vec![5u8; 300];
     v2[1] = 7;
     // Alone: defaults, reason UnsupportedVersion.
     let mut f = SimFlash::new();
@@ -780,7 +821,7 @@ fn unsupported_version_falls_back_or_is_reported() {
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(5, &a.encode()));
     let mut same_len = settings_b().encode();
-    same_len[0] = 4;
+    same_len[0] = 5;
     put_raw(&mut f, 1, &raw_record(6, &same_len));
     assert_eq!(
         boot(&f),
@@ -789,7 +830,7 @@ fn unsupported_version_falls_back_or_is_reported() {
             sequence: 5
         }
     );
-    // The next save overwrites the v4 record (slot 1) with sequence 7.
+    // The next save overwrites the v5 record (slot 1) with sequence 7.
     let mut st = store(f);
     assert_eq!(st.save(&settings_b()), Ok(7));
     assert_eq!(
@@ -904,9 +945,21 @@ fn settings() -> impl Strategy<Value = Settings> {
         (table(), table(), table()),
         (any::<bool>(), 110u32..=990),
         (any::<bool>(), 1000u16..=9000, 10u16..=5000, 0u16..=2000),
+        (any::<bool>(), 0u16..=1000),
     )
         .prop_map(
-            |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm), (rev, n, tau, dead))| Settings {
+            |(
+                fixed,
+                sp,
+                ds,
+                mc,
+                g,
+                br,
+                (k1, k2, k3),
+                (b, x_mm),
+                (rev, n, tau, dead),
+                (work, first),
+            )| Settings {
                 mode: if fixed {
                     Mode::Fixed
                 } else {
@@ -930,6 +983,8 @@ fn settings() -> impl Strategy<Value = Settings> {
                 .unwrap(),
                 drum_encoder_reversed: rev,
                 drive: supervisor::drive::DriveModel::new(n, tau, dead).unwrap(),
+                work_switch_fitted: work,
+                first_plant_distance: supervisor::settings::FirstPlantDistance::new(first).unwrap(),
             },
         )
 }

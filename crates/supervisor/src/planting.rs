@@ -1,0 +1,251 @@
+//! Profile A's passes: the work switch (pause and resume) and the live
+//! planting quality, on [`Supervisor`].
+//!
+//! - **Up** ([`Supervisor::set_work_switch`]`(false)`): the drum's target
+//!   ramps to rest at [`WORK_RAMP_RPM_PER_S`] — a controlled stop under the
+//!   speed loop, not the stop input's (outputs off, the drum coasts) — and
+//!   the pass ends: its quality joins the totals, partitions that still
+//!   leave during the ramp are not counted in the quality figures, and the
+//!   belt, at rest, adds no plants to the count. The drum stays *Running*
+//!   (no Start needed to resume).
+//! - **Down** (`true`): a new pass begins at the ground distance of that
+//!   moment, the next partition is asked to leave
+//!   [`Settings::first_plant_distance`](crate::settings::Settings::first_plant_distance)
+//!   further on (`realign_next_plant`), and the drum follows its target
+//!   again.
+//! - **No work switch fitted** (the default,
+//!   [`Settings::work_switch_fitted`](crate::settings::Settings::work_switch_fitted)
+//!   off): the unit counts as always down; a pass runs from Start to Stop.
+//!
+//! The quality figures ([`crate::quality`]) take every partition that left
+//! with the unit down, at the ground distance of that moment.
+
+use fuzzy_pid::I16F16;
+
+use crate::control::{RunState, Supervisor};
+use crate::quality::{Indices, Quality};
+
+/// The rate at which the drum's target falls to rest when the unit is
+/// lifted, r/min per second: from the rated 25.21 r/min in 0.1 s (the
+/// drum's own time constant is 25 ms, so it follows), in which the belt
+/// moves ≈ 5 mm, a tenth of a partition. Slower ramps drop more seedlings
+/// into the air after the lift; the stop input's stop (PWM off, coasting) is
+/// faster still but uncontrolled.
+pub const WORK_RAMP_RPM_PER_S: u32 = 250;
+
+/// The work switch's state on [`Supervisor`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Work {
+    /// The last state given to [`Supervisor::set_work_switch`].
+    switch_down: bool,
+    /// The ramp's ceiling on the target, r/min (follows the target while
+    /// down).
+    cap: I16F16,
+    /// Stand-in for helper "phase"'s contract (see [`standin`]).
+    standin: standin::State,
+}
+
+impl Work {
+    /// Up (a fitted switch must prove closed first).
+    pub const fn new() -> Self {
+        Self {
+            switch_down: false,
+            cap: I16F16::ZERO,
+            standin: standin::State::new(),
+        }
+    }
+}
+
+impl Default for Work {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Supervisor {
+    /// Whether the planting unit counts as down: the work switch says so,
+    /// or none is fitted.
+    pub fn unit_down(&self) -> bool {
+        self.work.switch_down || !self.settings().work_switch_fitted
+    }
+
+    /// The work switch's debounced state ([`crate::work_switch`]): `true`
+    /// when the planting unit is down. Ignored (the unit counts as down)
+    /// when no work switch is fitted.
+    pub fn set_work_switch(&mut self, down: bool) {
+        let was = self.unit_down();
+        self.work.switch_down = down;
+        let now = self.unit_down();
+        if was == now || self.run_state() != RunState::Running {
+            return;
+        }
+        let ground = self.ground_distance_um();
+        if now {
+            self.quality.begin_pass(ground);
+            let first = u64::from(self.settings().first_plant_distance.mm()).saturating_mul(1000);
+            self.realign_next_plant(ground.saturating_add(first));
+        } else {
+            self.quality.end_pass(ground);
+        }
+    }
+
+    /// Start: the quality figures restart; with the unit down, the first
+    /// pass begins.
+    pub(crate) fn start_planting(&mut self) {
+        let x_um = u32::from(self.settings().spacing.raw()).saturating_mul(1000);
+        self.quality.start(x_um);
+        self.work.cap = I16F16::ZERO;
+        if self.unit_down() {
+            self.quality.begin_pass(0);
+        }
+    }
+
+    /// The drum target under the work switch: unchanged while the unit is
+    /// down; ramping to rest at [`WORK_RAMP_RPM_PER_S`] while it is up.
+    pub(crate) fn work_ramp(&mut self, target: I16F16, elapsed_us: u32) -> I16F16 {
+        if self.unit_down() {
+            self.work.cap = target;
+            return target;
+        }
+        // r/min per period in I16F16 bits: rate · 2¹⁶ · elapsed / 10⁶.
+        let step = u64::from(WORK_RAMP_RPM_PER_S)
+            .saturating_mul(65_536)
+            .saturating_mul(u64::from(elapsed_us))
+            / 1_000_000;
+        let step = I16F16::from_bits(i32::try_from(step).unwrap_or(i32::MAX));
+        self.work.cap = self.work.cap.saturating_sub(step).max(I16F16::ZERO);
+        target.min(self.work.cap)
+    }
+
+    /// After a control step: the partitions that left (`before`: the
+    /// partition count × 10⁶ and the ground distance before the step) go
+    /// to the quality figures when the unit is down.
+    pub(crate) fn count_plants(&mut self, before_x1e6: u64, before_um: u64) {
+        self.standin_plants(before_x1e6, before_um);
+        if !self.unit_down() {
+            return;
+        }
+        let mut at = [0u64; 2];
+        let mut n = 0usize;
+        for (slot, e) in at.iter_mut().zip(self.plants_left()) {
+            *slot = e.ground_distance_um;
+            n = n.saturating_add(1);
+        }
+        for &a in at.iter().take(n) {
+            self.quality.plant(a);
+        }
+    }
+
+    /// The planting quality since Start and of the current pass.
+    pub fn quality(&self) -> &Quality {
+        &self.quality
+    }
+
+    /// The indices since Start, the pass in progress counted up to now.
+    pub fn quality_since_start(&self) -> Indices {
+        self.quality.since_start(self.ground_distance_um())
+    }
+
+    /// The indices of the pass in progress (or of the last one).
+    pub fn quality_of_pass(&self) -> Indices {
+        self.quality.pass_at(self.ground_distance_um())
+    }
+}
+
+/// **Stand-in** for what helper "phase" provides on [`Supervisor`] (the
+/// contract of this session: the ground distance since Start,
+/// `realign_next_plant`, `plants_left` and `PlantEvent`). Until the
+/// distance-locked loop lands, this is the smallest thing the work switch
+/// and the quality figures need: the ground distance is the supervisor's
+/// ∫ V1 dt since Start; a partition's ground distance is interpolated
+/// within the control step from the belt's partition count;
+/// `realign_next_plant` only records the place (the speed-following drum
+/// does not place the first plant). To be replaced at the merge.
+pub mod standin {
+    use super::Supervisor;
+
+    /// A partition that left the belt, with the ground distance since Start
+    /// at that moment.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub struct PlantEvent {
+        /// Ground distance since Start, µm.
+        pub ground_distance_um: u64,
+    }
+
+    /// Most partitions one control step reports (one per 10 ms step at any
+    /// reachable belt speed: 50 mm in 10 ms is 5 m/s).
+    const MAX_EVENTS: usize = 2;
+
+    /// The stand-in's state.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+    pub struct State {
+        events: [u64; MAX_EVENTS],
+        count: u8,
+        /// The place asked for by the last `realign_next_plant`.
+        realign_at: Option<u64>,
+    }
+
+    impl State {
+        /// No events.
+        pub const fn new() -> Self {
+            Self {
+                events: [0; MAX_EVENTS],
+                count: 0,
+                realign_at: None,
+            }
+        }
+    }
+
+    impl Supervisor {
+        /// Ground distance since Start, µm (stand-in: ∫ V1 dt).
+        pub fn ground_distance_um(&self) -> u64 {
+            self.distance_um
+        }
+
+        /// The next partition shall leave at `at_ground_distance_um`
+        /// (stand-in: recorded, not acted on).
+        pub fn realign_next_plant(&mut self, at_ground_distance_um: u64) {
+            self.work.standin.realign_at = Some(at_ground_distance_um);
+        }
+
+        /// The place the last `realign_next_plant` asked for.
+        pub fn realigned_at(&self) -> Option<u64> {
+            self.work.standin.realign_at
+        }
+
+        /// The partitions that left in the last control step.
+        pub fn plants_left(&self) -> impl Iterator<Item = PlantEvent> + '_ {
+            let s = &self.work.standin;
+            s.events
+                .iter()
+                .take(usize::from(s.count))
+                .map(|&ground_distance_um| PlantEvent { ground_distance_um })
+        }
+
+        /// Each partition boundary crossed in the step, at the ground
+        /// distance interpolated linearly between the step's ends.
+        pub(crate) fn standin_plants(&mut self, before_x1e6: u64, before_um: u64) {
+            let after_x1e6 = self.partitions_x1e6();
+            let after_um = self.distance_um;
+            let mut s = State {
+                realign_at: self.work.standin.realign_at,
+                ..State::new()
+            };
+            let dp = after_x1e6.saturating_sub(before_x1e6);
+            let dd = after_um.saturating_sub(before_um);
+            let mut n = before_x1e6 / 1_000_000;
+            for slot in &mut s.events {
+                n = n.saturating_add(1);
+                let boundary = n.saturating_mul(1_000_000);
+                if boundary > after_x1e6 || dp == 0 {
+                    break;
+                }
+                let into = boundary.saturating_sub(before_x1e6);
+                *slot =
+                    before_um.saturating_add(dd.saturating_mul(into).checked_div(dp).unwrap_or(0));
+                s.count = s.count.saturating_add(1);
+            }
+            self.work.standin = s;
+        }
+    }
+}

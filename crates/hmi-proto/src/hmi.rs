@@ -67,8 +67,10 @@ use crate::screen::{
     Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
 };
 
-/// Bytes the transmit queue holds (a page refresh plus a message fits).
-pub const TX_CAPACITY: usize = 256;
+/// Bytes the transmit queue holds (a page refresh plus a message fits: 313
+/// bytes at most, the Adaptive page with every value at its widest,
+/// `tests/tx_bound.rs`).
+pub const TX_CAPACITY: usize = 320;
 /// Touch events held while a `get` reply is awaited.
 pub const TOUCH_QUEUE: usize = 4;
 /// Events held until [`Hmi::poll_event`].
@@ -165,7 +167,7 @@ enum Link {
 
 /// The screen link: feed it received bytes and the time; drain events and bytes.
 ///
-/// Fixed size (≤ 640 bytes, asserted by a test: see the `*_QUEUE` and
+/// Fixed size (≤ 704 bytes, asserted by a test: see the `*_QUEUE` and
 /// [`TX_CAPACITY`] consts), no heap.
 #[derive(Debug)]
 pub struct Hmi {
@@ -638,6 +640,12 @@ impl Hmi {
                 let _ = self.set_settings(s);
                 Some(Command::SetDrumEncoderReversed(s.drum_encoder_reversed))
             }
+            Action::ToggleWorkSwitch => {
+                let mut s = self.settings;
+                s.work_switch_fitted = !s.work_switch_fitted;
+                let _ = self.set_settings(s);
+                Some(Command::SetWorkSwitchFitted(s.work_switch_fitted))
+            }
         };
         if let Some(c) = cmd {
             self.event(Event::Command(c));
@@ -665,6 +673,7 @@ impl Hmi {
                     Command::SetRollerRadius(v) => s.belt.roller_radius = v,
                     Command::SetBeltThickness(v) => s.belt.belt_thickness = v,
                     Command::SetSpeedThreshold(v) => s.belt.speed_threshold = v,
+                    Command::SetFirstPlantDistance(v) => s.first_plant_distance = v,
                     _ => {}
                 }
                 self.settings = s;

@@ -296,7 +296,7 @@ const REPORT_ALPHA: I16F16 = I16F16::lit("0.0196");
 /// The machine's operating logic (profile A).
 pub struct Supervisor {
     hw: Hardware,
-    settings: Settings,
+    pub(crate) settings: Settings,
     plan: DrumPlan,
     estimator: MtEstimator,
     /// The drum controller, or, while the drive is identified, the
@@ -1050,6 +1050,15 @@ impl Supervisor {
                 self.settings.drum_encoder_reversed = reversed;
                 Effect::SettingsChanged
             }
+            // Apply at once (crate::planting); persisted by Save.
+            Command::SetWorkSwitchFitted(fitted) => {
+                self.set_work_switch_fitted(fitted);
+                Effect::SettingsChanged
+            }
+            Command::SetFirstPlantDistance(d) => {
+                self.settings.first_plant_distance = d;
+                Effect::SettingsChanged
+            }
             // The machine profile applies after Save and a restart
             // (crate::machine).
             Command::SelectProfile(p) => {
@@ -1696,6 +1705,7 @@ impl Supervisor {
             _ => (0, 0),
         };
         // The model measured (until saved) or the one in force.
+        let q = self.quality_since_start();
         let shown_drive = match self.identify_state() {
             IdentifyState::Done(model) => model,
             _ => self.settings.drive,
@@ -1717,6 +1727,12 @@ impl Supervisor {
                 IdentifyState::Done(_) => 2,
                 IdentifyState::Failed(_) => 3,
             },
+            quality_of_feed_x10: q.quality_of_feed_x10,
+            multiples_x10: q.multiples_x10,
+            misses_x10: q.misses_x10,
+            precision_cv_x10: q.cv_x10,
+            within_10_pct_x10: q.within_10_pct_x10,
+            plants_per_m_x100: u16::try_from(q.plants_per_m_x100).unwrap_or(u16::MAX),
             // Profile B's live values: not this machine's.
             ..screen::Status::default()
         }
@@ -1754,6 +1770,8 @@ impl Supervisor {
             profile: crate::machine::screen_profile(settings.profile),
             belt: crate::machine::belt_to_screen(&settings.belt),
             drum_encoder_reversed: settings.drum_encoder_reversed,
+            work_switch_fitted: settings.work_switch_fitted,
+            first_plant_distance: settings.first_plant_distance,
         }
     }
 }

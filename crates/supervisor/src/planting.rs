@@ -75,6 +75,12 @@ impl Supervisor {
     pub fn set_work_switch(&mut self, down: bool) {
         let was = self.unit_down();
         self.work.switch_down = down;
+        self.unit_changed(was);
+    }
+
+    /// A pass begins or ends if the unit's state changed from `was` while
+    /// running.
+    fn unit_changed(&mut self, was: bool) {
         let now = self.unit_down();
         if was == now || self.run_state() != RunState::Running {
             return;
@@ -82,11 +88,19 @@ impl Supervisor {
         let ground = self.ground_distance_um();
         if now {
             self.quality.begin_pass(ground);
-            let first = u64::from(self.settings().first_plant_distance.mm()).saturating_mul(1000);
+            let first = u64::from(self.settings().first_plant_distance.raw()).saturating_mul(1000);
             self.realign_next_plant(ground.saturating_add(first));
         } else {
             self.quality.end_pass(ground);
         }
+    }
+
+    /// The work switch fitted or not (page 6): applies at once, as a
+    /// change of the switch would (a pass begins or ends).
+    pub(crate) fn set_work_switch_fitted(&mut self, fitted: bool) {
+        let was = self.unit_down();
+        self.settings.work_switch_fitted = fitted;
+        self.unit_changed(was);
     }
 
     /// Start: the quality figures restart; with the unit down, the first

@@ -24,7 +24,7 @@
 //! | 210 | 33 | [`Settings::belt`] | [`ProfileBConfig::to_bytes`] |
 //! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1 (format 4): [`Settings::work_switch_fitted`]; bits 2–7 zero |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
-//! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`]) |
+//! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`], default 100) |
 //!
 //! Total 252 bytes (version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
@@ -54,7 +54,9 @@
 
 use core::fmt;
 
-use hmi_proto::screen::{self, Brightness, DrumSpeed, Mode, MotorCoefficient, ParamError, Spacing};
+use hmi_proto::screen::{
+    self, Brightness, DrumSpeed, FirstPlantDistance, Mode, MotorCoefficient, ParamError, Spacing,
+};
 use kinematics::consts::Gear;
 use kinematics::table::TableError;
 use kinematics::travel::{Calibration, CALIBRATION_BYTES};
@@ -85,44 +87,6 @@ pub const SETTINGS_BYTES: usize = SETTINGS_V3_BYTES + 2;
 const FLAG_ENCODER_REVERSED: u8 = 1;
 /// Flags byte, bit 1 (format 4): a work switch is fitted.
 const FLAG_WORK_SWITCH: u8 = 2;
-
-/// Where the first plant of a pass lands, mm of ground after the point where
-/// the work switch closed (docs/firmware.md, "Work switch"). 0–1000 mm;
-/// default 100 mm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FirstPlantDistance(u16);
-
-impl FirstPlantDistance {
-    /// Smallest accepted value, mm.
-    pub const MIN: u16 = 0;
-    /// Largest accepted value, mm: a unit that needs more than a metre to
-    /// reach the soil is mis-set.
-    pub const MAX: u16 = 1000;
-    /// 100 mm: the drum needs ≈ 0.1 s (≈ 15 mm at Low 2) to reach speed
-    /// from rest, so the first plant can be placed there at every gear.
-    pub const DEFAULT: Self = Self(100);
-
-    /// Validates `mm` (0–1000).
-    pub const fn new(mm: u16) -> Option<Self> {
-        if mm <= Self::MAX {
-            Some(Self(mm))
-        } else {
-            None
-        }
-    }
-
-    /// The distance, mm.
-    pub const fn mm(self) -> u16 {
-        self.0
-    }
-}
-
-impl Default for FirstPlantDistance {
-    fn default() -> Self {
-        Self::DEFAULT
-    }
-}
 
 /// Which machine the firmware runs (SPEC §1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -237,8 +201,6 @@ pub enum SettingsError {
     Flags(u8),
     /// The drive model (offset 244) failed validation.
     Drive(DriveModelError),
-    /// The first-plant distance (offset 250) is above 1000 mm.
-    FirstPlantDistance(u16),
 }
 
 impl fmt::Display for SettingsError {
@@ -256,9 +218,6 @@ impl fmt::Display for SettingsError {
             Self::Belt => f.write_str("invalid profile B parameters"),
             Self::Flags(b) => write!(f, "invalid flags byte {b}"),
             Self::Drive(e) => write!(f, "{e}"),
-            Self::FirstPlantDistance(d) => {
-                write!(f, "first-plant distance {d} mm is above 1000 mm")
-            }
         }
     }
 }
@@ -316,7 +275,7 @@ impl Settings {
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
         let (v3, v4) = out.split_at_mut(SETTINGS_V3_BYTES);
-        v4.copy_from_slice(&self.first_plant_distance.mm().to_le_bytes());
+        v4.copy_from_slice(&self.first_plant_distance.raw().to_le_bytes());
         let (v2, v3) = v3.split_at_mut(SETTINGS_V2_BYTES);
         if let Some((flags, drive)) = v3.split_first_mut() {
             *flags = if self.drum_encoder_reversed {
@@ -382,10 +341,7 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
     let (v3, v4) = bytes.split_at(bytes.len().min(SETTINGS_V3_BYTES));
     let first_plant_distance = match v4 {
         [] => FirstPlantDistance::DEFAULT,
-        [a, b] => {
-            let mm = u16::from_le_bytes([*a, *b]);
-            FirstPlantDistance::new(mm).ok_or(SettingsError::FirstPlantDistance(mm))?
-        }
+        [a, b] => FirstPlantDistance::new(i32::from(u16::from_le_bytes([*a, *b])))?,
         _ => return Err(length),
     };
     let (v2, v3) = v3.split_at(v3.len().min(SETTINGS_V2_BYTES));
@@ -617,13 +573,17 @@ mod tests {
         // 1001 = 0x03E9.
         b[250] = 0xE9;
         b[251] = 0x03;
-        assert_eq!(decode(&b), Err(SettingsError::FirstPlantDistance(1001)));
-        b[250] = 0xE8;
-        assert_eq!(decode(&b).map(|s| s.first_plant_distance.mm()), Ok(1000));
+        let e = decode(&b).unwrap_err();
         assert_eq!(
-            std::format!("{}", SettingsError::FirstPlantDistance(1001)),
-            "first-plant distance 1001 mm is above 1000 mm"
+            e,
+            SettingsError::Param(ParamError {
+                field: Field::FirstPlantDistance,
+                value: 1001
+            })
         );
+        assert_eq!(std::format!("{e}"), "First plant must be 0.0-100.0 cm");
+        b[250] = 0xE8;
+        assert_eq!(decode(&b).map(|s| s.first_plant_distance.raw()), Ok(1000));
     }
 
     #[test]
@@ -867,7 +827,7 @@ mod tests {
                         drum_encoder_reversed: rev,
                         drive: DriveModel::new(n, tau, dead).unwrap(),
                         work_switch_fitted: work,
-                        first_plant_distance: FirstPlantDistance::new(first).unwrap(),
+                        first_plant_distance: FirstPlantDistance::new(i32::from(first)).unwrap(),
                     }
                 },
             )

@@ -283,7 +283,7 @@ fn settings_b() -> Settings {
         drum_encoder_reversed: true,
         drive: supervisor::drive::DriveModel::new(5000, 400, 200).unwrap(),
         work_switch_fitted: true,
-        first_plant_distance: supervisor::settings::FirstPlantDistance::new(250).unwrap(),
+        first_plant_distance: hmi_proto::screen::FirstPlantDistance::new(250).unwrap(),
     }
 }
 
@@ -695,7 +695,7 @@ fn a_record_written_before_profile_b_still_loads() {
         drum_encoder_reversed: false,
         drive: supervisor::drive::DriveModel::DEFAULT,
         work_switch_fitted: false,
-        first_plant_distance: supervisor::settings::FirstPlantDistance::DEFAULT,
+        first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
         ..b.clone()
     };
     assert_eq!(
@@ -730,7 +730,7 @@ fn a_record_written_before_the_work_switch_still_loads() {
     put_raw(&mut f, 0, &raw_record(5, &v3));
     let expected = Settings {
         work_switch_fitted: false,
-        first_plant_distance: supervisor::settings::FirstPlantDistance::DEFAULT,
+        first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
         ..b.clone()
     };
     assert_eq!(
@@ -766,7 +766,7 @@ fn a_record_written_before_the_drive_model_still_loads() {
         drum_encoder_reversed: false,
         drive: supervisor::drive::DriveModel::DEFAULT,
         work_switch_fitted: false,
-        first_plant_distance: supervisor::settings::FirstPlantDistance::DEFAULT,
+        first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
         ..b.clone()
     };
     assert_eq!(
@@ -984,7 +984,8 @@ fn settings() -> impl Strategy<Value = Settings> {
                 drum_encoder_reversed: rev,
                 drive: supervisor::drive::DriveModel::new(n, tau, dead).unwrap(),
                 work_switch_fitted: work,
-                first_plant_distance: supervisor::settings::FirstPlantDistance::new(first).unwrap(),
+                first_plant_distance: hmi_proto::screen::FirstPlantDistance::new(i32::from(first))
+                    .unwrap(),
             },
         )
 }

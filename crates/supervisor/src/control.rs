@@ -1325,7 +1325,6 @@ impl Supervisor {
     /// ```
     #[inline(never)]
     pub fn control_step(&mut self, now: Ticks, drum_encoder: u16) -> Actuation {
-        let before = (self.partitions_x1e6(), self.distance_um);
         self.ensure_controller();
         self.snapshot.steps = self.snapshot.steps.wrapping_add(1);
         let delta = match self.last_encoder {
@@ -1503,7 +1502,8 @@ impl Supervisor {
         self.snapshot.actual_drum_rpm_x1000 = milli(self.reported);
         self.snapshot.ccr = actuation.ccr;
         self.snapshot.hall_edges = self.edges;
-        self.snapshot.plants = self.plants_since_start();
+        let partitions_x1e6 = self.partitions_x1e6();
+        self.snapshot.plants = u32::try_from(partitions_x1e6 / 1_000_000).unwrap_or(u32::MAX);
         if self.run == RunState::Running {
             // ∫ V1 dt: (m/h)·µs / 3600 = µm.
             self.distance_um = self.distance_um.saturating_add(
@@ -1511,7 +1511,7 @@ impl Supervisor {
             );
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
-        self.count_plants(before.0, before.1);
+        self.count_plants(partitions_x1e6);
         actuation
     }
 
@@ -1657,15 +1657,9 @@ impl Supervisor {
         }
     }
 
-    /// Belt partitions passed since Start: Σ drum turns · k3(n) · π·(D2+2H2)
-    /// / Lclap, each turn with the belt slip k3 at the drum speed it was
-    /// turned at.
-    fn plants_since_start(&self) -> u32 {
-        u32::try_from(self.partitions_x1e6() / 1_000_000).unwrap_or(u32::MAX)
-    }
-
     /// Belt partitions passed since Start × 10⁶ (the plant count is its
-    /// integer part).
+    /// integer part): Σ drum turns · k3(n) · π·(D2+2H2) / Lclap, each turn
+    /// with the belt slip k3 at the drum speed it was turned at.
     pub(crate) fn partitions_x1e6(&self) -> u64 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;

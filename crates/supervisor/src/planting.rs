@@ -121,25 +121,24 @@ impl Supervisor {
             self.work.cap = target;
             return target;
         }
-        // r/min per period in I16F16 bits: rate · 2¹⁶ · elapsed / 10⁶.
-        let step = u64::from(WORK_RAMP_RPM_PER_S)
-            .saturating_mul(65_536)
-            .saturating_mul(u64::from(elapsed_us))
-            / 1_000_000;
+        // r/min per period in I16F16 bits: rate · 2¹⁶ · elapsed / 10⁶
+        // (elapsed ≤ 4 periods of 10 ms: 16 384 · 40 000 < 2³²).
+        let step = (WORK_RAMP_RPM_PER_S * 65_536 / 1000).saturating_mul(elapsed_us) / 1000;
         let step = I16F16::from_bits(i32::try_from(step).unwrap_or(i32::MAX));
         self.work.cap = self.work.cap.saturating_sub(step).max(I16F16::ZERO);
         target.min(self.work.cap)
     }
 
-    /// After a control step: the partitions that left (`before`: the
-    /// partition count × 10⁶ and the ground distance before the step) go
-    /// to the quality figures when the unit is down.
-    pub(crate) fn count_plants(&mut self, before_x1e6: u64, before_um: u64) {
-        self.standin_plants(before_x1e6, before_um);
+    /// After a control step (`partitions_x1e6`: the belt's partition count
+    /// × 10⁶ now): the partitions that left go to the quality figures when
+    /// the unit is down.
+    #[inline(never)]
+    pub(crate) fn count_plants(&mut self, partitions_x1e6: u64) {
+        self.standin_plants(partitions_x1e6);
         if !self.unit_down() {
             return;
         }
-        let mut at = [0u64; 2];
+        let mut at = [0u64; 1];
         let mut n = 0usize;
         for (slot, e) in at.iter_mut().zip(self.plants_left()) {
             *slot = e.ground_distance_um;
@@ -188,13 +187,16 @@ pub mod standin {
 
     /// Most partitions one control step reports (one per 10 ms step at any
     /// reachable belt speed: 50 mm in 10 ms is 5 m/s).
-    const MAX_EVENTS: usize = 2;
+    const MAX_EVENTS: usize = 1;
 
     /// The stand-in's state.
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
     pub struct State {
         events: [u64; MAX_EVENTS],
         count: u8,
+        /// The partition count × 10⁶ and the ground distance after the
+        /// last step.
+        last: (u64, u64),
         /// The place asked for by the last `realign_next_plant`.
         realign_at: Option<u64>,
     }
@@ -205,6 +207,7 @@ pub mod standin {
             Self {
                 events: [0; MAX_EVENTS],
                 count: 0,
+                last: (0, 0),
                 realign_at: None,
             }
         }
@@ -238,28 +241,34 @@ pub mod standin {
 
         /// Each partition boundary crossed in the step, at the ground
         /// distance interpolated linearly between the step's ends.
-        pub(crate) fn standin_plants(&mut self, before_x1e6: u64, before_um: u64) {
-            let after_x1e6 = self.partitions_x1e6();
+        pub(crate) fn standin_plants(&mut self, after_x1e6: u64) {
             let after_um = self.distance_um;
-            let mut s = State {
-                realign_at: self.work.standin.realign_at,
-                ..State::new()
-            };
-            let dp = after_x1e6.saturating_sub(before_x1e6);
-            let dd = after_um.saturating_sub(before_um);
-            let mut n = before_x1e6 / 1_000_000;
-            for slot in &mut s.events {
-                n = n.saturating_add(1);
-                let boundary = n.saturating_mul(1_000_000);
-                if boundary > after_x1e6 || dp == 0 {
-                    break;
-                }
-                let into = boundary.saturating_sub(before_x1e6);
-                *slot =
-                    before_um.saturating_add(dd.saturating_mul(into).checked_div(dp).unwrap_or(0));
-                s.count = s.count.saturating_add(1);
+            let st = &mut self.work.standin;
+            // Start zeroes both counts: then the step began at 0.
+            let (mut before_x1e6, mut before_um) = st.last;
+            if after_x1e6 < before_x1e6 || after_um < before_um {
+                (before_x1e6, before_um) = (0, 0);
             }
-            self.work.standin = s;
+            st.last = (after_x1e6, after_um);
+            st.count = 0;
+            // The partition boundary crossed in this step, if one was (at
+            // most one at any reachable belt speed: 50 mm in 10 ms is 5 m/s).
+            let boundary = (before_x1e6 / 1_000_000)
+                .wrapping_add(1)
+                .wrapping_mul(1_000_000);
+            if boundary <= after_x1e6 {
+                // A step's partitions and ground (≤ 36 mm at 3.6 m/s) fit
+                // u32; `into` ≤ `dp`.
+                let dp = u32::try_from(after_x1e6.wrapping_sub(before_x1e6)).unwrap_or(u32::MAX);
+                let into = u32::try_from(boundary.wrapping_sub(before_x1e6)).unwrap_or(u32::MAX);
+                let dd = u32::try_from(after_um.wrapping_sub(before_um)).unwrap_or(u32::MAX);
+                let part = u64::from(dd)
+                    .wrapping_mul(u64::from(into))
+                    .checked_div(u64::from(dp))
+                    .unwrap_or(0);
+                st.events = [before_um.wrapping_add(part)];
+                st.count = 1;
+            }
         }
     }
 }

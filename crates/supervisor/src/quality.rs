@@ -98,12 +98,16 @@ pub struct Indices {
 
 /// `num / den` in 0.1 %, rounded to the nearest (0 when `den` is 0).
 fn per_mille(num: u32, den: u32) -> u16 {
-    let v = u64::from(num)
-        .saturating_mul(1000)
-        .saturating_add(u64::from(den / 2))
-        .checked_div(u64::from(den))
-        .unwrap_or(0);
-    u16::try_from(v).unwrap_or(u16::MAX)
+    u16::try_from(per_mille_u64(u64::from(num), u64::from(den))).unwrap_or(u16::MAX)
+}
+
+/// `num · 1000 / den`, rounded to the nearest (0 when `den` is 0);
+/// `num < 2⁵³` (every caller's bound) keeps `num · 1000` in range.
+fn per_mille_u64(num: u64, den: u64) -> u64 {
+    num.wrapping_mul(1000)
+        .wrapping_add(den / 2)
+        .checked_div(den)
+        .unwrap_or(0)
 }
 
 /// ⌊√v⌋ (bit by bit, no floating point).
@@ -128,101 +132,80 @@ fn isqrt(v: u64) -> u64 {
 }
 
 impl Tally {
+    #[inline(never)]
     fn add_spacing(&mut self, s_um: u64, x_um: u32) {
-        let x = u64::from(x_um);
         self.spacings = self.spacings.saturating_add(1);
-        // 0.5·X and 1.5·X compared as 2·s against X and 3·X: exact.
-        let twice = s_um.saturating_mul(2);
-        if twice <= x {
+        // s ≤ 0.5·X ⇔ s ≤ ⌊X/2⌋ and s > 1.5·X ⇔ s > ⌊3X/2⌋ (s and X whole
+        // µm): exact. X ≤ 500 mm, so 3X fits u32.
+        let x = u64::from(x_um);
+        if s_um <= x / 2 {
             self.multiples = self.multiples.saturating_add(1);
-        } else if twice > x.saturating_mul(3) {
+        } else if s_um > x.wrapping_mul(3) / 2 {
             self.misses = self.misses.saturating_add(1);
         } else {
-            // |s − X| ≤ X/2 here: fits i64, its square u64.
-            let dev = i64::try_from(s_um)
-                .unwrap_or(i64::MAX)
-                .saturating_sub(i64::from(x_um));
-            self.sum_dev = self.sum_dev.saturating_add(dev);
-            self.sum_sq_dev = self
-                .sum_sq_dev
-                .saturating_add(dev.unsigned_abs().saturating_mul(dev.unsigned_abs()));
+            // A single: |s − X| ≤ X/2 < 2¹⁸ µm, so the deviation fits i32
+            // and its square (< 2³⁶) is a 32 × 32-bit product.
+            let dev = i32::try_from(s_um)
+                .unwrap_or(i32::MAX)
+                .wrapping_sub(i32::try_from(x_um).unwrap_or(i32::MAX));
+            let mag = u64::from(dev.unsigned_abs());
+            self.sum_dev = self.sum_dev.saturating_add(i64::from(dev));
+            self.sum_sq_dev = self.sum_sq_dev.saturating_add(mag.wrapping_mul(mag));
+            // Within ±10 %: |s − X| ≤ X/10 ⇔ 10·|s − X| ≤ X (a subset of
+            // the singles).
+            if mag.wrapping_mul(10) <= x {
+                self.within = self.within.saturating_add(1);
+            }
         }
-        // |s − X| ≤ X/10 as 10·|s − X| ≤ X.
-        if s_um.abs_diff(x).saturating_mul(10) <= x {
-            self.within = self.within.saturating_add(1);
-        }
-    }
-
-    fn merge(&mut self, o: &Tally) {
-        self.plants = self.plants.saturating_add(o.plants);
-        self.spacings = self.spacings.saturating_add(o.spacings);
-        self.multiples = self.multiples.saturating_add(o.multiples);
-        self.misses = self.misses.saturating_add(o.misses);
-        self.within = self.within.saturating_add(o.within);
-        self.distance_um = self.distance_um.saturating_add(o.distance_um);
-        self.sum_dev = self.sum_dev.saturating_add(o.sum_dev);
-        self.sum_sq_dev = self.sum_sq_dev.saturating_add(o.sum_sq_dev);
     }
 
     /// The indices for target spacing `x_um`.
+    ///
+    /// Plain (wrapping) arithmetic where the bounds below hold, to keep the
+    /// image small: counts ≤ 2³², so `count · 1000 < 2⁴²` and
+    /// `plants · 10⁸ < 2⁶³`; the CV's terms under the exactness limit of the
+    /// module docs.
+    #[inline(never)]
     fn indices(&self, x_um: u32) -> Indices {
         let n = self.spacings;
-        let singles = n.saturating_sub(self.multiples).saturating_sub(self.misses);
-        let multiples_x10 = per_mille(self.multiples, n);
-        let misses_x10 = per_mille(self.misses, n);
-        // A = 100 % − D − M of the same counts (rounded on its own so that
-        // it is the nearest 0.1 % of the singles' share).
-        let quality_of_feed_x10 = per_mille(singles, n);
-        // Sample SD of the singles: Σ(d − m)² with the integer mean m =
-        // round(Σd / k) is S − m·(2T − k·m), exactly; the mean's fraction
-        // (< 0.5 µm) is left in (≤ k/4 µm² on ≥ k·σ²).
-        let k = i64::from(singles);
+        // multiples + misses ≤ spacings by construction.
+        let singles = n.wrapping_sub(self.multiples).wrapping_sub(self.misses);
+        // Sample SD of the singles: with the integer m = T / k (truncated),
+        // Σ(d − m)² = S − m·(2T − k·m) exactly; m is within 1 µm of the
+        // mean, whose fraction is left in (≤ k µm² on ≥ k·σ²).
         let cv_x10 = if singles >= 2 {
+            let k = i64::from(singles);
             let t = self.sum_dev;
-            let m = t
-                .saturating_add((k / 2).saturating_mul(t.signum()))
-                .checked_div(k)
+            let m = t.checked_div(k).unwrap_or(0);
+            let s = i64::try_from(self.sum_sq_dev).unwrap_or(i64::MAX);
+            let ss =
+                s.wrapping_sub(m.wrapping_mul(t.wrapping_mul(2).wrapping_sub(k.wrapping_mul(m))));
+            let var = ss
+                .max(0)
+                .unsigned_abs()
+                .checked_div(u64::from(singles.wrapping_sub(1)))
                 .unwrap_or(0);
-            let two_t_minus_km = t.saturating_mul(2).saturating_sub(k.saturating_mul(m));
-            // Both terms are ≤ 6.25·10¹⁰ µm² per single: exact in i64 up
-            // to 1.4 · 10⁸ singles.
-            let ss = i64::try_from(self.sum_sq_dev)
-                .unwrap_or(i64::MAX)
-                .saturating_sub(m.saturating_mul(two_t_minus_km));
-            let ss = ss.max(0).unsigned_abs();
-            let sd_um = isqrt(
-                ss.checked_div(u64::try_from(k.saturating_sub(1)).unwrap_or(1))
-                    .unwrap_or(0),
-            );
-            let mean_um = i64::from(x_um).saturating_add(m).max(1).unsigned_abs();
-            u16::try_from(
-                sd_um
-                    .saturating_mul(1000)
-                    .saturating_add(mean_um / 2)
-                    .checked_div(mean_um)
-                    .unwrap_or(0),
-            )
-            .unwrap_or(u16::MAX)
+            // The mean ≥ X/2 > 0.
+            let mean_um = i64::from(x_um).wrapping_add(m).max(1).unsigned_abs();
+            per_mille_u64(isqrt(var), mean_um)
         } else {
             0
         };
-        let distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
-        // plants / m × 100 = plants · 10⁸ / distance µm, rounded.
-        let plants_per_m_x100 = u64::from(self.plants)
-            .saturating_mul(100_000_000)
-            .saturating_add(self.distance_um / 2)
-            .checked_div(self.distance_um)
-            .and_then(|v| u32::try_from(v).ok())
-            .unwrap_or(0);
         Indices {
             plants: self.plants,
             spacings: n,
-            distance_mm,
-            plants_per_m_x100,
-            multiples_x10,
-            misses_x10,
-            quality_of_feed_x10,
-            cv_x10,
+            distance_mm: u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX),
+            // plants / m × 100 = plants · 10⁸ / distance µm, rounded.
+            plants_per_m_x100: u32::try_from(per_mille_u64(
+                u64::from(self.plants).wrapping_mul(100_000),
+                self.distance_um,
+            ))
+            .unwrap_or(u32::MAX),
+            multiples_x10: per_mille(self.multiples, n),
+            misses_x10: per_mille(self.misses, n),
+            // A is the singles' share, rounded on its own.
+            quality_of_feed_x10: per_mille(singles, n),
+            cv_x10: u16::try_from(cv_x10).unwrap_or(u16::MAX),
             within_10_pct_x10: per_mille(self.within, n),
         }
     }
@@ -234,8 +217,9 @@ impl Tally {
 pub struct Quality {
     /// Target spacing X, µm (0 before [`start`](Self::start)).
     x_um: u32,
-    /// The passes ended since Start.
-    done: Tally,
+    /// Since Start: every plant and spacing, the distance of the passes
+    /// ended.
+    total: Tally,
     /// The pass in progress (or the last one, after its end).
     pass: Tally,
     /// Where the pass in progress began (ground distance, µm), if one is.
@@ -249,7 +233,7 @@ impl Quality {
     pub const fn new() -> Self {
         Self {
             x_um: 0,
-            done: Tally {
+            total: Tally {
                 plants: 0,
                 spacings: 0,
                 multiples: 0,
@@ -291,14 +275,15 @@ impl Quality {
         self.last_plant_um = None;
     }
 
-    /// The unit went up (or Stop) at `at_um`: the pass ends and joins the
-    /// totals. Returns whether a pass was open.
+    /// The unit went up (or Stop) at `at_um`: the pass ends, its distance
+    /// joins the total. Returns whether a pass was open.
     pub fn end_pass(&mut self, at_um: u64) -> bool {
         let Some(from) = self.pass_from_um.take() else {
             return false;
         };
-        self.pass.distance_um = at_um.saturating_sub(from);
-        self.done.merge(&self.pass);
+        let d = at_um.saturating_sub(from);
+        self.pass.distance_um = d;
+        self.total.distance_um = self.total.distance_um.saturating_add(d);
         true
     }
 
@@ -313,8 +298,11 @@ impl Quality {
             return;
         }
         self.pass.plants = self.pass.plants.saturating_add(1);
+        self.total.plants = self.total.plants.saturating_add(1);
         if let Some(last) = self.last_plant_um {
-            self.pass.add_spacing(at_um.saturating_sub(last), self.x_um);
+            let s = at_um.saturating_sub(last);
+            self.pass.add_spacing(s, self.x_um);
+            self.total.add_spacing(s, self.x_um);
         }
         self.last_plant_um = Some(at_um);
     }
@@ -342,9 +330,9 @@ impl Quality {
 
     /// The indices since Start, the pass in progress counted up to `now_um`.
     pub fn since_start(&self, now_um: u64) -> Indices {
-        let mut t = self.done;
-        if self.pass_from_um.is_some() {
-            t.merge(&self.pass_tally(now_um));
+        let mut t = self.total;
+        if let Some(from) = self.pass_from_um {
+            t.distance_um = t.distance_um.saturating_add(now_um.saturating_sub(from));
         }
         t.indices(self.x_um)
     }

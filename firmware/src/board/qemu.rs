@@ -161,7 +161,9 @@ const GATE_PATH_MAX: usize = 32;
 /// the simulated machine's true ground position, `work_down_mm=D` and
 /// `work_up_mm=D` (up to four in all, each once; the contact starts open, as an
 /// unwired input reads); `scatter=0` turns the landing scatter alone off
-/// (the figures of the control, without the seedlings' fall).
+/// (the figures of the control, without the seedlings' fall) and
+/// `slip_noise=0` the random variation of the track and belt slip around
+/// their means (which no sensor of the machine sees).
 #[derive(Default, Clone, Copy)]
 struct Scenario {
     gear: Option<u8>,
@@ -193,6 +195,8 @@ struct Scenario {
     work: [u32; 4],
     /// No landing scatter (`scatter=0`).
     no_scatter: bool,
+    /// No slip variation (`slip_noise=0`).
+    no_slip_noise: bool,
 }
 
 /// [`Scenario::work`]: the contact closes (unit down).
@@ -267,6 +271,10 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }
     if scenario.no_scatter {
         config.plant_scatter_m = 0.0;
+    }
+    if scenario.no_slip_noise {
+        config.track_slip_noise = 0.0;
+        config.belt_slip_noise = 0.0;
     }
     if scenario.profile_b {
         config.profile = machine_sim::Profile::B;
@@ -859,6 +867,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"slip" => s.slip_pct = parse_u32(value),
             b"plant_log" => s.plant_log = value == b"1",
             b"scatter" => s.no_scatter = value == b"0",
+            b"slip_noise" => s.no_slip_noise = value == b"0",
             b"work_down" | b"work_up" | b"work_down_mm" | b"work_up_mm" => {
                 let flags = if key.starts_with(b"work_down") {
                     WORK_CLOSED

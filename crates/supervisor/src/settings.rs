@@ -22,7 +22,7 @@
 //! | 10 | 199 | [`Settings::calibration`] | [`Calibration::to_bytes`] (its own version byte, then k1, k2, k3 tables padded to 66 bytes each) |
 //! | 209 | 1 | [`Settings::profile`] | 1 = A (drum belt), 2 = B (seedling belt) |
 //! | 210 | 33 | [`Settings::belt`] | [`ProfileBConfig::to_bytes`] |
-//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1 (format 4): [`Settings::work_switch_fitted`]; bits 2–7 zero |
+//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 2 (format 4): [`Settings::work_switch_fitted`]; bits 1 and 3–7 zero (bit 1 is kept for helper "phase"'s placement flag, same issue) |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
 //! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`], default 100) |
 //!
@@ -85,8 +85,9 @@ pub const SETTINGS_BYTES: usize = SETTINGS_V3_BYTES + 2;
 
 /// Flags byte (offset 243), bit 0: the drum encoder counts backwards.
 const FLAG_ENCODER_REVERSED: u8 = 1;
-/// Flags byte, bit 1 (format 4): a work switch is fitted.
-const FLAG_WORK_SWITCH: u8 = 2;
+/// Flags byte, bit 2 (format 4): a work switch is fitted. (Bit 1 is the
+/// placement flag of the distance-locked loop, merged separately.)
+const FLAG_WORK_SWITCH: u8 = 4;
 
 /// Which machine the firmware runs (SPEC §1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -477,12 +478,12 @@ mod tests {
         // Profile B (2) and its parameters.
         assert_eq!(b[209], 2);
         assert_eq!(b[210..243], s.belt.to_bytes());
-        // Flags: encoder reversed (bit 0), work switch (bit 1); drive 58.11
+        // Flags: encoder reversed (bit 0), work switch (bit 2); drive 58.11
         // r/min = 5811 = 0x16B3, τ 87.5 ms = 875 = 0x036B, dead time 60 ms =
         // 600 = 0x0258; first plant 1000 mm = 0x03E8.
         assert_eq!(
             b[243..],
-            [3, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02, 0xE8, 0x03]
+            [5, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02, 0xE8, 0x03]
         );
         assert_eq!(decode(&b).unwrap(), s);
     }
@@ -544,8 +545,8 @@ mod tests {
         let mut v3 = [0u8; SETTINGS_V3_BYTES];
         v3.copy_from_slice(&s.encode()[..SETTINGS_V3_BYTES]);
         v3[0] = 3;
-        // Bit 1 is unknown in format 3.
-        assert_eq!(decode(&v3), Err(SettingsError::Flags(3)));
+        // Bit 2 is unknown in format 3.
+        assert_eq!(decode(&v3), Err(SettingsError::Flags(5)));
         v3[243] = 1;
         assert_eq!(
             decode(&v3),
@@ -594,8 +595,9 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(243, 4), Err(SettingsError::Flags(4)));
-        assert!(with(243, 2).unwrap().work_switch_fitted);
+        assert_eq!(with(243, 2), Err(SettingsError::Flags(2)));
+        assert_eq!(with(243, 8), Err(SettingsError::Flags(8)));
+        assert!(with(243, 4).unwrap().work_switch_fitted);
         assert_eq!(with(243, 0xFF), Err(SettingsError::Flags(0xFF)));
         assert!(with(243, 1).unwrap().drum_encoder_reversed);
         // n_max 0x1100 + low byte: 4352 + 0xFF… → 0xFF_xx > 9000.

@@ -719,7 +719,7 @@ fn a_record_written_before_profile_b_still_loads() {
 #[test]
 fn a_record_written_before_the_work_switch_still_loads() {
     // Format 3: the first 250 bytes of today's payload, version byte 3,
-    // flags bit 1 (unknown then) clear. It loads without a work switch
+    // flags bit 2 (unknown then) clear. It loads without a work switch
     // and with the default first-plant distance; the next save writes
     // format 4.
     let b = settings_b();

@@ -373,13 +373,18 @@ impl Hmi {
         let old = self.settings;
         self.settings = settings;
         if old != settings && self.is_connected() {
-            for ins in page_instructions(self.page, &self.settings, self.version) {
-                if let Instruction::SetText(_, t) = ins {
-                    if t == self.version {
-                        continue;
-                    }
+            // Only what changed: the rest is on the screen already (a page
+            // change writes every value itself), and page 6's full set
+            // twice plus two messages — the profile refusal — would not fit
+            // the transmit queue. The version text never changes.
+            let before = page_instructions(self.page, &old, self.version);
+            for (i, ins) in page_instructions(self.page, &self.settings, self.version)
+                .into_iter()
+                .enumerate()
+            {
+                if before.get(i) != Some(&ins) {
+                    self.send(&ins)?;
                 }
-                self.send(&ins)?;
             }
         }
         Ok(())

@@ -686,7 +686,7 @@ pub const fn work_switch_label(fitted: bool) -> &'static str {
     if fitted {
         "fitted (PB11)"
     } else {
-        "none: plants from Start to Stop"
+        "not fitted"
     }
 }
 

@@ -107,3 +107,42 @@ fn profile_b_pages_fit_with_the_widest_parameters() {
     assert_eq!(n, 188);
     assert!(n < 207);
 }
+
+/// The profile refusal of a one-machine image on page 6 (the firmware's
+/// `handle_event`): the screen steps the profile (its own settings update
+/// and "Save, then restart…"), the firmware puts it back and says why, all
+/// before the queue drains. With the work switch's two settings on page 6
+/// (issue 19) the full page written twice overflowed 320 bytes and the
+/// firmware's message was dropped (tests/tests/one_machine_images.rs,
+/// `a_profile_a_image_refuses_profile_b_on_the_screen_and_in_the_log`);
+/// `set_settings` now writes only what changed.
+#[test]
+fn the_profile_refusal_on_the_settings_page_fits() {
+    use hmi_proto::screen::MachineProfile;
+    let mut hmi = Hmi::new(Settings::default(), LONG);
+    for b in [0x66, 0x00, 0xFF, 0xFF, 0xFF] {
+        hmi.push(b);
+    }
+    let mut sink = [0u8; 512];
+    let _ = hmi.show_page(Page::Settings);
+    let _ = hmi.poll_transmit(&mut sink);
+    let a = Settings::default();
+    let b = Settings {
+        profile: MachineProfile::SeedlingBelt,
+        ..a
+    };
+    let _ = hmi.set_settings(b);
+    let _ = hmi.show_message(LONG);
+    let _ = hmi.set_settings(a);
+    let _ = hmi.show_message(LONG);
+    let n = hmi.tx_pending();
+    println!("profile refusal: {n} bytes");
+    assert_eq!(hmi.stats().tx_dropped, 0, "{n} bytes");
+    // Two profile labels and two messages: nothing else was rewritten.
+    let label = |p: MachineProfile| p.label().len() + "tprofile.txt=\"\"".len() + 3;
+    let message = LONG.len() + "tmsg.txt=\"\"".len() + 3;
+    assert_eq!(
+        n,
+        label(MachineProfile::SeedlingBelt) + label(MachineProfile::DrumBelt) + 2 * message
+    );
+}

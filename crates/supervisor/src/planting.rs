@@ -41,6 +41,9 @@ pub struct Work {
     /// The ramp's ceiling on the target, r/min (follows the target while
     /// down).
     cap: I16F16,
+    /// After a lowering: the drum waits at rest until this ground distance
+    /// (µm), or `u64::MAX` (no wait).
+    hold_until_um: u64,
     /// Stand-in for helper "phase"'s contract (see [`standin`]).
     standin: standin::State,
 }
@@ -51,6 +54,7 @@ impl Work {
         Self {
             switch_down: false,
             cap: I16F16::ZERO,
+            hold_until_um: u64::MAX,
             standin: standin::State::new(),
         }
     }
@@ -88,8 +92,27 @@ impl Supervisor {
         let ground = self.ground_distance_um();
         if now {
             self.quality.begin_pass(ground);
+            // The contact closed one debounce time (30 ms) before the
+            // switch reads down; the drum answers a start one lag later
+            // (its 25 ms time constant and 5 ms dead time): both ≈ 30 ms of
+            // travel, 8.33 µm per m/h.
+            let lag_um = u64::from(self.snapshot().travel_speed_kmh_x1000).saturating_mul(25) / 3;
             let first = u64::from(self.settings().first_plant_distance.raw()).saturating_mul(1000);
-            self.realign_next_plant(ground.saturating_add(first));
+            let at = ground.saturating_sub(lag_um).saturating_add(first);
+            self.realign_next_plant(at);
+            // The belt rests with the next partition `1 − frac` of a pitch
+            // from leaving: at the spacing's ratio that is `(1 − frac)·X` of
+            // ground. The drum waits until then less its lag, so that the
+            // first plant lands near `at` however the lift left the belt;
+            // the distance-locked loop takes up the rest. (Without the wait
+            // the next partition would leave within a pitch of the
+            // lowering whatever `first_plant_distance` says, and the loop's
+            // bounded correction cannot hold the belt back for that long.)
+            let x_um = u64::from(self.settings().spacing.raw()).saturating_mul(1000);
+            let left = 1_000_000u64.saturating_sub(self.partitions_x1e6() % 1_000_000);
+            let needs = left.saturating_mul(x_um) / 1_000_000;
+            let hold = at.saturating_sub(needs).saturating_sub(lag_um);
+            self.work.hold_until_um = if hold > ground { hold } else { u64::MAX };
         } else {
             self.quality.end_pass(ground);
         }
@@ -118,6 +141,12 @@ impl Supervisor {
     /// down; ramping to rest at [`WORK_RAMP_RPM_PER_S`] while it is up.
     pub(crate) fn work_ramp(&mut self, target: I16F16, elapsed_us: u32) -> I16F16 {
         if self.unit_down() {
+            let hold = self.work.hold_until_um;
+            if hold != u64::MAX && self.ground_distance_um() < hold {
+                self.work.cap = I16F16::ZERO;
+                return I16F16::ZERO;
+            }
+            self.work.hold_until_um = u64::MAX;
             self.work.cap = target;
             return target;
         }

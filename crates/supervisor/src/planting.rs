@@ -96,7 +96,14 @@ impl Supervisor {
             // switch reads down; the drum answers a start one lag later
             // (its 25 ms time constant and 5 ms dead time): both ≈ 30 ms of
             // travel, 8.33 µm per m/h.
-            let lag_um = u64::from(self.snapshot().travel_speed_kmh_x1000).saturating_mul(25) / 3;
+            // (u32: 100 km/h, beyond the Hall sensor's 90, is 833 333 µm.)
+            let lag_um = u64::from(
+                self.snapshot()
+                    .travel_speed_kmh_x1000
+                    .min(100_000)
+                    .wrapping_mul(25)
+                    / 3,
+            );
             let first = u64::from(self.settings().first_plant_distance.raw()).saturating_mul(1000);
             let at = ground.saturating_sub(lag_um).saturating_add(first);
             self.realign_next_plant(at);
@@ -108,9 +115,12 @@ impl Supervisor {
             // the next partition would leave within a pitch of the
             // lowering whatever `first_plant_distance` says, and the loop's
             // bounded correction cannot hold the belt back for that long.)
-            let x_um = u64::from(self.settings().spacing.raw()).saturating_mul(1000);
-            let left = 1_000_000u64.saturating_sub(self.partitions_x1e6() % 1_000_000);
-            let needs = left.saturating_mul(x_um) / 1_000_000;
+            // In u32: `left` ≤ 10⁶ (a pitch × 10⁶) and X ≤ 500 mm, so
+            // left · X_mm ≤ 5 · 10⁸; / 1000 gives µm.
+            let left = 1_000_000u32
+                .wrapping_sub(u32::try_from(self.partitions_x1e6() % 1_000_000).unwrap_or(0));
+            let needs =
+                u64::from(left.wrapping_mul(u32::from(self.settings().spacing.raw())) / 1000);
             let hold = at.saturating_sub(needs).saturating_sub(lag_um);
             self.work.hold_until_um = if hold > ground { hold } else { u64::MAX };
         } else {

@@ -42,12 +42,12 @@
 //! s.spacing = Spacing::new(120).unwrap();
 //! let bytes = s.encode();
 //! assert_eq!(bytes.len(), SETTINGS_BYTES);
-//! // version 3, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // version 4, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
 //! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
 //! // brightness 100 (0x64).
 //! assert_eq!(
 //!     bytes[..10],
-//!     [3, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//!     [4, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
 //! );
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```

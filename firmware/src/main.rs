@@ -75,6 +75,8 @@ mod app {
     };
     #[cfg(feature = "profile-a")]
     use supervisor::control::{Alarm, RunState, Supervisor};
+    #[cfg(feature = "profile-a")]
+    use supervisor::work_switch::{WorkChange, WorkSwitch};
     use supervisor::{
         control::Effect,
         machine::Machine,
@@ -145,6 +147,8 @@ mod app {
         saves_in: Sender<'static, (), 1>,
         saves_out: Receiver<'static, (), 1>,
         sensors: board::Sensors,
+        #[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
+        work_switch: board::WorkSwitchInput,
         actuators: Actuators,
         watchdog: board::Watchdog,
         led: board::StatusLed,
@@ -214,6 +218,7 @@ mod app {
                 saves_in,
                 saves_out,
                 sensors: board.sensors,
+                work_switch: board.work_switch,
                 actuators,
                 watchdog: board.watchdog,
                 led: board.led,
@@ -453,11 +458,15 @@ mod app {
     ///   ends after its next release is counted as an overrun and does not
     ///   feed the watchdog.
     /// - Budget: 1 ms (measured cost: docs/PERFORMANCE.md).
-    #[task(priority = 2, local = [sensors, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop])]
+    #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop])]
     async fn control(mut cx: control::Context) {
         let mut next = Mono::now();
         #[cfg(feature = "profile-a")]
         let (mut last_alarm, mut last_run) = (None::<Alarm>, RunState::Stopped);
+        // The work switch (PB11), debounced here every period (profile A;
+        // docs/firmware.md "Work switch").
+        #[cfg(feature = "profile-a")]
+        let mut work = WorkSwitch::new();
         #[cfg(feature = "profile-b")]
         let (mut last_belt_alarm, mut last_belt_state) =
             (None::<PlanterAlarm>, PlanterState::Stopped);
@@ -472,6 +481,11 @@ mod app {
                 let change = stop.latch.sample(open, CONTROL_PERIOD_MS * 1000);
                 (change, stop.latch.is_latched())
             });
+            #[cfg(feature = "profile-a")]
+            let work_change =
+                work.sample(cx.local.work_switch.is_closed(), CONTROL_PERIOD_MS * 1000);
+            #[cfg(feature = "profile-a")]
+            let work_down = work.is_down();
             let edges_out = &mut cx.local.edges_out;
             let step = cx.shared.machine.lock(|m| {
                 if stop_latched {
@@ -490,6 +504,8 @@ mod app {
                         for &edge in &sample.hall_edges {
                             sup.hall_edge(Ticks(edge));
                         }
+                        // Idempotent; a change begins or ends a pass.
+                        sup.set_work_switch(work_down);
                         let a = sup.control_step(now, sample.drum_encoder);
                         Step::Drum(a, sup.alarm(), sup.run_state())
                     }
@@ -563,8 +579,17 @@ mod app {
                         }
                         last_alarm = alarm;
                     }
+                    if let Some(change) = work_change {
+                        cx.shared
+                            .machine
+                            .lock(|m| log_work_change(m, change, last_run));
+                    }
                     if run != last_run {
                         defmt::info!("drum: {}", run);
+                        if last_run == RunState::Running {
+                            // Stop (or an alarm) ends the pass in progress.
+                            cx.shared.machine.lock(|m| log_quality(m, "stop"));
+                        }
                         last_run = run;
                     }
                     // The simulated machine's own view next to the firmware's,
@@ -767,6 +792,58 @@ mod app {
             }
             Event::ScreenError(code) => defmt::warn!("screen error: {}", code),
             Event::ReplyTimeout(field) => defmt::warn!("screen reply timeout: {}", field),
+        }
+    }
+
+    /// A change of the work switch, and at a lift the figures of the pass
+    /// that ended (profile A; `running`: the drum was running).
+    #[cfg(feature = "profile-a")]
+    fn log_work_change(machine: &Machine, change: WorkChange, running: RunState) {
+        #[allow(unreachable_patterns)]
+        let sup = match machine {
+            Machine::DrumBelt(sup) => sup,
+            _ => return,
+        };
+        let ground_mm = u32::try_from(sup.ground_distance_um() / 1000).unwrap_or(u32::MAX);
+        let lifted = change == WorkChange::Lifted;
+        defmt::info!(
+            "work switch: {=str} at ground {=u32} mm",
+            if lifted { "up" } else { "down" },
+            ground_mm
+        );
+        if lifted && running == RunState::Running && sup.settings().work_switch_fitted {
+            log_quality(machine, "lift");
+        }
+    }
+
+    /// The planting quality of the pass that ended (`why`: "lift" or
+    /// "stop") and since Start, in the log (profile A; docs/firmware.md,
+    /// "Work switch"). Shares and CV in 0.1 %.
+    #[cfg(feature = "profile-a")]
+    fn log_quality(machine: &Machine, why: &str) {
+        #[allow(unreachable_patterns)]
+        let sup = match machine {
+            Machine::DrumBelt(sup) => sup,
+            _ => return,
+        };
+        for (what, q) in [
+            ("pass", sup.quality_of_pass()),
+            ("since Start", sup.quality_since_start()),
+        ] {
+            defmt::info!(
+                "quality: {=str} ({=str}): plants {=u32}, spacings {=u32}, distance {=u32} mm, per m {=u32} x0.01, multiples {=u16} misses {=u16} qf {=u16} cv {=u16} within10 {=u16} x0.1%",
+                what,
+                why,
+                q.plants,
+                q.spacings,
+                q.distance_mm,
+                q.plants_per_m_x100,
+                q.multiples_x10,
+                q.misses_x10,
+                q.quality_of_feed_x10,
+                q.cv_x10,
+                q.within_10_pct_x10
+            );
         }
     }
 

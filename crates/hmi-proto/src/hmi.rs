@@ -67,8 +67,10 @@ use crate::screen::{
     Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
 };
 
-/// Bytes the transmit queue holds (a page refresh plus a message fits).
-pub const TX_CAPACITY: usize = 256;
+/// Bytes the transmit queue holds (a page refresh plus a message fits: 313
+/// bytes at most, the Adaptive page with every value at its widest,
+/// `tests/tx_bound.rs`).
+pub const TX_CAPACITY: usize = 320;
 /// Touch events held while a `get` reply is awaited.
 pub const TOUCH_QUEUE: usize = 4;
 /// Events held until [`Hmi::poll_event`].
@@ -165,7 +167,7 @@ enum Link {
 
 /// The screen link: feed it received bytes and the time; drain events and bytes.
 ///
-/// Fixed size (≤ 640 bytes, asserted by a test: see the `*_QUEUE` and
+/// Fixed size (≤ 704 bytes, asserted by a test: see the `*_QUEUE` and
 /// [`TX_CAPACITY`] consts), no heap.
 #[derive(Debug)]
 pub struct Hmi {
@@ -371,13 +373,18 @@ impl Hmi {
         let old = self.settings;
         self.settings = settings;
         if old != settings && self.is_connected() {
-            for ins in page_instructions(self.page, &self.settings, self.version) {
-                if let Instruction::SetText(_, t) = ins {
-                    if t == self.version {
-                        continue;
-                    }
+            // Only what changed: the rest is on the screen already (a page
+            // change writes every value itself), and page 6's full set
+            // twice plus two messages — the profile refusal — would not fit
+            // the transmit queue. The version text never changes.
+            let before = page_instructions(self.page, &old, self.version);
+            for (i, ins) in page_instructions(self.page, &self.settings, self.version)
+                .into_iter()
+                .enumerate()
+            {
+                if before.get(i) != Some(&ins) {
+                    self.send(&ins)?;
                 }
-                self.send(&ins)?;
             }
         }
         Ok(())
@@ -638,6 +645,12 @@ impl Hmi {
                 let _ = self.set_settings(s);
                 Some(Command::SetDrumEncoderReversed(s.drum_encoder_reversed))
             }
+            Action::ToggleWorkSwitch => {
+                let mut s = self.settings;
+                s.work_switch_fitted = !s.work_switch_fitted;
+                let _ = self.set_settings(s);
+                Some(Command::SetWorkSwitchFitted(s.work_switch_fitted))
+            }
         };
         if let Some(c) = cmd {
             self.event(Event::Command(c));
@@ -665,6 +678,7 @@ impl Hmi {
                     Command::SetRollerRadius(v) => s.belt.roller_radius = v,
                     Command::SetBeltThickness(v) => s.belt.belt_thickness = v,
                     Command::SetSpeedThreshold(v) => s.belt.speed_threshold = v,
+                    Command::SetFirstPlantDistance(v) => s.first_plant_distance = v,
                     _ => {}
                 }
                 self.settings = s;

@@ -18,6 +18,9 @@
 //! | distance travelled | dm (0.1 m) | 0–2³¹ | 1, shown in m |
 //! | plants planted | count | 0–2³¹ | – (Number) |
 //! | brightness | % | 10–100 | – (Number) |
+//! | first-plant distance after the work switch closes | mm | 0–1000 (0–100 cm) | 1, shown in cm |
+//! | planting quality shares and CV (page 3) | 0.1 % | 0–1000 | 1 |
+//! | plants per metre (page 3) | × 100 | 0–65535 | 2 |
 //!
 //! Profile B (the seedling-belt planter, paper B; pages 7 and 8):
 //!
@@ -318,11 +321,14 @@ pub enum Field {
     BeltThickness,
     /// Profile B: speed-change threshold Y, mm/s.
     SpeedThreshold,
+    /// Where the first plant of a pass lands after the work switch closes,
+    /// mm (page 6).
+    FirstPlantDistance,
 }
 
 impl Field {
     /// Every field.
-    pub const ALL: [Field; 13] = [
+    pub const ALL: [Field; 14] = [
         Self::MotorCoefficient,
         Self::FixedDrumSpeed,
         Self::Spacing,
@@ -336,6 +342,7 @@ impl Field {
         Self::RollerRadius,
         Self::BeltThickness,
         Self::SpeedThreshold,
+        Self::FirstPlantDistance,
     ];
 }
 
@@ -367,6 +374,7 @@ impl ParamError {
             Field::RollerRadius => "Roller radius must be 5.0-100.0 mm",
             Field::BeltThickness => "Belt thickness must be 0.01-10.00 mm",
             Field::SpeedThreshold => "Threshold Y must be 0.001-0.500 m/s",
+            Field::FirstPlantDistance => "First plant must be 0.0-100.0 cm",
         }
     }
 }
@@ -481,6 +489,14 @@ bounded!(
     SpeedThreshold, u16, Field::SpeedThreshold, 1, 500, 20
 );
 
+bounded!(
+    /// Where the first plant of a pass lands, mm of ground after the point
+    /// where the work switch closed, 0–1000 (0–100 cm). Default 100 mm: the
+    /// drum reaches speed from rest in ≈ 0.1 s (≈ 15 mm at Low 2), so the
+    /// place can be met at every gear.
+    FirstPlantDistance, u16, Field::FirstPlantDistance, 0, 1000, 100
+);
+
 impl CalibrationCoefficient {
     /// `actual / measured`, rounded to 0.001, then range-checked; a zero
     /// `measured` distance is out of range too.
@@ -514,6 +530,9 @@ impl Field {
             Self::RollerRadius => Command::SetRollerRadius(RollerRadius::new(raw)?),
             Self::BeltThickness => Command::SetBeltThickness(BeltThickness::new(raw)?),
             Self::SpeedThreshold => Command::SetSpeedThreshold(SpeedThreshold::new(raw)?),
+            Self::FirstPlantDistance => {
+                Command::SetFirstPlantDistance(FirstPlantDistance::new(raw)?)
+            }
         })
     }
 
@@ -535,6 +554,7 @@ impl Field {
             Self::RollerRadius => i32::from(s.belt.roller_radius.raw()),
             Self::BeltThickness => i32::from(s.belt.belt_thickness.raw()),
             Self::SpeedThreshold => i32::from(s.belt.speed_threshold.raw()),
+            Self::FirstPlantDistance => i32::from(s.first_plant_distance.raw()),
         }
     }
 }
@@ -600,6 +620,11 @@ pub enum Command {
     IdentifyDrive,
     /// Page 9: use and save the drive model just identified.
     AcceptDriveModel,
+    /// A work switch is fitted (`true`) or not; page 6 `bwork` toggles it.
+    /// Persisted with *Save settings*.
+    SetWorkSwitchFitted(bool),
+    /// Where the first plant of a pass lands after the work switch closes.
+    SetFirstPlantDistance(FirstPlantDistance),
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -650,6 +675,19 @@ pub struct Settings {
     pub belt: BeltSettings,
     /// The drum encoder's direction is reversed (page 6 `tenc`).
     pub drum_encoder_reversed: bool,
+    /// A work switch is fitted (page 6 `twork`).
+    pub work_switch_fitted: bool,
+    /// First-plant distance after the work switch closes (page 6 `nfirst`).
+    pub first_plant_distance: FirstPlantDistance,
+}
+
+/// The label of the work switch setting (page 6 `twork`).
+pub const fn work_switch_label(fitted: bool) -> &'static str {
+    if fitted {
+        "fitted (PB11)"
+    } else {
+        "not fitted"
+    }
 }
 
 /// The label of the drum encoder direction (page 6 `tenc`).
@@ -699,6 +737,19 @@ pub struct Status {
     pub drive_dead_time_x10_ms: u16,
     /// Drive identification: 0 idle, 1 running, 2 done (press Save), 3 failed.
     pub drive_identification: u8,
+    /// Planting quality since Start (of the *commanded* spacings: the
+    /// control, not the seedlings' fall): quality of feed, 0.1 %.
+    pub quality_of_feed_x10: u16,
+    /// Multiples index (spacings ≤ 0.5 X), 0.1 %.
+    pub multiples_x10: u16,
+    /// Miss index (spacings > 1.5 X), 0.1 %.
+    pub misses_x10: u16,
+    /// Precision: CV of the spacings in the quality-of-feed band, 0.1 %.
+    pub precision_cv_x10: u16,
+    /// Share of the spacings within ±10 % of X, 0.1 %.
+    pub within_10_pct_x10: u16,
+    /// Plants per metre planted (unit down), × 100.
+    pub plants_per_m_x100: u16,
 }
 
 /// Live values shown by display-only components.
@@ -737,6 +788,18 @@ pub enum StatusField {
     DriveDeadTime,
     /// [`Status::drive_identification`].
     DriveIdentification,
+    /// [`Status::quality_of_feed_x10`].
+    QualityOfFeed,
+    /// [`Status::multiples_x10`].
+    Multiples,
+    /// [`Status::misses_x10`].
+    Misses,
+    /// [`Status::precision_cv_x10`].
+    PrecisionCv,
+    /// [`Status::within_10_pct_x10`].
+    Within10Pct,
+    /// [`Status::plants_per_m_x100`].
+    PlantsPerMetre,
 }
 
 impl StatusField {
@@ -760,6 +823,12 @@ impl StatusField {
             Self::DriveTau => i32::from(s.drive_tau_x10_ms),
             Self::DriveDeadTime => i32::from(s.drive_dead_time_x10_ms),
             Self::DriveIdentification => i32::from(s.drive_identification),
+            Self::QualityOfFeed => i32::from(s.quality_of_feed_x10),
+            Self::Multiples => i32::from(s.multiples_x10),
+            Self::Misses => i32::from(s.misses_x10),
+            Self::PrecisionCv => i32::from(s.precision_cv_x10),
+            Self::Within10Pct => i32::from(s.within_10_pct_x10),
+            Self::PlantsPerMetre => i32::from(s.plants_per_m_x100),
         }
     }
 }
@@ -803,6 +872,8 @@ pub enum Action {
     ToggleEncoderDirection,
     /// [`Command::IdentifyDrive`].
     IdentifyDrive,
+    /// [`Command::SetWorkSwitchFitted`] with the other state.
+    ToggleWorkSwitch,
     /// [`Command::AcceptDriveModel`].
     AcceptDriveModel,
 }
@@ -827,6 +898,8 @@ pub enum Role {
     Version,
     /// The drum encoder direction's label, written with `tenc.txt=`.
     EncoderDirectionLabel,
+    /// The work switch setting's label, written with `twork.txt=`.
+    WorkSwitchLabel,
     /// The alarm text, written with `talarm.txt=`.
     AlarmText,
     /// The page's message box for validation errors and notices.
@@ -1074,6 +1147,50 @@ pub const COMPONENTS: &[Component] = &[
         R::Status(StatusField::Distance),
     ),
     c(P::Adaptive, 14, "tmsg", K::Text, R::Message),
+    // Planting quality since Start (the control's, not the seedlings' fall:
+    // the page's static label says so, docs/hmi.md).
+    c(
+        P::Adaptive,
+        15,
+        "xqf",
+        K::Xfloat(1),
+        R::Status(StatusField::QualityOfFeed),
+    ),
+    c(
+        P::Adaptive,
+        16,
+        "xmult",
+        K::Xfloat(1),
+        R::Status(StatusField::Multiples),
+    ),
+    c(
+        P::Adaptive,
+        17,
+        "xmiss",
+        K::Xfloat(1),
+        R::Status(StatusField::Misses),
+    ),
+    c(
+        P::Adaptive,
+        18,
+        "xcv",
+        K::Xfloat(1),
+        R::Status(StatusField::PrecisionCv),
+    ),
+    c(
+        P::Adaptive,
+        19,
+        "xwithin",
+        K::Xfloat(1),
+        R::Status(StatusField::Within10Pct),
+    ),
+    c(
+        P::Adaptive,
+        20,
+        "xperm",
+        K::Xfloat(2),
+        R::Status(StatusField::PlantsPerMetre),
+    ),
     // 4 calib
     c(
         P::Calibration,
@@ -1211,6 +1328,28 @@ pub const COMPONENTS: &[Component] = &[
         "bdrive",
         K::Button,
         R::Action(A::ShowPage(P::Drive)),
+    ),
+    c(
+        P::Settings,
+        12,
+        "bwork",
+        K::Button,
+        R::Action(A::ToggleWorkSwitch),
+    ),
+    c(P::Settings, 13, "twork", K::Text, R::WorkSwitchLabel),
+    c(
+        P::Settings,
+        14,
+        "nfirst",
+        K::Xfloat(1),
+        R::Input(Field::FirstPlantDistance),
+    ),
+    c(
+        P::Settings,
+        15,
+        "bfirst",
+        K::Button,
+        R::Action(A::Apply(Field::FirstPlantDistance)),
     ),
     // 7 belt (profile B home)
     c(P::Belt, 1, "bstart", K::Button, R::Action(A::Start)),
@@ -1465,6 +1604,10 @@ pub fn page_instructions(
                 ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
                     .unwrap_or(version),
             ),
+            Role::WorkSwitchLabel => Instruction::SetText(
+                comp.obj(),
+                ScreenText::new(work_switch_label(settings.work_switch_fitted)).unwrap_or(version),
+            ),
             _ => continue,
         };
         // Capacity is checked by a test for every page.
@@ -1473,18 +1616,16 @@ pub fn page_instructions(
     out
 }
 
-/// The instructions that show `status` on `page` (only its status components).
-pub fn status_instructions(
+/// The instructions that show `status` on `page` (only its status
+/// components), one at a time (the Adaptive page has 11: no buffer).
+pub fn status_instructions<'a>(
     page: Page,
-    status: &Status,
-) -> heapless::Vec<Instruction<'static>, MAX_PAGE_INSTRUCTIONS> {
-    let mut out = heapless::Vec::new();
-    for comp in Component::on_page(page) {
-        if let Role::Status(f) = comp.role {
-            let _ = out.push(Instruction::SetValue(comp.obj(), f.value(status)));
-        }
-    }
-    out
+    status: &'a Status,
+) -> impl Iterator<Item = Instruction<'static>> + 'a {
+    Component::on_page(page).filter_map(move |comp| match comp.role {
+        Role::Status(f) => Some(Instruction::SetValue(comp.obj(), f.value(status))),
+        _ => None,
+    })
 }
 
 #[cfg(test)]
@@ -1511,7 +1652,9 @@ mod tests {
             for id in 1..=n {
                 assert!(Component::lookup(p.id(), u8::try_from(id).unwrap()).is_some());
             }
-            assert!(Component::on_page(p).count() <= 16);
+            // The Adaptive page has 20 (the quality figures); the editor
+            // takes up to 250 a page.
+            assert!(Component::on_page(p).count() <= 24);
             assert!(
                 Component::on_page(p)
                     .filter(|c| {
@@ -1522,15 +1665,10 @@ mod tests {
                                 | Role::CalibrationLabel
                                 | Role::ProfileLabel
                                 | Role::EncoderDirectionLabel
+                                | Role::WorkSwitchLabel
                                 | Role::Version
                         )
                     })
-                    .count()
-                    <= MAX_PAGE_INSTRUCTIONS
-            );
-            assert!(
-                Component::on_page(p)
-                    .filter(|c| matches!(c.role, Role::Status(_)))
                     .count()
                     <= MAX_PAGE_INSTRUCTIONS
             );
@@ -1549,6 +1687,8 @@ mod tests {
         }
         for r in [false, true] {
             let l = encoder_direction_label(r);
+            assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
+            let l = work_switch_label(r);
             assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
         }
         let m = PROFILE_RESTART_MESSAGE;

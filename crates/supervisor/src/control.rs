@@ -309,7 +309,7 @@ const REPORT_ALPHA: I16F16 = I16F16::lit("0.0196");
 /// The machine's operating logic (profile A).
 pub struct Supervisor {
     hw: Hardware,
-    settings: Settings,
+    pub(crate) settings: Settings,
     plan: DrumPlan,
     estimator: MtEstimator,
     /// The drum controller, or, while the drive is identified, the
@@ -339,7 +339,7 @@ pub struct Supervisor {
     teeth: u32,
     last_tooth_at: Option<u32>,
     /// Ground distance since Start (∫ V1 dt), µm.
-    distance_um: u64,
+    pub(crate) distance_um: u64,
     /// The chassis's deceleration limit at the Hall gear, for the silence
     /// rule.
     hall_silence: DecelerationBound,
@@ -370,6 +370,11 @@ pub struct Supervisor {
     /// Distance-locked placement: ground and belt positions, the phase
     /// loop and the partitions' events ([`crate::phase`]).
     phase: Phase,
+    /// The work switch's effect on the drum and the count
+    /// ([`crate::planting`]).
+    pub(crate) work: crate::planting::Work,
+    /// Live planting quality ([`crate::quality`]).
+    pub(crate) quality: crate::quality::Quality,
 }
 
 /// Bridges the Hall sensor's sparse updates (one edge every 170 ms at Low 2)
@@ -795,6 +800,8 @@ impl Supervisor {
             predictor: Predictor::default(),
             snapshot: Snapshot::default(),
             phase,
+            work: crate::planting::Work::new(),
+            quality: crate::quality::Quality::new(),
         })
     }
 
@@ -882,6 +889,10 @@ impl Supervisor {
 
     /// Stops the drum (no alarm).
     pub fn stop(&mut self) {
+        if self.run == RunState::Running {
+            // The pass in progress ends here.
+            self.quality.end_pass(self.distance_um);
+        }
         self.run = RunState::Stopped;
         match &mut self.drum {
             Drum::Control(c) => c.stop(),
@@ -912,6 +923,7 @@ impl Supervisor {
             self.belt_counts_k3_milli = 0;
             self.phase.start(self.teeth);
             self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
+            self.start_planting();
         }
         Effect::None
     }
@@ -1100,6 +1112,15 @@ impl Supervisor {
             // is kept, only the sign of its delta changes).
             Command::SetDrumEncoderReversed(reversed) => {
                 self.settings.drum_encoder_reversed = reversed;
+                Effect::SettingsChanged
+            }
+            // Apply at once (crate::planting); persisted by Save.
+            Command::SetWorkSwitchFitted(fitted) => {
+                self.set_work_switch_fitted(fitted);
+                Effect::SettingsChanged
+            }
+            Command::SetFirstPlantDistance(d) => {
+                self.settings.first_plant_distance = d;
                 Effect::SettingsChanged
             }
             // The machine profile applies after Save and a restart
@@ -1479,6 +1500,8 @@ impl Supervisor {
             (Some(Alarm::TooFast { .. }), _) => self.alarm = None,
             _ => {}
         }
+        // The work switch up: the target ramps to rest (crate::planting).
+        let target = self.work_ramp(target, elapsed_us);
 
         let mut actuation = Actuation::OFF;
         if self.run == RunState::Identifying {
@@ -1564,7 +1587,8 @@ impl Supervisor {
         self.snapshot.actual_drum_rpm_x1000 = milli(self.reported);
         self.snapshot.ccr = actuation.ccr;
         self.snapshot.hall_edges = self.edges;
-        self.snapshot.plants = self.plants_since_start();
+        let partitions_x1e6 = self.partitions_x1e6();
+        self.snapshot.plants = u32::try_from(partitions_x1e6 / 1_000_000).unwrap_or(u32::MAX);
         if self.run == RunState::Running {
             // ∫ V1 dt: (m/h)·µs / 3600 = µm.
             self.distance_um = self.distance_um.saturating_add(
@@ -1572,6 +1596,7 @@ impl Supervisor {
             );
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
+        self.count_plants();
         actuation
     }
 
@@ -1736,20 +1761,18 @@ impl Supervisor {
         }
     }
 
-    /// Belt partitions passed since Start: Σ drum turns · k3(n) · π·(D2+2H2)
-    /// / Lclap, each turn with the belt slip k3 at the drum speed it was
-    /// turned at.
-    fn plants_since_start(&self) -> u32 {
+    /// Belt partitions passed since Start × 10⁶ (the plant count is its
+    /// integer part): Σ drum turns · k3(n) · π·(D2+2H2) / Lclap, each turn
+    /// with the belt slip k3 at the drum speed it was turned at.
+    pub(crate) fn partitions_x1e6(&self) -> u64 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
         // Σ Δcounts·k3·1000 / counts per turn = turns · k3 · 1000.
         self.belt_counts_k3_milli
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .map(|turns_k3_x1000| {
-                turns_k3_x1000.saturating_mul(PARTITIONS_PER_TURN_X1E6) / 1_000_000_000
+            .map_or(u64::MAX, |turns_k3_x1000| {
+                turns_k3_x1000.saturating_mul(PARTITIONS_PER_TURN_X1E6) / 1000
             })
-            .and_then(|v| u32::try_from(v).ok())
-            .unwrap_or(u32::MAX)
     }
 
     /// The status as the screen shows it.
@@ -1780,6 +1803,7 @@ impl Supervisor {
             _ => (0, 0),
         };
         // The model measured (until saved) or the one in force.
+        let q = self.quality_since_start();
         let shown_drive = match self.identify_state() {
             IdentifyState::Done(model) => model,
             _ => self.settings.drive,
@@ -1801,6 +1825,12 @@ impl Supervisor {
                 IdentifyState::Done(_) => 2,
                 IdentifyState::Failed(_) => 3,
             },
+            quality_of_feed_x10: q.quality_of_feed_x10,
+            multiples_x10: q.multiples_x10,
+            misses_x10: q.misses_x10,
+            precision_cv_x10: q.cv_x10,
+            within_10_pct_x10: q.within_10_pct_x10,
+            plants_per_m_x100: u16::try_from(q.plants_per_m_x100).unwrap_or(u16::MAX),
             // Profile B's live values: not this machine's.
             ..screen::Status::default()
         }
@@ -1838,6 +1868,8 @@ impl Supervisor {
             profile: crate::machine::screen_profile(settings.profile),
             belt: crate::machine::belt_to_screen(&settings.belt),
             drum_encoder_reversed: settings.drum_encoder_reversed,
+            work_switch_fitted: settings.work_switch_fitted,
+            first_plant_distance: settings.first_plant_distance,
         }
     }
 }

@@ -171,6 +171,16 @@ impl BeltMachine {
                 self.settings.drum_encoder_reversed = r;
                 Effect::SettingsChanged
             }
+            // The work switch (profile A only, issue 19): kept and saved
+            // likewise.
+            Command::SetWorkSwitchFitted(w) => {
+                self.settings.work_switch_fitted = w;
+                Effect::SettingsChanged
+            }
+            Command::SetFirstPlantDistance(d) => {
+                self.settings.first_plant_distance = d;
+                Effect::SettingsChanged
+            }
             other => match belt_with(&self.settings.belt, other) {
                 Some(Ok(config)) => match self.planter.set_config(config) {
                     Ok(()) => {
@@ -194,6 +204,8 @@ impl BeltMachine {
             profile: screen_profile(self.settings.profile),
             belt: belt_to_screen(&self.settings.belt),
             drum_encoder_reversed: self.settings.drum_encoder_reversed,
+            work_switch_fitted: self.settings.work_switch_fitted,
+            first_plant_distance: self.settings.first_plant_distance,
             ..screen::Settings::default()
         }
     }

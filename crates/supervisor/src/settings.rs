@@ -2,9 +2,10 @@
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
 //! multi-byte number is little endian. Format version 4. [`decode`] still
-//! reads the older formats: version 3 has the same layout without flag bit 1
-//! (read as [`Placement::DistanceLocked`], the default; a version-3 record
-//! with bit 1 set is invalid, as before); version 2 is version 3 without its last 7 bytes
+//! reads the older formats: version 3 is version 4 without its last 2 bytes
+//! and knows flag bit 0 only (written before the placement setting and the
+//! work switch; read as [`Placement::DistanceLocked`], with no work switch
+//! fitted and [`FirstPlantDistance::DEFAULT`]), version 2 is version 3 without its last 7 bytes
 //! (written before the drum encoder direction and the drive model existed;
 //! read with the encoder not reversed and [`DriveModel::DEFAULT`]), version 1
 //! is version 2 without its last 34 bytes (written before profile B existed;
@@ -22,10 +23,11 @@
 //! | 10 | 199 | [`Settings::calibration`] | [`Calibration::to_bytes`] (its own version byte, then k1, k2, k3 tables padded to 66 bytes each) |
 //! | 209 | 1 | [`Settings::profile`] | 1 = A (drum belt), 2 = B (seedling belt) |
 //! | 210 | 33 | [`Settings::belt`] | [`ProfileBConfig::to_bytes`] |
-//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1: [`Settings::placement`] is [`Placement::SpeedFollowing`] (format 4 only); bits 2–7 zero |
+//! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1 (format 4): [`Settings::placement`] is [`Placement::SpeedFollowing`]; bit 2 (format 4): [`Settings::work_switch_fitted`]; bits 3–7 zero |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
+//! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`], default 100) |
 //!
-//! Total 250 bytes (version 3 too; version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! Total 252 bytes (version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -53,7 +55,9 @@
 
 use core::fmt;
 
-use hmi_proto::screen::{self, Brightness, DrumSpeed, Mode, MotorCoefficient, ParamError, Spacing};
+use hmi_proto::screen::{
+    self, Brightness, DrumSpeed, FirstPlantDistance, Mode, MotorCoefficient, ParamError, Spacing,
+};
 use kinematics::consts::Gear;
 use kinematics::table::TableError;
 use kinematics::travel::{Calibration, CALIBRATION_BYTES};
@@ -63,9 +67,6 @@ use crate::profile_b::{ProfileBConfig, CONFIG_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
 pub const SETTINGS_FORMAT_VERSION: u8 = 4;
-
-/// The previous format (same layout, flag bit 1 not defined).
-const SETTINGS_V3: u8 = 3;
 
 /// Bytes before the calibration block: version, mode, spacing, drum speed,
 /// motor coefficient, gear, brightness.
@@ -77,13 +78,18 @@ pub const SETTINGS_V1_BYTES: usize = HEAD_BYTES + CALIBRATION_BYTES;
 /// Size of a format-2 record: 209 + 1 + 33 = 243.
 pub const SETTINGS_V2_BYTES: usize = SETTINGS_V1_BYTES + 1 + CONFIG_BYTES;
 
-/// Size of an encoded [`Settings`] (format versions 3 and 4): 243 + 1 + 6 = 250.
-pub const SETTINGS_BYTES: usize = SETTINGS_V2_BYTES + 1 + DRIVE_MODEL_BYTES;
+/// Size of a format-3 record: 243 + 1 + 6 = 250.
+pub const SETTINGS_V3_BYTES: usize = SETTINGS_V2_BYTES + 1 + DRIVE_MODEL_BYTES;
+
+/// Size of an encoded [`Settings`] (format version 4): 250 + 2 = 252.
+pub const SETTINGS_BYTES: usize = SETTINGS_V3_BYTES + 2;
 
 /// Flags byte (offset 243), bit 0: the drum encoder counts backwards.
 const FLAG_ENCODER_REVERSED: u8 = 1;
 /// Flags byte, bit 1 (format 4): speed-following placement.
 const FLAG_SPEED_FOLLOWING: u8 = 2;
+/// Flags byte, bit 2 (format 4): a work switch is fitted.
+const FLAG_WORK_SWITCH: u8 = 4;
 
 /// How profile A's drum places the plants in Speed-Adaptive mode
 /// (issue 19, docs/placement.md).
@@ -158,6 +164,13 @@ pub struct Settings {
     /// Distance-locked or speed-following placement (Speed-Adaptive mode).
     /// Default: [`Placement::DistanceLocked`].
     pub placement: Placement,
+    /// A work switch is wired to PB11 (docs/firmware.md, "Work switch").
+    /// Without one (the default) the unit counts as always down: the machine
+    /// plants from Start to Stop as before.
+    pub work_switch_fitted: bool,
+    /// Where the first plant of a pass lands after the work switch closes.
+    /// Default: [`FirstPlantDistance::DEFAULT`].
+    pub first_plant_distance: FirstPlantDistance,
 }
 
 impl Default for Settings {
@@ -175,6 +188,8 @@ impl Default for Settings {
             drum_encoder_reversed: false,
             drive: DriveModel::DEFAULT,
             placement: Placement::DistanceLocked,
+            work_switch_fitted: false,
+            first_plant_distance: FirstPlantDistance::DEFAULT,
         }
     }
 }
@@ -281,7 +296,9 @@ impl Settings {
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
-        let (v2, v3) = out.split_at_mut(SETTINGS_V2_BYTES);
+        let (v3, v4) = out.split_at_mut(SETTINGS_V3_BYTES);
+        v4.copy_from_slice(&self.first_plant_distance.raw().to_le_bytes());
+        let (v2, v3) = v3.split_at_mut(SETTINGS_V2_BYTES);
         if let Some((flags, drive)) = v3.split_first_mut() {
             *flags = if self.drum_encoder_reversed {
                 FLAG_ENCODER_REVERSED
@@ -289,6 +306,10 @@ impl Settings {
                 0
             } | if self.placement == Placement::SpeedFollowing {
                 FLAG_SPEED_FOLLOWING
+            } else {
+                0
+            } | if self.work_switch_fitted {
+                FLAG_WORK_SWITCH
             } else {
                 0
             };
@@ -333,7 +354,8 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
     let expected = match version {
         1 => SETTINGS_V1_BYTES,
         2 => SETTINGS_V2_BYTES,
-        SETTINGS_V3 | SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
+        3 => SETTINGS_V3_BYTES,
+        SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
         other => return Err(SettingsError::UnsupportedVersion(other)),
     };
     if bytes.len() != expected {
@@ -342,7 +364,13 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
             found: bytes.len(),
         });
     }
-    let (v2, v3) = bytes.split_at(bytes.len().min(SETTINGS_V2_BYTES));
+    let (v3, v4) = bytes.split_at(bytes.len().min(SETTINGS_V3_BYTES));
+    let first_plant_distance = match v4 {
+        [] => FirstPlantDistance::DEFAULT,
+        [a, b] => FirstPlantDistance::new(i32::from(u16::from_le_bytes([*a, *b])))?,
+        _ => return Err(length),
+    };
+    let (v2, v3) = v3.split_at(v3.len().min(SETTINGS_V2_BYTES));
     let (v1, tail) = v2.split_at(v2.len().min(SETTINGS_V1_BYTES));
     let tail = if tail.is_empty() { None } else { Some(tail) };
     let (head, cal) = v1.split_at(HEAD_BYTES);
@@ -375,10 +403,11 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
             )
         }
     };
-    let known = if version == SETTINGS_FORMAT_VERSION {
-        FLAG_ENCODER_REVERSED | FLAG_SPEED_FOLLOWING
-    } else {
+    // Bits 1 and 2 are known from format 4 on.
+    let known = if v4.is_empty() {
         FLAG_ENCODER_REVERSED
+    } else {
+        FLAG_ENCODER_REVERSED | FLAG_SPEED_FOLLOWING | FLAG_WORK_SWITCH
     };
     let (drum_encoder_reversed, placement, drive) = match v3.split_first() {
         None => (false, Placement::DistanceLocked, DriveModel::DEFAULT),
@@ -411,6 +440,10 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         drum_encoder_reversed,
         drive,
         placement,
+        work_switch_fitted: v3
+            .first()
+            .is_some_and(|&flags| flags & FLAG_WORK_SWITCH != 0),
+        first_plant_distance,
     })
 }
 
@@ -433,7 +466,9 @@ mod tests {
         // + profile byte + ProfileBConfig::to_bytes (33).
         assert_eq!(SETTINGS_V2_BYTES, 243);
         // + flags byte + DriveModel::to_bytes (3 × u16).
-        assert_eq!(SETTINGS_BYTES, 250);
+        assert_eq!(SETTINGS_V3_BYTES, 250);
+        // + the first-plant distance (u16).
+        assert_eq!(SETTINGS_BYTES, 252);
     }
 
     #[test]
@@ -465,6 +500,8 @@ mod tests {
             drum_encoder_reversed: true,
             drive: DriveModel::new(5811, 875, 600).unwrap(),
             placement: Placement::SpeedFollowing,
+            work_switch_fitted: true,
+            first_plant_distance: FirstPlantDistance::new(1000).unwrap(),
         };
         let b = s.encode();
         // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
@@ -473,10 +510,14 @@ mod tests {
         // Profile B (2) and its parameters.
         assert_eq!(b[209], 2);
         assert_eq!(b[210..243], s.belt.to_bytes());
-        // Flags: encoder reversed (bit 0), speed-following (bit 1); drive
-        // 58.11 r/min = 5811 = 0x16B3, τ 87.5 ms = 875 = 0x036B, dead time
-        // 60 ms = 600 = 0x0258.
-        assert_eq!(b[243..], [3, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02]);
+        // Flags: encoder reversed (bit 0), speed-following (bit 1), work
+        // switch (bit 2); drive 58.11 r/min = 5811 = 0x16B3, τ 87.5 ms = 875
+        // = 0x036B, dead time 60 ms = 600 = 0x0258; first plant 1000 mm =
+        // 0x03E8.
+        assert_eq!(
+            b[243..],
+            [7, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02, 0xE8, 0x03]
+        );
         assert_eq!(decode(&b).unwrap(), s);
     }
 
@@ -503,7 +544,8 @@ mod tests {
             })
         );
         // A version-2 record must be 243 bytes long, a version-3 one 250.
-        let mut v2_long = s.encode();
+        let mut v2_long = [0u8; SETTINGS_V3_BYTES];
+        v2_long.copy_from_slice(&s.encode()[..SETTINGS_V3_BYTES]);
         v2_long[0] = 2;
         assert_eq!(
             decode(&v2_long),
@@ -524,22 +566,62 @@ mod tests {
     }
 
     #[test]
-    fn a_version_3_record_reads_distance_locked_and_knows_no_bit_1() {
-        // Format 3 (before the placement setting): the same 250 bytes, flag
-        // bit 1 undefined. Read with the default placement; bit 1 set is
-        // invalid there, as it was for the firmware that wrote format 3.
+    fn a_version_3_record_reads_distance_locked_without_a_work_switch() {
+        // A record written before the placement setting and the work switch:
+        // version 3, the first 250 bytes; its flags byte knows bit 0 only.
         let s = Settings {
             drum_encoder_reversed: true,
-            spacing: Spacing::new(180).unwrap(),
+            placement: Placement::SpeedFollowing,
+            work_switch_fitted: true,
+            first_plant_distance: FirstPlantDistance::new(350).unwrap(),
             ..Settings::default()
         };
-        let mut v3 = s.encode();
+        let mut v3 = [0u8; SETTINGS_V3_BYTES];
+        v3.copy_from_slice(&s.encode()[..SETTINGS_V3_BYTES]);
         v3[0] = 3;
-        assert_eq!(decode(&v3), Ok(s.clone()));
-        v3[243] = 3;
-        assert_eq!(decode(&v3), Err(SettingsError::Flags(3)));
+        // Bits 1 and 2 are unknown in format 3.
+        assert_eq!(decode(&v3), Err(SettingsError::Flags(7)));
+        v3[243] = 1;
+        assert_eq!(
+            decode(&v3),
+            Ok(Settings {
+                placement: Placement::DistanceLocked,
+                work_switch_fitted: false,
+                first_plant_distance: FirstPlantDistance::DEFAULT,
+                ..s.clone()
+            })
+        );
         // The default placement is distance-locked.
         assert_eq!(Settings::default().placement, Placement::DistanceLocked);
+        // A version-4 record is 252 bytes long.
+        let mut v4_short = v3;
+        v4_short[0] = 4;
+        assert_eq!(
+            decode(&v4_short),
+            Err(SettingsError::Length {
+                expected: 252,
+                found: 250
+            })
+        );
+    }
+
+    #[test]
+    fn rejects_a_first_plant_distance_above_a_metre() {
+        let mut b = Settings::default().encode();
+        // 1001 = 0x03E9.
+        b[250] = 0xE9;
+        b[251] = 0x03;
+        let e = decode(&b).unwrap_err();
+        assert_eq!(
+            e,
+            SettingsError::Param(ParamError {
+                field: Field::FirstPlantDistance,
+                value: 1001
+            })
+        );
+        assert_eq!(std::format!("{e}"), "First plant must be 0.0-100.0 cm");
+        b[250] = 0xE8;
+        assert_eq!(decode(&b).map(|s| s.first_plant_distance.raw()), Ok(1000));
     }
 
     #[test]
@@ -550,7 +632,8 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(243, 4), Err(SettingsError::Flags(4)));
+        assert_eq!(with(243, 8), Err(SettingsError::Flags(8)));
+        assert!(with(243, 4).unwrap().work_switch_fitted);
         assert_eq!(with(243, 0xFF), Err(SettingsError::Flags(0xFF)));
         assert!(with(243, 1).unwrap().drum_encoder_reversed);
         assert_eq!(with(243, 2).unwrap().placement, Placement::SpeedFollowing);
@@ -654,19 +737,19 @@ mod tests {
         assert_eq!(
             decode(&[]),
             Err(SettingsError::Length {
-                expected: 250,
+                expected: 252,
                 found: 0
             })
         );
         assert_eq!(
-            decode(&good[..249]),
+            decode(&good[..251]),
             Err(SettingsError::Length {
-                expected: 250,
-                found: 249
+                expected: 252,
+                found: 251
             })
         );
-        let mut long = [0u8; 251];
-        long[..250].copy_from_slice(&good);
+        let mut long = [0u8; 253];
+        long[..252].copy_from_slice(&good);
         assert!(matches!(decode(&long), Err(SettingsError::Length { .. })));
         // A version-1 record must be 209 bytes long.
         let mut v1_short = good;
@@ -675,7 +758,7 @@ mod tests {
             decode(&v1_short),
             Err(SettingsError::Length {
                 expected: 209,
-                found: 250
+                found: 252
             })
         );
         assert_eq!(
@@ -741,9 +824,24 @@ mod tests {
                 DriveModel::TAU_RANGE,
                 0..=DriveModel::DEAD_TIME_MAX,
             ),
+            (
+                any::<bool>(),
+                FirstPlantDistance::MIN..=FirstPlantDistance::MAX,
+            ),
         )
             .prop_map(
-                |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm), ((rev, sf), n, tau, dead))| {
+                |(
+                    fixed,
+                    sp,
+                    ds,
+                    mc,
+                    g,
+                    br,
+                    (k1, k2, k3),
+                    (b, x_mm),
+                    ((rev, sf), n, tau, dead),
+                    (work, first),
+                )| {
                     Settings {
                         mode: if fixed {
                             Mode::Fixed
@@ -773,6 +871,8 @@ mod tests {
                         } else {
                             Placement::DistanceLocked
                         },
+                        work_switch_fitted: work,
+                        first_plant_distance: FirstPlantDistance::new(i32::from(first)).unwrap(),
                     }
                 },
             )
@@ -787,7 +887,7 @@ mod tests {
         }
 
         #[test]
-        fn decode_arbitrary_bytes_never_panics(b in proptest::collection::vec(any::<u8>(), 0..260)) {
+        fn decode_arbitrary_bytes_never_panics(b in proptest::collection::vec(any::<u8>(), 0..262)) {
             let _ = decode(&b);
         }
 

@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | 0 | 4 | magic [`MAGIC`] = `"TPS1"` |
 //! | 4 | 4 | sequence, u32; the newer record has the higher sequence, compared with wrap-around |
-//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 250 for settings formats 4 and 3; 243 and 209 for formats 2 and 1) |
+//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 252 for settings format 4; 250, 243 and 209 for formats 3, 2 and 1) |
 //! | 10 | 2 | `!n` (guards the length before the CRC is known) |
 //! | 12 | `n` | payload: [`Settings::encode`] |
 //! | 12 + n | 0–3 | zero padding to a multiple of 4 |
@@ -77,7 +77,7 @@
 //!
 //! // The bytes in flash follow the documented layout.
 //! let flash = store.into_inner();
-//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xFA\x00\x05\xFF"); // magic, seq 1, n = 250, !n
+//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xFC\x00\x03\xFF"); // magic, seq 1, n = 252, !n
 //! assert_eq!(flash.0[12], 4); // settings format version
 //! assert_eq!(&flash.0[268..272], b"DONE");
 //! assert_eq!(flash.0[272], 0xFF); // the record ends there
@@ -91,7 +91,7 @@ use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 use crate::crc::Crc32;
 use crate::settings::{
     decode, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION, SETTINGS_V1_BYTES,
-    SETTINGS_V2_BYTES,
+    SETTINGS_V2_BYTES, SETTINGS_V3_BYTES,
 };
 
 /// Record magic at offset 0: `"TPS1"` (transplanter settings, record format 1).
@@ -665,9 +665,13 @@ impl<F: NorFlash> SettingsStore<F> {
         if self.crc(slot, 4, lay.crc_off)? != u32::from_le_bytes(word) {
             return Ok(Slot::Corrupt);
         }
-        // This format (or format 3, same length), format 2 (written before the drive model) or format
-        // 1 (before profile B): the decoder reads all three.
-        if lay.len == SETTINGS_BYTES || lay.len == SETTINGS_V2_BYTES || lay.len == SETTINGS_V1_BYTES
+        // This format, format 3 (written before the work switch), format 2
+        // (before the drive model) or format 1 (before profile B): the
+        // decoder reads all four.
+        if lay.len == SETTINGS_BYTES
+            || lay.len == SETTINGS_V3_BYTES
+            || lay.len == SETTINGS_V2_BYTES
+            || lay.len == SETTINGS_V1_BYTES
         {
             let mut buf = [0u8; SETTINGS_BYTES];
             let payload = buf.get_mut(..lay.len).ok_or(ReadFail::Bounds)?;
@@ -743,7 +747,7 @@ mod tests {
 
     #[test]
     fn f1_layout() {
-        // 250-byte payload, WRITE_SIZE 2: CRC at 12 + 252 = 264, commit at
+        // 252-byte payload, WRITE_SIZE 2: CRC at 12 + 252 = 264, commit at
         // 268, end 272 = 136 half-words.
         let l = layout(SETTINGS_BYTES, 2).unwrap();
         assert_eq!(

@@ -283,6 +283,8 @@ fn settings_b() -> Settings {
         drum_encoder_reversed: true,
         drive: supervisor::drive::DriveModel::new(5000, 400, 200).unwrap(),
         placement: supervisor::settings::Placement::SpeedFollowing,
+        work_switch_fitted: true,
+        first_plant_distance: hmi_proto::screen::FirstPlantDistance::new(250).unwrap(),
     }
 }
 
@@ -426,8 +428,8 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&a).unwrap();
     let only_a = st.into_inner();
     let total = sweep(&only_a, &a, &b);
-    // One erase + 272 bytes / 2 = 136 half-word programs (250-byte payload:
-    // header 12, payload padded to 252, CRC 4, commit 4).
+    // One erase + 272 bytes / 2 = 136 half-word programs (252-byte payload:
+    // header 12, payload 252, CRC 4, commit 4).
     assert_eq!(total, 137);
 
     // 2. X (seq 1) in slot 0, A (seq 2) in slot 1; B overwrites X's slot.
@@ -516,12 +518,12 @@ fn record_bytes_follow_the_documented_layout() {
     assert_eq!(&slot0[..272], &rec[..]);
     assert!(slot0[272..].iter().all(|&b| b == 0xFF));
     assert!(slot_bytes(&f, 1).iter().all(|&b| b == 0xFF));
-    // Header bytes spelled out: "TPS1", seq 1, n = 250 = 0x00FA, !n = 0xFF05.
+    // Header bytes spelled out: "TPS1", seq 1, n = 252 = 0x00FC, !n = 0xFF03.
     assert_eq!(
         &slot0[..12],
-        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xFA, 0x00, 0x05, 0xFF]
+        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xFC, 0x00, 0x03, 0xFF]
     );
-    assert_eq!(SETTINGS_BYTES, 250);
+    assert_eq!(SETTINGS_BYTES, 252);
 }
 
 #[test]
@@ -694,6 +696,8 @@ fn a_record_written_before_profile_b_still_loads() {
         drum_encoder_reversed: false,
         drive: supervisor::drive::DriveModel::DEFAULT,
         placement: supervisor::settings::Placement::DistanceLocked,
+        work_switch_fitted: false,
+        first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
         ..b.clone()
     };
     assert_eq!(
@@ -715,6 +719,42 @@ fn a_record_written_before_profile_b_still_loads() {
 }
 
 #[test]
+fn a_record_written_before_the_work_switch_still_loads() {
+    // Format 3: the first 250 bytes of today's payload, version byte 3,
+    // flags bits 1 and 2 (unknown then) clear. It loads distance-locked,
+    // without a work switch and with the default first-plant distance; the
+    // next save writes format 4.
+    let b = settings_b();
+    let mut v3 = b.encode()[..250].to_vec();
+    v3[0] = 3;
+    v3[243] &= 1;
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 0, &raw_record(5, &v3));
+    let expected = Settings {
+        placement: supervisor::settings::Placement::DistanceLocked,
+        work_switch_fitted: false,
+        first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
+        ..b.clone()
+    };
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: expected,
+            sequence: 5
+        }
+    );
+    let mut st = store(f);
+    assert_eq!(st.save(&b), Ok(6));
+    assert_eq!(
+        boot(&st.into_inner()),
+        Loaded::Saved {
+            settings: b,
+            sequence: 6
+        }
+    );
+}
+
+#[test]
 fn a_record_written_before_the_drive_model_still_loads() {
     // Format 2: the first 243 bytes of today's payload, version byte 2
     // (docs of supervisor::settings). It loads with the encoder forward and
@@ -729,6 +769,8 @@ fn a_record_written_before_the_drive_model_still_loads() {
         drum_encoder_reversed: false,
         drive: supervisor::drive::DriveModel::DEFAULT,
         placement: supervisor::settings::Placement::DistanceLocked,
+        work_switch_fitted: false,
+        first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
         ..b.clone()
     };
     assert_eq!(
@@ -907,9 +949,21 @@ fn settings() -> impl Strategy<Value = Settings> {
         (table(), table(), table()),
         (any::<bool>(), 110u32..=990),
         (any::<bool>(), 1000u16..=9000, 10u16..=5000, 0u16..=2000),
+        (any::<bool>(), 0u16..=1000),
     )
         .prop_map(
-            |(fixed, sp, ds, mc, g, br, (k1, k2, k3), (b, x_mm), (rev, n, tau, dead))| Settings {
+            |(
+                fixed,
+                sp,
+                ds,
+                mc,
+                g,
+                br,
+                (k1, k2, k3),
+                (b, x_mm),
+                (rev, n, tau, dead),
+                (work, first),
+            )| Settings {
                 mode: if fixed {
                     Mode::Fixed
                 } else {
@@ -938,6 +992,9 @@ fn settings() -> impl Strategy<Value = Settings> {
                 } else {
                     supervisor::settings::Placement::DistanceLocked
                 },
+                work_switch_fitted: work,
+                first_plant_distance: hmi_proto::screen::FirstPlantDistance::new(i32::from(first))
+                    .unwrap(),
             },
         )
 }

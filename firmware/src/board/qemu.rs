@@ -89,6 +89,9 @@ static FEED_STEP_BITS: AtomicU32 = AtomicU32::new(0);
 static PLANT_STEP_BITS: AtomicU32 = AtomicU32::new(0);
 /// Stand-in for the stop input pin PB10 (high = contact open = stop).
 static STOP_INPUT_OPEN: AtomicBool = AtomicBool::new(false);
+/// Stand-in for the work switch pin PB11 (low = contact closed = unit
+/// down); the scenario moves it.
+static WORK_SWITCH_CLOSED: AtomicBool = AtomicBool::new(false);
 /// Truth: when the simulated contact opened, and when [`stop_outputs`] made
 /// the outputs safe after it (µs of firmware time).
 static STOP_OPENED_US: AtomicU32 = AtomicU32::new(0);
@@ -110,6 +113,8 @@ pub struct Board {
     pub led: StatusLed,
     /// The stop input (the scenario opens and closes it and pends EXTI15_10).
     pub stop_input: StopInput,
+    /// The work switch (the scenario closes and opens it).
+    pub work_switch: WorkSwitchInput,
     /// The watchdog stand-in.
     pub watchdog: Watchdog,
     /// Profile B's feeding step output stand-in.
@@ -151,10 +156,18 @@ const GATE_PATH_MAX: usize = 32;
 /// to P % (a machine whose calibration is not the paper's); `plant_log=1`
 /// logs every plant the model drops (`sim: plant N at P um`, the main job's
 /// report plots each spacing from them; off by default to keep the long
-/// accelerated runs' logs short); `drive_tau=MS`, `drive_dead=MS` (0–15) and
-/// `drive_nmax=N` (r/min × 100) give the drum another drive than the
-/// default 25 ms / 5 ms / 44.70 r/min (the drive identification's test);
-/// `load=P` sets the seedlings' load droop to P ‰ (`load=0`: an empty belt).
+/// accelerated runs' logs short). The work switch (PB11): `work_down=T`
+/// closes its contact (unit down) at T ms, `work_up=T` opens it; or, by
+/// the simulated machine's true ground position, `work_down_mm=D` and
+/// `work_up_mm=D` (up to four in all, each once; the contact starts open, as an
+/// unwired input reads); `scatter=0` turns the landing scatter alone off
+/// (the figures of the control, without the seedlings' fall) and
+/// `slip_noise=0` the random variation of the track and belt slip around
+/// their means (which no sensor of the machine sees). `drive_tau=MS`,
+/// `drive_dead=MS` (0–15) and `drive_nmax=N` (r/min × 100) give the drum
+/// another drive than the default 25 ms / 5 ms / 44.70 r/min (the drive
+/// identification's test); `load=P` sets the seedlings' load droop to P ‰
+/// (`load=0`: an empty belt).
 #[derive(Default, Clone, Copy)]
 struct Scenario {
     gear: Option<u8>,
@@ -188,7 +201,22 @@ struct Scenario {
     drive_nmax_centi: Option<u32>,
     /// The seedlings' load droop, ‰ (`load=P`).
     load_permille: Option<u32>,
+    /// Work switch changes, packed to keep `init`'s stack small: bit 31
+    /// closed (down), bit 30 the value is ground mm (else firmware ms),
+    /// bits 0–29 the value; 0 = none.
+    work: [u32; 4],
+    /// No landing scatter (`scatter=0`).
+    no_scatter: bool,
+    /// No slip variation (`slip_noise=0`).
+    no_slip_noise: bool,
 }
+
+/// [`Scenario::work`]: the contact closes (unit down).
+const WORK_CLOSED: u32 = 1 << 31;
+/// [`Scenario::work`]: the value is a ground position in mm.
+const WORK_GROUND: u32 = 1 << 30;
+/// [`Scenario::work`]: the value's bits.
+const WORK_VALUE: u32 = WORK_GROUND - 1;
 
 /// Brings up the emulated peripherals. Called once from `init`.
 #[inline(never)]
@@ -265,6 +293,13 @@ pub fn init(dp: pac::Peripherals) -> Board {
     if let Some(pct) = scenario.slip_pct {
         config.track_slip_scale = pct as f32 / 100.0;
     }
+    if scenario.no_scatter {
+        config.plant_scatter_m = 0.0;
+    }
+    if scenario.no_slip_noise {
+        config.track_slip_noise = 0.0;
+        config.belt_slip_noise = 0.0;
+    }
     if scenario.profile_b {
         config.profile = machine_sim::Profile::B;
         // The metrics' target: profile B's default spacing X = 25 cm.
@@ -298,12 +333,14 @@ pub fn init(dp: pac::Peripherals) -> Board {
             now_ms: 0,
             roller_turns_seen: 0,
             stop_watch: StopWatch::default(),
+            work_fired: 0,
             gate,
             gate_in,
         },
         hall: HallCapture,
         led: StatusLed,
         stop_input: StopInput,
+        work_switch: WorkSwitchInput,
         watchdog: Watchdog,
         #[cfg(feature = "profile-b")]
         feed_step: FeedStep,
@@ -400,6 +437,8 @@ pub struct Sensors {
     roller_turns_seen: u32,
     /// Profile B: when the steppers came to rest after the tractor stopped.
     stop_watch: StopWatch,
+    /// The scenario's work switch changes done (bit i: entry i).
+    work_fired: u8,
     /// The lock-step gate: a host FIFO read once per control period.
     gate: Option<usize>,
     /// Screen bytes from the gate, to [`HmiRx`].
@@ -488,6 +527,26 @@ impl Sensors {
             STOP_INPUT_OPEN.store(false, Relaxed);
             pac::NVIC::pend(pac::Interrupt::EXTI15_10);
             defmt::info!("sim: stop input closed");
+        }
+        let ground_mm = (self.machine.ground_position_m() * 1000.0) as u32;
+        for (i, &w) in s.work.iter().enumerate() {
+            let bit = 1u8 << i;
+            let value = w & WORK_VALUE;
+            let now = if w & WORK_GROUND != 0 {
+                ground_mm >= value
+            } else {
+                value <= to
+            };
+            if w != 0 && now && self.work_fired & bit == 0 {
+                self.work_fired |= bit;
+                let closed = w & WORK_CLOSED != 0;
+                WORK_SWITCH_CLOSED.store(closed, Relaxed);
+                defmt::info!(
+                    "sim: work switch {=str} at ground {=u32} mm",
+                    if closed { "closed (down)" } else { "open (up)" },
+                    ground_mm
+                );
+            }
         }
         if due(s.stall, from, to) {
             self.machine.inject_fault(Fault::DrumStall);
@@ -650,6 +709,16 @@ impl StopInput {
 
     /// Nothing to acknowledge (the interrupt was pended by software).
     pub fn clear_interrupt(&mut self) {}
+}
+
+/// The work switch stand-in: PB11's level comes from the scenario.
+pub struct WorkSwitchInput;
+
+impl WorkSwitchInput {
+    /// The contact is closed: the unit is down.
+    pub fn is_closed(&self) -> bool {
+        WORK_SWITCH_CLOSED.load(Relaxed)
+    }
 }
 
 /// Firmware time in µs: the monotonic's milliseconds and SysTick's count
@@ -825,6 +894,23 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"drive_dead" => s.drive_dead_ms = parse_u32(value),
             b"drive_nmax" => s.drive_nmax_centi = parse_u32(value),
             b"load" => s.load_permille = parse_u32(value),
+            b"scatter" => s.no_scatter = value == b"0",
+            b"slip_noise" => s.no_slip_noise = value == b"0",
+            b"work_down" | b"work_up" | b"work_down_mm" | b"work_up_mm" => {
+                let flags = if key.starts_with(b"work_down") {
+                    WORK_CLOSED
+                } else {
+                    0
+                } | if key.ends_with(b"_mm") {
+                    WORK_GROUND
+                } else {
+                    0
+                };
+                let at = parse_u32(value).filter(|&v| v <= WORK_VALUE);
+                if let (Some(slot), Some(at)) = (s.work.iter_mut().find(|x| **x == 0), at) {
+                    *slot = flags | at;
+                }
+            }
             _ => {}
         }
     }

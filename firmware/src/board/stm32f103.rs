@@ -12,6 +12,7 @@
 //! | PA9 / PA10 | USART1 TX/RX, touchscreen, 115200 8N1 |
 //! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable, RS-485 to the motor driver, 9600 8N1 |
 //! | PB10 | stop input: NC contact to ground, internal pull-up (FT pin), EXTI10 on both edges |
+//! | PB11 | work switch: contact to ground closed while the planting unit is down, internal pull-up (FT pin), polled every 10 ms |
 //! | PC13 | status LED (low = on) |
 //!
 //! PA0–PA7 are not 5 V tolerant (datasheet STM32F103xB, Table 5, "FT"
@@ -27,7 +28,7 @@ use kinematics::speed::CaptureExtender;
 use stm32f1xx_hal::{
     afio::AfioExt,
     flash::{self, FlashSize, SectorSize},
-    gpio::{Edge, ExtiPin, Input, Output, PullUp, PushPull, PA1, PB10, PB12, PB13, PC13},
+    gpio::{Edge, ExtiPin, Input, Output, PullUp, PushPull, PA1, PB10, PB11, PB12, PB13, PC13},
     pac::{self, IWDG, TIM1, TIM2, TIM3, USART1, USART2},
     prelude::*,
     rcc,
@@ -75,6 +76,8 @@ pub struct Board {
     pub led: StatusLed,
     /// The stop input (its interrupt is EXTI15_10).
     pub stop_input: StopInput,
+    /// The work switch (polled by the control task).
+    pub work_switch: WorkSwitchInput,
     /// The independent watchdog (running).
     pub watchdog: Watchdog,
     /// Profile B's feeding-motor step output (TIM4 CH1 on PB6), idle. The
@@ -234,6 +237,12 @@ pub fn init(dp: pac::Peripherals) -> Board {
     stop_pin.trigger_on_edge(&mut exti, Edge::RisingFalling);
     stop_pin.enable_interrupt(&mut exti);
     let stop_input = StopInput { pin: stop_pin };
+    // Work switch, PB11 (5 V tolerant): contact to ground, closed while the
+    // planting unit is down, pulled up, so a broken wire reads up (not
+    // planting). Polled, no interrupt.
+    let work_switch = WorkSwitchInput {
+        pin: gpiob.pb11.into_pull_up_input(&mut gpiob.crh),
+    };
 
     Board {
         hmi_tx,
@@ -244,6 +253,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         rs485: Rs485 { tx, rx, de },
         led,
         stop_input,
+        work_switch,
         watchdog,
         #[cfg(feature = "profile-b")]
         feed_step,
@@ -753,6 +763,21 @@ impl StopInput {
     /// Acknowledges the pin's EXTI interrupt.
     pub fn clear_interrupt(&mut self) {
         self.pin.clear_interrupt_pending_bit();
+    }
+}
+
+/// The work switch on PB11: a contact to ground that closes while the
+/// planting unit is down, with the internal pull-up (PB11 is a 5 V
+/// tolerant "FT" pin). An open contact, a cut wire or an unplugged
+/// connector read high: up, not planting (the safe side).
+pub struct WorkSwitchInput {
+    pin: PB11<Input<PullUp>>,
+}
+
+impl WorkSwitchInput {
+    /// The contact is closed (the pin reads low): the unit is down.
+    pub fn is_closed(&self) -> bool {
+        self.pin.is_low()
     }
 }
 

@@ -1,0 +1,201 @@
+//! Profile A's passes: the work switch (pause and resume) and the live
+//! planting quality, on [`Supervisor`].
+//!
+//! - **Up** ([`Supervisor::set_work_switch`]`(false)`): the drum's target
+//!   ramps to rest at [`WORK_RAMP_RPM_PER_S`] — a controlled stop under the
+//!   speed loop, not the stop input's (outputs off, the drum coasts) — and
+//!   the pass ends: its quality joins the totals, partitions that still
+//!   leave during the ramp are not counted in the quality figures, and the
+//!   belt, at rest, adds no plants to the count. The drum stays *Running*
+//!   (no Start needed to resume).
+//! - **Down** (`true`): a new pass begins at the ground distance of that
+//!   moment, the next partition is asked to leave
+//!   [`Settings::first_plant_distance`](crate::settings::Settings::first_plant_distance)
+//!   further on (`realign_next_plant`), and the drum follows its target
+//!   again.
+//! - **No work switch fitted** (the default,
+//!   [`Settings::work_switch_fitted`](crate::settings::Settings::work_switch_fitted)
+//!   off): the unit counts as always down; a pass runs from Start to Stop.
+//!
+//! The quality figures ([`crate::quality`]) take every partition that left
+//! with the unit down, at the ground distance of that moment.
+
+use fuzzy_pid::I16F16;
+
+use crate::control::{RunState, Supervisor};
+use crate::quality::{Indices, Quality};
+
+/// The rate at which the drum's target falls to rest when the unit is
+/// lifted, r/min per second: from the rated 25.21 r/min in 0.1 s (the
+/// drum's own time constant is 25 ms, so it follows), in which the belt
+/// moves ≈ 5 mm, a tenth of a partition. Slower ramps drop more seedlings
+/// into the air after the lift; the stop input's stop (PWM off, coasting) is
+/// faster still but uncontrolled.
+pub const WORK_RAMP_RPM_PER_S: u32 = 250;
+
+/// The work switch's state on [`Supervisor`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Work {
+    /// The last state given to [`Supervisor::set_work_switch`].
+    switch_down: bool,
+    /// The ramp's ceiling on the target, r/min (follows the target while
+    /// down).
+    cap: I16F16,
+    /// After a lowering: the drum waits at rest until this ground distance
+    /// (µm), or `u64::MAX` (no wait).
+    hold_until_um: u64,
+}
+
+impl Work {
+    /// Up (a fitted switch must prove closed first).
+    pub const fn new() -> Self {
+        Self {
+            switch_down: false,
+            cap: I16F16::ZERO,
+            hold_until_um: u64::MAX,
+        }
+    }
+}
+
+impl Default for Work {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Supervisor {
+    /// Whether the planting unit counts as down: the work switch says so,
+    /// or none is fitted.
+    pub fn unit_down(&self) -> bool {
+        self.work.switch_down || !self.settings().work_switch_fitted
+    }
+
+    /// The work switch's debounced state ([`crate::work_switch`]): `true`
+    /// when the planting unit is down. Ignored (the unit counts as down)
+    /// when no work switch is fitted.
+    pub fn set_work_switch(&mut self, down: bool) {
+        let was = self.unit_down();
+        self.work.switch_down = down;
+        self.unit_changed(was);
+    }
+
+    /// A pass begins or ends if the unit's state changed from `was` while
+    /// running.
+    fn unit_changed(&mut self, was: bool) {
+        let now = self.unit_down();
+        if was == now || self.run_state() != RunState::Running {
+            return;
+        }
+        let ground = self.ground_distance_um();
+        if now {
+            self.quality.begin_pass(ground);
+            // The contact closed one debounce time (30 ms) before the
+            // switch reads down; the drum answers a start one lag later
+            // (its 25 ms time constant and 5 ms dead time): both ≈ 30 ms of
+            // travel, 8.33 µm per m/h.
+            // (u32: 100 km/h, beyond the Hall sensor's 90, is 833 333 µm.)
+            let lag_um = u64::from(
+                self.snapshot()
+                    .travel_speed_kmh_x1000
+                    .min(100_000)
+                    .wrapping_mul(25)
+                    / 3,
+            );
+            let first = u64::from(self.settings().first_plant_distance.raw()).saturating_mul(1000);
+            let at = ground.saturating_sub(lag_um).saturating_add(first);
+            self.realign_next_plant(at);
+            // The belt rests with the next partition `1 − frac` of a pitch
+            // from leaving: at the spacing's ratio that is `(1 − frac)·X` of
+            // ground. The drum waits until then less its lag, so that the
+            // first plant lands near `at` however the lift left the belt;
+            // the distance-locked loop takes up the rest. (Without the wait
+            // the next partition would leave within a pitch of the
+            // lowering whatever `first_plant_distance` says, and the loop's
+            // bounded correction cannot hold the belt back for that long.)
+            // In u32: `left` ≤ 10⁶ (a pitch × 10⁶) and X ≤ 500 mm, so
+            // left · X_mm ≤ 5 · 10⁸; / 1000 gives µm.
+            let left = 1_000_000u32
+                .wrapping_sub(u32::try_from(self.partitions_x1e6() % 1_000_000).unwrap_or(0));
+            let needs =
+                u64::from(left.wrapping_mul(u32::from(self.settings().spacing.raw())) / 1000);
+            let hold = at.saturating_sub(needs).saturating_sub(lag_um);
+            self.work.hold_until_um = if hold > ground { hold } else { u64::MAX };
+        } else {
+            self.quality.end_pass(ground);
+        }
+    }
+
+    /// The work switch fitted or not (page 6): applies at once, as a
+    /// change of the switch would (a pass begins or ends).
+    pub(crate) fn set_work_switch_fitted(&mut self, fitted: bool) {
+        let was = self.unit_down();
+        self.settings.work_switch_fitted = fitted;
+        self.unit_changed(was);
+    }
+
+    /// Start: the quality figures restart; with the unit down, the first
+    /// pass begins.
+    pub(crate) fn start_planting(&mut self) {
+        let x_um = u32::from(self.settings().spacing.raw()).saturating_mul(1000);
+        self.quality.start(x_um);
+        self.work.cap = I16F16::ZERO;
+        if self.unit_down() {
+            self.quality.begin_pass(0);
+        }
+    }
+
+    /// The drum target under the work switch: unchanged while the unit is
+    /// down; ramping to rest at [`WORK_RAMP_RPM_PER_S`] while it is up.
+    pub(crate) fn work_ramp(&mut self, target: I16F16, elapsed_us: u32) -> I16F16 {
+        if self.unit_down() {
+            let hold = self.work.hold_until_um;
+            if hold != u64::MAX && self.ground_distance_um() < hold {
+                self.work.cap = I16F16::ZERO;
+                return I16F16::ZERO;
+            }
+            self.work.hold_until_um = u64::MAX;
+            self.work.cap = target;
+            return target;
+        }
+        // r/min per period in I16F16 bits: rate · 2¹⁶ · elapsed / 10⁶
+        // (elapsed ≤ 4 periods of 10 ms: 16 384 · 40 000 < 2³²).
+        let step = (WORK_RAMP_RPM_PER_S * 65_536 / 1000).saturating_mul(elapsed_us) / 1000;
+        let step = I16F16::from_bits(i32::try_from(step).unwrap_or(i32::MAX));
+        self.work.cap = self.work.cap.saturating_sub(step).max(I16F16::ZERO);
+        target.min(self.work.cap)
+    }
+
+    /// After a control step: the partitions that left
+    /// ([`Supervisor::plants_left`]) go to the quality figures when the unit
+    /// is down.
+    #[inline(never)]
+    pub(crate) fn count_plants(&mut self) {
+        if !self.unit_down() {
+            return;
+        }
+        let mut at = [0u64; 1];
+        let mut n = 0usize;
+        for (slot, e) in at.iter_mut().zip(self.plants_left()) {
+            *slot = e.ground_distance_um;
+            n = n.saturating_add(1);
+        }
+        for &a in at.iter().take(n) {
+            self.quality.plant(a);
+        }
+    }
+
+    /// The planting quality since Start and of the current pass.
+    pub fn quality(&self) -> &Quality {
+        &self.quality
+    }
+
+    /// The indices since Start, the pass in progress counted up to now.
+    pub fn quality_since_start(&self) -> Indices {
+        self.quality.since_start(self.ground_distance_um())
+    }
+
+    /// The indices of the pass in progress (or of the last one).
+    pub fn quality_of_pass(&self) -> Indices {
+        self.quality.pass_at(self.ground_distance_um())
+    }
+}

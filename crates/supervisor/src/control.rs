@@ -1596,7 +1596,7 @@ impl Supervisor {
             );
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
-        self.count_plants();
+        self.count_plants(partitions_x1e6);
         actuation
     }
 

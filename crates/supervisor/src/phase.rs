@@ -126,6 +126,9 @@ pub struct Phase {
     /// Ground at the last edge, and now (extrapolated), nm.
     ground_edges_nm: u64,
     ground_nm: u64,
+    /// The ground at the end of the last [`Phase::advance_belt`] (the start
+    /// of this step), nm: a partition's ground is interpolated in the step.
+    step_ground_nm: u64,
     /// Belt since Start, nm, and the remainder of its division.
     belt_nm: u64,
     belt_rem: u64,
@@ -161,6 +164,7 @@ impl Phase {
             edge_nm: EDGE_NM,
             ground_edges_nm: 0,
             ground_nm: 0,
+            step_ground_nm: 0,
             belt_nm: 0,
             belt_rem: 0,
             left: 0,
@@ -200,6 +204,7 @@ impl Phase {
             edge_nm: EDGE_NM,
             ground_edges_nm: 0,
             ground_nm: 0,
+            step_ground_nm: 0,
             belt_nm: 0,
             belt_rem: 0,
             left: 0,
@@ -322,8 +327,14 @@ impl Phase {
             .wrapping_mul(u64::from(k3_milli.min(2000)))
             .wrapping_mul(self.belt_q16_per_count)
             .wrapping_add(self.belt_rem);
+        let belt_before = self.belt_nm;
         self.belt_nm = self.belt_nm.saturating_add(acc >> 16);
         self.belt_rem = acc & 0xFFFF;
+        // The step's ground, for interpolating when each partition left
+        // (at the step's end it is up to 10 ms late: 1.4 mm at Low 2, which
+        // the screen's CV would count).
+        let (g0, g1) = (self.step_ground_nm.min(self.ground_nm), self.ground_nm);
+        self.step_ground_nm = g1;
         for _ in 0..MAX_EVENTS {
             let boundary = u64::from(self.left)
                 .saturating_add(1)
@@ -332,7 +343,19 @@ impl Phase {
                 break;
             }
             self.left = self.left.saturating_add(1);
-            let g = self.ground_um();
+            // g0 + (g1 − g0)·(boundary − b0)/(b1 − b0): a step moves the
+            // ground < 2²⁶ nm (67 m/s) and the belt < 2³² nm, so the
+            // product < 2⁵⁸.
+            let g = g0
+                .saturating_add(
+                    g1.saturating_sub(g0)
+                        .min(1 << 26)
+                        .saturating_mul(boundary.saturating_sub(belt_before).min(1 << 32))
+                        .checked_div(self.belt_nm.saturating_sub(belt_before))
+                        .unwrap_or(0),
+                )
+                .min(g1)
+                / 1000;
             if let Some(slot) = self.events.get_mut(usize::from(self.n_events)) {
                 *slot = g;
                 self.n_events = self.n_events.saturating_add(1);

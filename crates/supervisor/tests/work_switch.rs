@@ -104,7 +104,7 @@ fn indices(passes: &[Vec<f64>], x: f64) -> [f64; 5] {
 #[test]
 fn a_lift_pauses_planting_and_the_quality_figures_match_the_drops() {
     // Noiseless: the control alone.
-    lift_and_lower(Config::noiseless());
+    lift_and_lower_cv_tolerance(Config::noiseless(), 0.5);
 }
 
 #[test]
@@ -117,19 +117,25 @@ fn with_terrain_load_and_sensor_noise_the_quality_figures_still_match_the_drops(
     // the encoder with the drum: a slip change moves the true plant against
     // the measured ground unseen). With those on, the drops' CV here is
     // 1.1 % against the firmware's 0.6 %: that difference is the slip's,
-    // not the figures'.
-    lift_and_lower(Config {
-        plant_scatter_m: 0.0,
-        track_slip_noise: 0.0,
-        belt_slip_noise: 0.0,
-        ..Config::default()
-    });
+    // not the figures'. With the distance-locked loop (issue 19) the drum
+    // follows the Hall-edge ground, whose between-edge steps show in the
+    // drops' CV (1.36 %) but not in the ∫V1 dt ground the figures use
+    // (0.7 %): the CV gets 1 point here, the other indices 0.5.
+    lift_and_lower_cv_tolerance(
+        Config {
+            plant_scatter_m: 0.0,
+            track_slip_noise: 0.0,
+            belt_slip_noise: 0.0,
+            ..Config::default()
+        },
+        1.0,
+    );
 }
 
 /// Speed-Adaptive, 7 cm, Low 2; work switch fitted, first plant 100 mm
 /// after the lowering. Start at 2 m (the tractor at speed), lift at 10 m,
 /// lower at 12 m, stop at 20 m.
-fn lift_and_lower(config: Config) {
+fn lift_and_lower_cv_tolerance(config: Config, cv_tolerance: f64) {
     let x = 0.07;
     let settings = Settings {
         mode: Mode::SpeedAdaptive,
@@ -230,8 +236,9 @@ fn lift_and_lower(config: Config) {
     .map(|v| f64::from(v) / 10.0);
     println!("since Start: firmware {got:?} vs drops {want:?}");
     for (i, name) in ["D", "M", "A", "CV", "±10 %"].iter().enumerate() {
+        let tolerance = if *name == "CV" { cv_tolerance } else { 0.5 };
         assert!(
-            (got[i] - want[i]).abs() <= 0.5,
+            (got[i] - want[i]).abs() <= tolerance,
             "{name}: {} vs {}",
             got[i],
             want[i]

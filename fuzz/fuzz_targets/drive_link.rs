@@ -9,9 +9,14 @@ use drive_link::rtu::{self, Request, MAX_FRAME};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    // A frame parse of the raw bytes, as each request kind.
-    let _ = rtu::parse_reply(1, Request::Read { address: 0x20AB, count: 1 }, data);
-    let _ = rtu::parse_reply(1, Request::Write { address: 0x200E, value: 8 }, data);
+    // A frame parse of the raw bytes, as each request kind, and of the
+    // bytes with a valid CRC appended (random bytes rarely carry one).
+    let mut framed = data.to_vec();
+    framed.extend_from_slice(&rtu::crc16(data).to_le_bytes());
+    for bytes in [data, &framed[..]] {
+        let _ = rtu::parse_reply(1, Request::Read { address: 0x20AB, count: 1 }, bytes);
+        let _ = rtu::parse_reply(1, Request::Write { address: 0x200E, value: 8 }, bytes);
+    }
 
     let mut link = Link::new(ZLAC8015D, LinkConfig::for_baud(9600).unwrap());
     let mut now = 0u64;

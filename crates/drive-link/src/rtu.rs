@@ -29,7 +29,7 @@
 use core::fmt;
 
 use crc::{Crc, NoTable, CRC_16_MODBUS};
-use modbus_core::{Encode, Exception, ExceptionResponse, Request as Pdu, Response};
+use modbus_core::{Encode, Request as Pdu, Response};
 
 /// CRC-16/MODBUS, bit at a time (no table in flash; frames are ≤ 9 bytes).
 static CRC_16: Crc<u16, NoTable> = Crc::<u16, NoTable>::new(&CRC_16_MODBUS);
@@ -174,8 +174,16 @@ pub fn parse_reply(slave: u8, request: Request, frame: &[u8]) -> Result<Reply, R
     if id != slave {
         return Err(ReplyError::Slave(id));
     }
-    if let Ok(ExceptionResponse { exception, .. }) = ExceptionResponse::try_from(pdu) {
-        return Err(ReplyError::Exception(exception_code(exception)));
+    // Exceptions decoded here, not by modbus-core: its
+    // `ExceptionResponse::try_from` indexes past a 1-byte PDU with bit 7 set
+    // (`01 80` + CRC panicked; found by `parse_never_panics`).
+    if let Some((&function, rest)) = pdu.split_first() {
+        if function & 0x80 != 0 {
+            return match rest {
+                [code] => Err(ReplyError::Exception(*code)),
+                _ => Err(ReplyError::Mismatch),
+            };
+        }
     }
     let response = Response::try_from(pdu).map_err(|_| ReplyError::Mismatch)?;
     match (request, response) {
@@ -199,20 +207,6 @@ pub fn parse_reply(slave: u8, request: Request, frame: &[u8]) -> Result<Reply, R
             Ok(Reply::Written)
         }
         _ => Err(ReplyError::Mismatch),
-    }
-}
-
-fn exception_code(e: Exception) -> u8 {
-    match e {
-        Exception::IllegalFunction => 1,
-        Exception::IllegalDataAddress => 2,
-        Exception::IllegalDataValue => 3,
-        Exception::ServerDeviceFailure => 4,
-        Exception::Acknowledge => 5,
-        Exception::ServerDeviceBusy => 6,
-        Exception::MemoryParityError => 8,
-        Exception::GatewayPathUnavailable => 0x0A,
-        Exception::GatewayTargetDevice => 0x0B,
     }
 }
 
@@ -397,6 +391,16 @@ mod tests {
             Err(ReplyError::Mismatch)
         );
         assert_eq!(parse_reply(1, read, &[1, 3]), Err(ReplyError::Length(2)));
+        // An exception frame without its code byte (modbus-core's own
+        // exception decoder panicked on it): refused, no panic.
+        assert_eq!(
+            parse_reply(1, read, &frame(&[1, 0x80])),
+            Err(ReplyError::Mismatch)
+        );
+        assert_eq!(
+            parse_reply(1, read, &frame(&[1, 0x83, 2, 9])),
+            Err(ReplyError::Mismatch)
+        );
     }
 
     proptest! {

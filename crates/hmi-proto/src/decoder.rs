@@ -158,6 +158,13 @@ fn scan(bytes: &[u8]) -> Scan {
 /// property test of noise followed by two frames). The screen link adds a
 /// line-quiet rule on top ([`crate::hmi::RX_GAP_MS`]).
 ///
+/// Known limit: while recovering, a frame whose payload ends in `FF` bytes
+/// that themselves complete a shorter valid frame (a `get` number reply of
+/// `…24 FF` holds the return code `24 FF FF FF`) is taken as that shorter
+/// frame — its true end comes one byte later, and the decoder does not wait
+/// for it. Touch events never carry `FF` in their payload; the lost reply is
+/// asked for again by the link.
+///
 /// ```
 /// use hmi_proto::{Decoder, Frame, TouchEvent};
 ///

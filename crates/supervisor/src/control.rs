@@ -1094,17 +1094,13 @@ impl Supervisor {
             }
             Command::AcceptDriveModel => match self.identify_state() {
                 IdentifyState::Done(model) if self.run == RunState::Stopped => {
-                    match self.use_drive(model) {
-                        Ok(()) => {
-                            self.identified = IdentifyState::Idle;
-                            if self.alarm == Some(Alarm::DrumUnstable) {
-                                self.alarm = None;
-                            }
-                            // Persisted at once (the drum is stopped).
-                            Effect::Save
-                        }
-                        Err(_) => Effect::Message("Drive model rejected"),
+                    self.use_drive(model);
+                    self.identified = IdentifyState::Idle;
+                    if self.alarm == Some(Alarm::DrumUnstable) {
+                        self.alarm = None;
                     }
+                    // Persisted at once (the drum is stopped).
+                    Effect::Save
                 }
                 _ => Effect::Message("Identify the drive first"),
             },
@@ -1160,7 +1156,7 @@ impl Supervisor {
         self.phase.set_spacing(settings.spacing.raw());
         self.settings = settings;
         if drive != old {
-            self.use_drive(drive)?;
+            self.use_drive(drive);
         }
         Ok(())
     }
@@ -1658,7 +1654,7 @@ impl Supervisor {
     /// (tests/tests/identify.rs). Every model [`DriveModel`] accepts builds
     /// (`scheduled_configs_build_for_extreme_models`).
     #[inline(never)]
-    fn use_drive(&mut self, model: DriveModel) -> Result<(), Error> {
+    fn use_drive(&mut self, model: DriveModel) {
         self.settings.drive = model;
         self.fallback = false;
         if self.scheduled {
@@ -1666,7 +1662,6 @@ impl Supervisor {
         }
         self.law = DriveLaw::of(&model, self.hw.control_period_us);
         self.monitor = Monitor::default();
-        Ok(())
     }
 
     /// Builds the controller if it is not yet ([`Supervisor::new`]).
@@ -1684,26 +1679,15 @@ impl Supervisor {
     /// one scheduled from the drive model in force (a controller given to
     /// [`Supervisor::with_controller`] is not kept across an
     /// identification).
-    fn restore_controller(&mut self) {
-        let _ = self.rebuild_controller();
-    }
-
-    /// Builds the controller for the drive model in force (or the fallback)
-    /// into `self.drum`; false (and `self.drum` unchanged) if it cannot be
-    /// built.
     #[inline(never)]
-    fn rebuild_controller(&mut self) -> bool {
+    fn restore_controller(&mut self) {
         let config = if self.fallback {
             fallback_config(&self.settings.drive)
         } else {
             scheduled_config(&self.settings.drive, self.hw.control_period_us)
         };
-        match config.build() {
-            Ok(c) => {
-                self.drum = Drum::Control(c);
-                true
-            }
-            Err(_) => false,
+        if let Ok(c) = config.build() {
+            self.drum = Drum::Control(c);
         }
     }
 

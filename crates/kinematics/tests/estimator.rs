@@ -413,3 +413,143 @@ fn a_short_pause_does_not_turn_the_next_real_edges_into_glitches() {
     // A contact bounce 20 ms after a real edge (1/15 of the period).
     assert_eq!(push(20_000, &mut est), EdgeVerdict::Glitch);
 }
+
+/// Edge times of a 25-tooth gear whose tooth `k` sits `pos_err[k]` pitches
+/// off its nominal place, driven at `speed(t)` pitches per second for
+/// `secs` s, integrated in 10 µs steps.
+fn edges_of(speed: &dyn Fn(f64) -> f64, pos_err: &[f64; 25], secs: f64) -> Vec<u32> {
+    let (mut t, mut angle, mut next) = (0.0f64, 0.0f64, 1u64);
+    let mut out = Vec::new();
+    let dt = 1e-5;
+    while t < secs {
+        t += dt;
+        angle += speed(t) * dt;
+        let at = next as f64 + pos_err[(next % 25) as usize];
+        if angle >= at {
+            out.push((t * 1e6) as u32);
+            next += 1;
+        }
+    }
+    out
+}
+
+/// RMS difference (in shares) between the estimator's learned gap shares,
+/// scaled to sum to 25, and the true ones: the gap ending at edge `j` (the
+/// estimator's tooth index `j mod 25`, edge 0 being the first it saw) spans
+/// `1 + e[j] − e[j−1]` pitches.
+fn share_error(est: &MtEstimator, pos_err: &[f64; 25], first_edge: u64) -> f64 {
+    let w: Vec<f64> = est.tooth_weights().map(f64::from).collect();
+    let sum: f64 = w.iter().sum();
+    let mut acc = 0.0;
+    for (k, wk) in w.iter().enumerate() {
+        // Estimator index k ↔ physical edge first_edge + k (mod 25).
+        let j = (first_edge + k as u64) % 25;
+        let truth = 1.0 + pos_err[j as usize] - pos_err[((j + 24) % 25) as usize];
+        acc += (wk * 25.0 / sum - truth).powi(2);
+    }
+    (acc / 25.0).sqrt()
+}
+
+fn position_errors(seed: u64) -> [f64; 25] {
+    // ±2 % of a pitch per tooth, as the machine model's default gear.
+    let mut rng = Rng(seed);
+    let mut e = [0.0; 25];
+    for v in &mut e {
+        *v = 0.02 * rng.sym();
+    }
+    e
+}
+
+/// Tooth learning on a speed that never holds still: the terrain's ±3 %
+/// wander over 8 s at 0.5 km/h (Low 1's pace: a revolution in 4.5 s), the
+/// gear's teeth ±2 % of a pitch off. The shares must be learnt to within
+/// 0.3 % RMS in 400 s (89 revolutions). Before the curvature-gated learning
+/// (the old rule learnt only while the revolution time held within 0.2 %)
+/// nothing was learnt on such a speed: the error stayed the gear's own,
+/// ≈ 1.6 % RMS here.
+#[test]
+fn tooth_shares_are_learnt_while_the_speed_wanders() {
+    for seed in [3u64, 17, 29] {
+        let pos_err = position_errors(seed);
+        let v0 = 0.5 / 3.6 / (std::f64::consts::PI * 0.2 / 25.0); // pitches/s
+        let speed = |t: f64| v0 * (1.0 + 0.03 * (2.0 * std::f64::consts::PI * t / 8.0).sin());
+        let edges = edges_of(&speed, &pos_err, 400.0);
+        let mut est = EstimatorSettings::default().build().unwrap();
+        let mut k = 0;
+        let mut t_update = 100_000u32;
+        for &t in &edges {
+            while t > t_update {
+                est.update(Ticks(t_update));
+                t_update += 100_000;
+            }
+            est.push_edge(Ticks(t));
+            k += 1;
+        }
+        let _ = k;
+        let gear = {
+            let truth: Vec<f64> = (0..25)
+                .map(|j| pos_err[j] - pos_err[(j + 24) % 25])
+                .collect();
+            (truth.iter().map(|d| d * d).sum::<f64>() / 25.0).sqrt()
+        };
+        let err = share_error(&est, &pos_err, 1);
+        println!(
+            "seed {seed}: learnt shares {:.3} % RMS off (the gear's own {:.3} %)",
+            err * 100.0,
+            gear * 100.0
+        );
+        assert!(err <= 0.003, "seed {seed}: {:.3} % RMS", err * 100.0);
+    }
+}
+
+/// On the hills profile's speed steps (±20 % through the chassis' 0.5 s time
+/// constant, one every 3 s) what is learnt must not be worse than learning
+/// nothing (the gear's own error). Measured: 1.01 % and 1.25 % RMS against
+/// the gear's 1.98 % and 1.59 % (without the curvature and slope gates 1.42 %
+/// and 1.28 %: the ±4 % guard alone keeps the worst out here; the gates'
+/// sharp check is `a_speed_change_is_not_learnt_as_tooth_error`, which fails
+/// without them).
+#[test]
+fn speed_steps_are_not_learnt_as_tooth_error() {
+    for seed in [5u64, 23] {
+        let pos_err = position_errors(seed);
+        let v0 = 0.5 / 3.6 / (std::f64::consts::PI * 0.2 / 25.0);
+        // Set points from a fixed sequence of ±20 % steps every 3 s.
+        let mut rng = Rng(seed ^ 0x5eed);
+        let sets: Vec<f64> = (0..200).map(|_| 1.0 + 0.2 * rng.sym()).collect();
+        let speed = move |t: f64| {
+            let i = (t / 3.0) as usize;
+            let (prev, now) = (if i == 0 { 1.0 } else { sets[i - 1] }, sets[i]);
+            let since = t - i as f64 * 3.0;
+            v0 * (now + (prev - now) * (-since / 0.5).exp())
+        };
+        let edges = edges_of(&speed, &pos_err, 400.0);
+        let mut est = EstimatorSettings::default().build().unwrap();
+        let mut t_update = 100_000u32;
+        for &t in &edges {
+            while t > t_update {
+                est.update(Ticks(t_update));
+                t_update += 100_000;
+            }
+            est.push_edge(Ticks(t));
+        }
+        let gear = {
+            let d: Vec<f64> = (0..25)
+                .map(|j| pos_err[j] - pos_err[(j + 24) % 25])
+                .collect();
+            (d.iter().map(|d| d * d).sum::<f64>() / 25.0).sqrt()
+        };
+        let err = share_error(&est, &pos_err, 1);
+        println!(
+            "seed {seed}: learnt shares {:.3} % RMS off (the gear's own {:.3} %)",
+            err * 100.0,
+            gear * 100.0
+        );
+        assert!(
+            err <= gear,
+            "seed {seed}: {:.3} % vs {:.3} %",
+            err * 100.0,
+            gear * 100.0
+        );
+    }
+}

@@ -337,6 +337,8 @@ pub struct Supervisor {
     /// ones and the plausible teeth the estimator dropped), and the time of
     /// the last one.
     teeth: u32,
+    /// The teeth's learned pitches summed, Q16 (wraps; differences only).
+    pitches_q16: u32,
     last_tooth_at: Option<u32>,
     /// Ground distance since Start (∫ V1 dt), µm.
     pub(crate) distance_um: u64,
@@ -786,6 +788,7 @@ impl Supervisor {
             reported: I16F16::ZERO,
             edges: 0,
             teeth: 0,
+            pitches_q16: 0,
             last_tooth_at: None,
             distance_um: 0,
             hall_silence,
@@ -876,6 +879,13 @@ impl Supervisor {
         let gap = self.last_tooth_at.map_or(u32::MAX, |l| t.0.wrapping_sub(l));
         if accepted || gap >= DISTANCE_EDGE_MIN_GAP_US {
             self.teeth = self.teeth.wrapping_add(1);
+            // A tooth the estimator dropped has no learned pitch: nominal.
+            let pitch = if accepted {
+                self.estimator.newest_gap_pitches_q16()
+            } else {
+                1 << 16
+            };
+            self.pitches_q16 = self.pitches_q16.wrapping_add(pitch);
             self.last_tooth_at = Some(t.0);
         }
     }
@@ -923,7 +933,7 @@ impl Supervisor {
             self.stall_us = 0;
             self.distance_um = 0;
             self.belt_counts_k3_milli = 0;
-            self.phase.start(self.teeth);
+            self.phase.start(self.teeth, self.pitches_q16);
             self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
             self.start_planting();
         }
@@ -1444,8 +1454,13 @@ impl Supervisor {
         if self.run == RunState::Running {
             let k1k2 = travel
                 .map(|t| u64::from(t.k1.to_milli()).saturating_mul(u64::from(t.k2.to_milli())));
-            self.phase
-                .advance_ground(self.teeth, m.since_edge_ticks, travel_kmh_x1000, k1k2);
+            self.phase.advance_ground(
+                self.teeth,
+                self.pitches_q16,
+                m.since_edge_ticks,
+                travel_kmh_x1000,
+                k1k2,
+            );
         }
         self.phase.advance_belt(delta, k3_x1000);
 

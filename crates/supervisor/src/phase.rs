@@ -119,8 +119,10 @@ pub struct Phase {
     l_over_x_q24: u64,
     /// The first Hall edge after Start passed (the origin).
     armed: bool,
-    /// The supervisor's edge counter at the last step.
+    /// The supervisor's edge counter and its pitch sum (Q16) at the last
+    /// step.
     edges_seen: u32,
+    pitches_seen_q16: u32,
     /// Distance of one edge at the last known speed, nm.
     edge_nm: u64,
     /// Ground at the last edge, and now (extrapolated), nm.
@@ -161,6 +163,7 @@ impl Phase {
             l_over_x_q24: 0,
             armed: false,
             edges_seen: 0,
+            pitches_seen_q16: 0,
             edge_nm: EDGE_NM,
             ground_edges_nm: 0,
             ground_nm: 0,
@@ -190,9 +193,10 @@ impl Phase {
     /// counter. The caller then places the first plant ([`Phase::realign`]
     /// with [`first_plant_place_um`]).
     #[inline(never)]
-    pub fn start(&mut self, edges: u32) {
+    pub fn start(&mut self, edges: u32, pitches_q16: u32) {
         *self = Self {
             edges_seen: edges,
+            pitches_seen_q16: pitches_q16,
             ..Self::new_like(self)
         };
     }
@@ -201,6 +205,7 @@ impl Phase {
         Self {
             armed: false,
             edges_seen: 0,
+            pitches_seen_q16: 0,
             edge_nm: EDGE_NM,
             ground_edges_nm: 0,
             ground_nm: 0,
@@ -272,7 +277,11 @@ impl Phase {
         self.n_events = 0;
     }
 
-    /// Advances the ground: `edges` is the supervisor's edge counter,
+    /// Advances the ground: `edges` is the supervisor's edge counter and
+    /// `pitches_q16` the sum of those edges' learned pitches (Q16: 65 536 a
+    /// nominal pitch; the Hall gear's teeth are not evenly spaced, and the
+    /// speed estimator learns each gap's share of a revolution,
+    /// [`kinematics::speed::MtEstimator::newest_gap_pitches_q16`]),
     /// `since_edge_us` the time since the newest edge, `travel_mh` the
     /// travel speed (m/h) and `k1k2_x1e6` the product of k1 and k2 × 10⁶ at
     /// it (`None` when no speed is known: the last is kept).
@@ -280,6 +289,7 @@ impl Phase {
     pub fn advance_ground(
         &mut self,
         edges: u32,
+        pitches_q16: u32,
         since_edge_us: u32,
         travel_mh: u32,
         k1k2_x1e6: Option<u64>,
@@ -291,11 +301,13 @@ impl Phase {
         }
         let new = edges.wrapping_sub(self.edges_seen);
         self.edges_seen = edges;
-        let mut new = u64::from(new);
+        let mut new_q16 = u64::from(pitches_q16.wrapping_sub(self.pitches_seen_q16));
+        self.pitches_seen_q16 = pitches_q16;
         if !self.armed && new > 0 {
-            // The origin: the first edge counts nothing.
+            // The origin: the first edge counts nothing (of several in the
+            // step, the mean pitch is taken off).
             self.armed = true;
-            new = new.saturating_sub(1);
+            new_q16 = new_q16.saturating_sub(new_q16 / u64::from(new));
             if self.belt_nm > ROLLING_START_NM && !self.pass_started {
                 // Started on the move: the drum ran on the feed-forward
                 // before the origin. Its phase here is kept (the next
@@ -308,10 +320,11 @@ impl Phase {
         if !self.armed {
             return;
         }
-        // new < 2³², edge_nm < 2²⁷: the product < 2⁵⁹.
+        // new_q16 < 2³², edge_nm < 2²⁷: the product < 2⁵⁹; the shift drops
+        // < 1 nm a step.
         self.ground_edges_nm = self
             .ground_edges_nm
-            .saturating_add(new.wrapping_mul(self.edge_nm));
+            .saturating_add(new_q16.wrapping_mul(self.edge_nm) >> 16);
         // m/h · µs = nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶). The
         // time clamped to 16.7 s (beyond any edge at any speed that moves
         // the ground) and the speed to 1000 km/h keep the product < 2⁶¹.
@@ -473,19 +486,19 @@ mod tests {
     #[test]
     fn ground_counts_edges_after_the_origin_and_extrapolates_at_most_one_edge() {
         let mut p = Phase::new(47_200, 70);
-        p.start(7);
+        p.start(7, 7 << 16);
         p.realign(first_plant_place_um(70));
         // First edge: the origin.
-        p.advance_ground(8, 0, 500, Some(1_000_000));
+        p.advance_ground(8, 8 << 16, 0, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 0);
         // 0.5 km/h = 500 m/h for 100 ms = 13 888.9 µm.
-        p.advance_ground(8, 100_000, 500, Some(1_000_000));
+        p.advance_ground(8, 8 << 16, 100_000, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 13_888);
         // A second without an edge: capped at one edge (25 132 µm).
-        p.advance_ground(8, 1_000_000, 500, Some(1_000_000));
+        p.advance_ground(8, 8 << 16, 1_000_000, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 25_132);
         // Two edges at k1·k2 = 0.98: 2 · 25 132 741 · 0.98 = 49 260 172 nm.
-        p.advance_ground(10, 0, 500, Some(980_000));
+        p.advance_ground(10, 10 << 16, 0, 500, Some(980_000));
         assert_eq!(p.ground_um(), 49_260);
     }
 
@@ -494,10 +507,10 @@ mod tests {
         // 47 200 counts per turn at k3 = 1: 219 911 486 / 47 200 =
         // 4659.14 nm per count; 50 mm is 10 731.5 counts.
         let mut p = Phase::new(47_200, 70);
-        p.start(0);
+        p.start(0, 0 << 16);
         p.realign(first_plant_place_um(70));
-        p.advance_ground(1, 0, 0, None);
-        p.advance_ground(2, 0, 0, Some(1_000_000));
+        p.advance_ground(1, 1 << 16, 0, 0, None);
+        p.advance_ground(2, 2 << 16, 0, 0, Some(1_000_000));
         p.clear_events();
         p.advance_belt(10_731, 1000);
         assert_eq!(p.events().count(), 0);

@@ -105,6 +105,8 @@ fn lut_cost(name: &str, inputs: &[(I16F16, I16F16); INPUTS], baseline: u32) {
 /// the stack next to the other frames they would not fit the QEMU board's
 /// 8 KB of RAM, and in two static slots they left too little stack for the
 /// controller's build (the bench failed with a lockup at `pid_step_lut_7x7`).
+// Boxing is not available (no heap); the size difference is the point.
+#[allow(clippy::large_enum_variant)]
 enum Slot {
     Empty,
     Lut(fuzzy_pid::LutController),

@@ -31,13 +31,13 @@
 //! as a running mean of each tooth's first 15 samples and then an IIR of
 //! 1/16, with a ±4 % plausibility guard, and weighs every gap by its learned
 //! share. A sample is taken only when the speed around it is smooth enough
-//! for the centring to hold: the second difference of the rolling revolution
-//! times half a revolution apart within 1 % of a revolution (a share biased
-//! by at most a sixth of that) and those two revolutions within 5 % of each
-//! other. So the shares are learnt on terrain whose speed wanders (±3 % over
-//! 8 s: to 0.05 % RMS in 400 s, tests/estimator.rs), which the earlier rule
-//! (learn only while the revolution time held within 0.2 %) never did on the
-//! machine model's default terrain; a chassis' answer to a speed step is
+//! for the centring to hold: the rolling revolution times a quarter
+//! revolution before and after the centred one in line with it within 1/400
+//! of a revolution (a share biased by at most 0.17 %) and within 2.5 % of
+//! each other. So the shares are learnt on terrain whose speed wanders (±3 %
+//! over 8 s: to 0.03 % RMS in 400 s, tests/estimator.rs), which the earlier
+//! rule (learn only while the revolution time held within 0.2 %) never did on
+//! the machine model's default terrain; a chassis' answer to a speed step is
 //! mostly kept out. Until a tooth has a sample its gap counts as 1/Z. It
 //! assumes no real edge is lost (a lost edge shifts the tooth index; the
 //! table is then dropped and re-learnt). [`MtEstimator::newest_gap_pitches_q16`]
@@ -78,22 +78,24 @@ use fixed::types::U12F20;
 
 /// Largest tooth count the estimator supports.
 pub const MAX_TEETH: usize = 32;
-/// Edge stamps kept: two revolutions of the largest gear and a few (tooth
-/// learning reaches a revolution and a half back from the gap it learns,
-/// which is half a revolution back from the newest edge).
-const RING: usize = 2 * MAX_TEETH + 4;
-/// Tooth learning's gate on the change of acceleration: the second
-/// difference of the rolling revolution time (half a revolution apart)
-/// within 1/100 of it — a share biased by at most a sixth of that, 0.17 %.
-const CURVATURE_GATE: u64 = 100;
-/// Tooth learning's gate on the acceleration: the rolling revolutions half a
-/// revolution before and after the centred one within 1/20 (5 %) of it. A
-/// centred revolution cancels a steady acceleration, but not a step of
-/// speed at the learnt gap, which the second difference cannot see (the
-/// three revolutions are then in line); a chassis' answer to a 20 % step
-/// (the hills profile) exceeds it, the default terrain's wandering speed
-/// mostly does not (measured on the machine model, docs/kinematics.md).
-const SLOPE_GATE: u64 = 20;
+/// Edge stamps kept: a revolution and a half of the largest gear and a few
+/// (tooth learning reaches a revolution and half a revolution back).
+const RING: usize = MAX_TEETH + MAX_TEETH / 2 + 4;
+/// Tooth learning's gate on a change of acceleration: the second difference
+/// of the rolling revolution times a quarter revolution apart within 1/400
+/// of a revolution. A centred revolution's share is biased by about a sixth
+/// of the second difference half a revolution apart (four times this one):
+/// at most 0.17 %.
+const CURVATURE_GATE: u64 = 400;
+/// Tooth learning's gate on the acceleration: the rolling revolutions a
+/// quarter revolution before and after the centred one within 1/40 (2.5 %)
+/// of it. A centred revolution cancels a steady acceleration but not a step
+/// of speed at the learnt gap, which the second difference cannot see (the
+/// three revolutions stay in line across it): a chassis' answer to a step
+/// (the hills profile; tests/estimator.rs, a 10 % rise through 0.5 s) mostly
+/// exceeds this, the default terrain's wandering speed mostly does not
+/// (chosen on the machine model: docs/kinematics.md).
+const SLOPE_GATE: u64 = 40;
 /// A tooth's share is the running mean of its first samples, then an IIR of
 /// this weight (1/16).
 const SHARE_SAMPLES: u8 = 15;
@@ -906,24 +908,24 @@ impl MtEstimator {
     fn learn(&mut self) {
         let z = self.z;
         let half = z / 2;
-        // Each new edge lets one gap be learnt: the gap p = z edges before
-        // the new one (offsets count back from the newest edge), at the
-        // centre of the revolution R(p − half) whose z gaps run from
-        // p − half to p + half. A revolution's time is free of tooth errors,
-        // and centred on the gap it cancels a steady acceleration (the gaps
-        // before the centre lengthen as much as those after shorten). Two
-        // gates keep out most of what it cannot cancel (module docs): a
-        // change of acceleration (the second difference of the revolutions
-        // half a revolution apart, CURVATURE_GATE) and a strong acceleration
-        // (SLOPE_GATE), which also keeps out most steps of speed near the
-        // gap (revolution times stay in line across a step).
+        // Each new edge lets one gap be learnt: the gap p = half + q edges
+        // before it (offsets count back from the newest edge; q a quarter
+        // revolution), at the centre of the revolution R(e), e = p − half,
+        // whose z gaps run from p − half to p + half. A revolution's time is
+        // free of tooth errors, and centred on the gap it cancels a steady
+        // acceleration (the gaps before the centre lengthen as much as those
+        // after shorten). Two gates keep out most of what it cannot cancel
+        // (module docs): a change of acceleration (the second difference of
+        // R(e + q), R(e), R(e − q): CURVATURE_GATE) and a strong acceleration
+        // (R(e + q) against R(e − q): SLOPE_GATE).
         let fresh = self.edges_total.wrapping_sub(self.learned_upto);
         self.learned_upto = self.edges_total;
         let tol = ONE_Q16 / 25; // ±4 %
         for b in 0..usize::try_from(fresh.min(4)).unwrap_or(0) {
-            let p = b.saturating_add(z);
-            // Stamps reach back to p + z.
-            let reach = p.saturating_add(z);
+            let q = half / 2;
+            let p = b.saturating_add(half).saturating_add(q);
+            // R(e + q) reaches back to e + q + z = b + 2q + z.
+            let reach = b.saturating_add(z).saturating_add(q.saturating_mul(2));
             if reach >= RING || u32::try_from(reach).map_or(true, |r| r >= self.valid_run) {
                 break;
             }
@@ -942,7 +944,8 @@ impl MtEstimator {
                     .unsigned_abs()
             };
             let e = p.saturating_sub(half);
-            let (r_before, r_centre, r_after) = (rev(p), rev(e), rev(e.saturating_sub(half)));
+            let (r_before, r_centre, r_after) =
+                (rev(e.saturating_add(q)), rev(e), rev(e.saturating_sub(q)));
             let g = gap(p);
             if r_centre == 0
                 || second(r_before, r_centre, r_after).saturating_mul(CURVATURE_GATE)
@@ -966,7 +969,7 @@ impl MtEstimator {
             let tooth = self
                 .tooth
                 .wrapping_add(z.saturating_mul(2))
-                .wrapping_sub(p % z.max(1))
+                .wrapping_sub(p.checked_rem(z).unwrap_or(0))
                 .checked_rem(z)
                 .unwrap_or(0);
             // A running mean over a tooth's first SHARE_SAMPLES samples, then
@@ -976,9 +979,9 @@ impl MtEstimator {
             let k = u32::from(n).saturating_add(1);
             let w = self.weight(tooth);
             let w = if w_new >= w {
-                w.saturating_add(w_new.saturating_sub(w) / k)
+                w.saturating_add(w_new.saturating_sub(w).checked_div(k).unwrap_or(0))
             } else {
-                w.saturating_sub(w.saturating_sub(w_new) / k)
+                w.saturating_sub(w.saturating_sub(w_new).checked_div(k).unwrap_or(0))
             };
             if let Some(slot) = self.weights.get_mut(tooth) {
                 // Between the old share and `w_new`, both within ±4 %.

@@ -307,7 +307,7 @@ impl Phase {
             // The origin: the first edge counts nothing (of several in the
             // step, the mean pitch is taken off).
             self.armed = true;
-            new_q16 = new_q16.saturating_sub(new_q16 / u64::from(new));
+            new_q16 = new_q16.saturating_sub(new_q16.checked_div(u64::from(new)).unwrap_or(0));
             if self.belt_nm > ROLLING_START_NM && !self.pass_started {
                 // Started on the move: the drum ran on the feed-forward
                 // before the origin. Its phase here is kept (the next
@@ -500,6 +500,29 @@ mod tests {
         // Two edges at k1·k2 = 0.98: 2 · 25 132 741 · 0.98 = 49 260 172 nm.
         p.advance_ground(10, 10 << 16, 0, 500, Some(980_000));
         assert_eq!(p.ground_um(), 49_260);
+    }
+
+    #[test]
+    fn ground_counts_each_edge_at_its_learned_pitch() {
+        // Teeth of a real gear are not evenly spaced: the estimator's learned
+        // shares (Q16 pitches) give each edge its own length.
+        let mut p = Phase::new(47_200, 70);
+        p.start(0, 0);
+        p.realign(first_plant_place_um(70));
+        // The origin (its own pitch, 1.03, counts nothing).
+        p.advance_ground(1, 67_502, 0, 0, Some(1_000_000));
+        assert_eq!(p.ground_um(), 0);
+        // Two edges of 0.98 and 1.01 pitches (64 225 + 66 191 = 130 416 Q16
+        // = 1.989 99 pitches) × 25 132 675 nm (the pitch at k1·k2 = 1 in
+        // advance_ground's Q16 form) = 50 013 778 nm.
+        p.advance_ground(3, 67_502 + 64_225 + 66_191, 0, 0, Some(1_000_000));
+        assert_eq!(p.ground_at_edge_nm() / 1000, 50_013);
+        // Nominal pitches give the edge count × the pitch, as before.
+        let mut n = Phase::new(47_200, 70);
+        n.start(0, 0);
+        n.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000));
+        n.advance_ground(3, 3 << 16, 0, 0, Some(1_000_000));
+        assert_eq!(n.ground_at_edge_nm(), 2 * (1_000_000u64 * 1_647_095 >> 16));
     }
 
     #[test]

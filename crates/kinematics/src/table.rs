@@ -206,6 +206,24 @@ impl CoeffTable {
     /// Parses and validates serialised data; returns the table and the
     /// number of bytes consumed.
     pub fn from_bytes(bytes: &[u8]) -> Result<(Self, usize), TableError> {
+        let mut table = Self::one();
+        let used = table.read_from(bytes)?;
+        Ok((table, used))
+    }
+
+    /// [`CoeffTable::from_bytes`] into `self`, without a second table on the
+    /// stack (the settings are decoded in `init`, on the QEMU board's 4 KB
+    /// stack); returns the number of bytes consumed. On an error `self` is
+    /// the identity table ([`CoeffTable::one`]).
+    pub fn read_from(&mut self, bytes: &[u8]) -> Result<usize, TableError> {
+        let r = self.parse(bytes);
+        if r.is_err() {
+            *self = Self::one();
+        }
+        r
+    }
+
+    fn parse(&mut self, bytes: &[u8]) -> Result<usize, TableError> {
         let (&version, rest) = bytes.split_first().ok_or(TableError::BadLength)?;
         if version != TABLE_FORMAT_VERSION {
             return Err(TableError::BadVersion);
@@ -215,22 +233,32 @@ impl CoeffTable {
         if n > MAX_POINTS {
             return Err(TableError::TooManyPoints);
         }
+        if n == 0 {
+            return Err(TableError::Empty);
+        }
         let body_len = n.checked_mul(POINT_BYTES).ok_or(TableError::BadLength)?;
         let body = rest.get(..body_len).ok_or(TableError::BadLength)?;
-        let mut pts = [TablePoint::new(U16F16::ZERO, Coefficient::ZERO); MAX_POINTS];
-        for (slot, chunk) in pts.iter_mut().zip(body.chunks_exact(POINT_BYTES)) {
+        self.points.clear();
+        for chunk in body.chunks_exact(POINT_BYTES) {
             let mut xb = [0u8; 4];
             let mut kb = [0u8; 4];
             let (xs, ks) = chunk.split_at(4);
             xb.copy_from_slice(xs);
             kb.copy_from_slice(ks);
-            *slot = TablePoint::new(
+            let p = TablePoint::new(
                 U16F16::from_bits(u32::from_le_bytes(xb)),
                 Coefficient::from_bits(u32::from_le_bytes(kb)),
             );
+            // The checks of `new`, point by point.
+            if p.k < K_MIN || p.k > K_MAX {
+                return Err(TableError::CoefficientOutOfRange);
+            }
+            if self.points.last().is_some_and(|last| p.x <= last.x) {
+                return Err(TableError::NotIncreasing);
+            }
+            self.points.push(p).map_err(|_| TableError::TooManyPoints)?;
         }
-        let table = Self::new(pts.get(..n).ok_or(TableError::BadLength)?)?;
-        Ok((table, body_len.saturating_add(2)))
+        Ok(body_len.saturating_add(2))
     }
 }
 

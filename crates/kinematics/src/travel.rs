@@ -158,20 +158,24 @@ impl Calibration {
 
     /// Parses and validates [`Calibration::to_bytes`] output.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, TableError> {
+        let mut cal = Self::paper_defaults();
+        cal.read_from(bytes)?;
+        Ok(cal)
+    }
+
+    /// [`Calibration::from_bytes`] into `self`, table by table in place
+    /// ([`CoeffTable::read_from`]). On an error `self` holds valid tables
+    /// but not the ones asked for: decode into a scratch value.
+    pub fn read_from(&mut self, bytes: &[u8]) -> Result<(), TableError> {
         let (&v, rest) = bytes.split_first().ok_or(TableError::BadLength)?;
         if v != CALIBRATION_FORMAT_VERSION {
             return Err(TableError::BadVersion);
         }
         let mut chunks = rest.chunks_exact(TABLE_BYTES_MAX);
-        let mut next = || -> Result<CoeffTable, TableError> {
-            let c = chunks.next().ok_or(TableError::BadLength)?;
-            CoeffTable::from_bytes(c).map(|(t, _)| t)
-        };
-        Ok(Self {
-            k1: next()?,
-            k2: next()?,
-            k3: next()?,
-        })
+        for table in [&mut self.k1, &mut self.k2, &mut self.k3] {
+            table.read_from(chunks.next().ok_or(TableError::BadLength)?)?;
+        }
+        Ok(())
     }
 }
 

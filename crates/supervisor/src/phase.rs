@@ -522,7 +522,10 @@ mod tests {
         n.start(0, 0);
         n.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000));
         n.advance_ground(3, 3 << 16, 0, 0, Some(1_000_000));
-        assert_eq!(n.ground_at_edge_nm(), 2 * ((1_000_000u64 * 1_647_095) >> 16));
+        assert_eq!(
+            n.ground_at_edge_nm(),
+            2 * ((1_000_000u64 * 1_647_095) >> 16)
+        );
     }
 
     #[test]

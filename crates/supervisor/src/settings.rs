@@ -346,6 +346,34 @@ impl Settings {
 
 /// Parses and validates bytes written by [`Settings::encode`].
 pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
+    let mut settings = Settings::default();
+    decode_into(bytes, &mut settings)?;
+    Ok(settings)
+}
+
+/// [`decode`] into `out`, the calibration tables in place: no second
+/// `Settings` on the stack (the store decodes in `init`, on the QEMU board's
+/// 4 KB stack). On an error `out` holds valid values but not the record's:
+/// decode into a scratch value.
+pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError> {
+    // Every field is written below: this pattern stops compiling when a
+    // field is added, until it is decoded here too.
+    let Settings {
+        mode: _,
+        spacing: _,
+        fixed_drum_speed: _,
+        motor_coefficient: _,
+        gear: _,
+        brightness: _,
+        calibration: _,
+        profile: _,
+        belt: _,
+        drum_encoder_reversed: _,
+        drive: _,
+        placement: _,
+        work_switch_fitted: _,
+        first_plant_distance: _,
+    } = out;
     let length = SettingsError::Length {
         expected: SETTINGS_BYTES,
         found: bytes.len(),
@@ -387,7 +415,9 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
         .map(gear_from_screen)
         .ok_or(SettingsError::Gear(gear))?;
     let brightness = Brightness::new(i32::from(brightness))?;
-    let calibration = Calibration::from_bytes(cal).map_err(SettingsError::Calibration)?;
+    out.calibration
+        .read_from(cal)
+        .map_err(SettingsError::Calibration)?;
     let (profile, belt) = match tail.and_then(|t| t.split_first()) {
         None => (Profile::DrumBelt, ProfileBConfig::default()),
         Some((&p, belt)) => {
@@ -427,24 +457,22 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
             )
         }
     };
-    Ok(Settings {
-        mode,
-        spacing,
-        fixed_drum_speed,
-        motor_coefficient,
-        gear,
-        brightness,
-        calibration,
-        profile,
-        belt,
-        drum_encoder_reversed,
-        drive,
-        placement,
-        work_switch_fitted: v3
-            .first()
-            .is_some_and(|&flags| flags & FLAG_WORK_SWITCH != 0),
-        first_plant_distance,
-    })
+    out.mode = mode;
+    out.spacing = spacing;
+    out.fixed_drum_speed = fixed_drum_speed;
+    out.motor_coefficient = motor_coefficient;
+    out.gear = gear;
+    out.brightness = brightness;
+    out.profile = profile;
+    out.belt = belt;
+    out.drum_encoder_reversed = drum_encoder_reversed;
+    out.drive = drive;
+    out.placement = placement;
+    out.work_switch_fitted = v3
+        .first()
+        .is_some_and(|&flags| flags & FLAG_WORK_SWITCH != 0);
+    out.first_plant_distance = first_plant_distance;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -90,8 +90,8 @@ use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 
 use crate::crc::Crc32;
 use crate::settings::{
-    decode, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION, SETTINGS_V1_BYTES,
-    SETTINGS_V2_BYTES, SETTINGS_V3_BYTES,
+    decode_into, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION,
+    SETTINGS_V1_BYTES, SETTINGS_V2_BYTES, SETTINGS_V3_BYTES,
 };
 
 /// Record magic at offset 0: `"TPS1"` (transplanter settings, record format 1).
@@ -299,19 +299,21 @@ impl<E> From<E> for StoreError<E> {
     }
 }
 
-/// A slot as read, with the data the store needs.
-// `Valid` carries a whole `Settings` (~220 bytes); there is no heap to box
-// it in, and at most two `Slot`s live at a time, on the stack.
+/// A slot as read, with the data the store needs (`S`: its settings, or
+/// `()` when they went to a caller's value).
+// `Valid` carries a whole `Settings` (~280 bytes); there is no heap to box
+// it in, and at most two `Slot`s live at a time, on the stack (in `save`;
+// `load` decodes into one value of its own).
 #[allow(clippy::large_enum_variant)]
-enum Slot<E> {
+enum Slot<E, S = Settings> {
     Blank,
     Corrupt,
     Unsupported(u32),
-    Valid(u32, Settings),
+    Valid(u32, S),
     Unreadable(E),
 }
 
-impl<E> Slot<E> {
+impl<E, S> Slot<E, S> {
     fn status(&self) -> SlotStatus {
         match self {
             Self::Blank => SlotStatus::Blank,
@@ -412,11 +414,16 @@ impl<F: NorFlash> SettingsStore<F> {
     /// defaults with the reason. Never writes.
     #[inline(never)]
     pub fn load(&mut self) -> Loaded {
-        // Statuses first, then the newest valid slot once more for its
-        // settings: one decoded record on the stack at a time instead of
-        // both slots' plus a copy (this runs in `init`, on the QEMU board's
-        // 4.8 KB stack). Nothing writes the flash in between.
-        let slots = [self.status(0), self.status(1)];
+        // Statuses first, then the newest valid slot once more: each decode
+        // goes into the one `settings` value (in place, table by table), so
+        // no second decoded record is ever on the stack (this runs in
+        // `init`, on the QEMU board's ≈ 4 KB stack). Nothing writes the
+        // flash in between.
+        let mut settings = Settings::default();
+        let slots = [
+            self.scan_into(0, &mut settings).status(),
+            self.scan_into(1, &mut settings).status(),
+        ];
         let newest = slots
             .iter()
             .enumerate()
@@ -426,7 +433,7 @@ impl<F: NorFlash> SettingsStore<F> {
             })
             .reduce(|a, b| if is_newer(b.1, a.1) { b } else { a });
         if let Some((slot, _)) = newest {
-            if let Slot::Valid(sequence, settings) = self.scan(slot) {
+            if let Slot::Valid(sequence, ()) = self.scan_into(slot, &mut settings) {
                 return Loaded::Saved { settings, sequence };
             }
         }
@@ -632,15 +639,33 @@ impl<F: NorFlash> SettingsStore<F> {
         Ok(true)
     }
 
+    /// A slot with its settings (for `save`, which compares them).
     fn scan(&mut self, slot: SlotIndex) -> Slot<F::Error> {
-        match self.try_scan(slot) {
+        let mut settings = Settings::default();
+        match self.scan_into(slot, &mut settings) {
+            Slot::Blank => Slot::Blank,
+            Slot::Corrupt => Slot::Corrupt,
+            Slot::Unsupported(q) => Slot::Unsupported(q),
+            Slot::Valid(q, ()) => Slot::Valid(q, settings),
+            Slot::Unreadable(e) => Slot::Unreadable(e),
+        }
+    }
+
+    /// A slot, its settings decoded into `out` (meaningful only when it is
+    /// `Valid`).
+    fn scan_into(&mut self, slot: SlotIndex, out: &mut Settings) -> Slot<F::Error, ()> {
+        match self.try_scan(slot, out) {
             Ok(s) => s,
             Err(ReadFail::Flash(e)) => Slot::Unreadable(e),
             Err(ReadFail::Bounds) => Slot::Corrupt,
         }
     }
 
-    fn try_scan(&mut self, slot: SlotIndex) -> Result<Slot<F::Error>, ReadFail<F::Error>> {
+    fn try_scan(
+        &mut self,
+        slot: SlotIndex,
+        out: &mut Settings,
+    ) -> Result<Slot<F::Error, ()>, ReadFail<F::Error>> {
         let mut head = [0u8; HEADER_BYTES];
         self.read(slot, 0, &mut head)?;
         let [m0, m1, m2, m3, s0, s1, s2, s3, l0, l1, i0, i1] = head;
@@ -678,7 +703,7 @@ impl<F: NorFlash> SettingsStore<F> {
             || lay.len == SETTINGS_V2_BYTES
             || lay.len == SETTINGS_V1_BYTES
         {
-            return self.decode_slot(slot, sequence, lay.len);
+            return self.decode_slot(slot, sequence, lay.len, out);
         }
         // Another length: a different format version, or garbage.
         let mut version = [0u8; 1];
@@ -696,29 +721,24 @@ impl<F: NorFlash> SettingsStore<F> {
 
 impl<F: NorFlash> SettingsStore<F> {
     /// Reads and decodes the `len` payload bytes of a slot whose record is
-    /// complete (magic, commit word, CRC checked).
+    /// complete (magic, commit word, CRC checked) into `out`. Out of line:
+    /// its buffer must not add to `try_scan`'s frame.
     #[inline(never)]
     fn decode_slot(
         &mut self,
         slot: SlotIndex,
         sequence: u32,
         len: usize,
-    ) -> Result<Slot<F::Error>, ReadFail<F::Error>> {
+        out: &mut Settings,
+    ) -> Result<Slot<F::Error, ()>, ReadFail<F::Error>> {
         let mut buf = [0u8; SETTINGS_BYTES];
         let payload = buf.get_mut(..len).ok_or(ReadFail::Bounds)?;
         self.read(slot, HEADER_BYTES, payload)?;
-        Ok(match decode(payload) {
-            Ok(s) => Slot::Valid(sequence, s),
+        Ok(match decode_into(payload, out) {
+            Ok(()) => Slot::Valid(sequence, ()),
             Err(SettingsError::UnsupportedVersion(_)) => Slot::Unsupported(sequence),
             Err(_) => Slot::Corrupt,
         })
-    }
-
-    /// What a slot holds, without keeping its settings (`load`'s first
-    /// pass: the decoded record stays in this frame).
-    #[inline(never)]
-    fn status(&mut self, slot: SlotIndex) -> SlotStatus {
-        self.scan(slot).status()
     }
 }
 

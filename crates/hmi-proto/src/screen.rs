@@ -385,6 +385,18 @@ impl fmt::Display for ParamError {
     }
 }
 
+/// `raw` if within `min..=max`, else the field's [`ParamError`]: the one
+/// check behind every bounded value's `new` (shared, not repeated per type,
+/// to keep the image small).
+#[inline(never)]
+fn check_range(raw: i32, min: i32, max: i32, field: Field) -> Result<i32, ParamError> {
+    if (min..=max).contains(&raw) {
+        Ok(raw)
+    } else {
+        Err(ParamError { field, value: raw })
+    }
+}
+
 macro_rules! bounded {
     ($(#[$doc:meta])* $name:ident, $t:ty, $field:expr, $min:expr, $max:expr, $default:expr) => {
         $(#[$doc])*
@@ -402,11 +414,10 @@ macro_rules! bounded {
 
             /// Checked construction from the raw (scaled) value.
             pub fn new(raw: i32) -> Result<Self, ParamError> {
-                <$t>::try_from(raw)
-                    .ok()
-                    .filter(|v| (Self::MIN..=Self::MAX).contains(v))
-                    .map(Self)
-                    .ok_or(ParamError { field: $field, value: raw })
+                // Every bound is within 0..=100 000 (below), so it fits an
+                // `i32`, and a value between two bounds fits `$t`.
+                #[allow(clippy::cast_possible_truncation, clippy::cast_possible_wrap, clippy::cast_sign_loss)]
+                check_range(raw, Self::MIN as i32, Self::MAX as i32, $field).map(|v| Self(v as $t))
             }
 
             /// The raw (scaled) value.

@@ -26,6 +26,7 @@
 compile_error!("enable at least one machine: feature `profile-a` or `profile-b`");
 
 mod board;
+mod div64;
 mod mem;
 mod stats;
 

@@ -128,3 +128,37 @@ pub unsafe extern "C" fn memcmp(a: *const u8, b: *const u8, n: usize) -> i32 {
     }
     0
 }
+
+/// `n / d`, and `n % d` into `*rem` when not null: what
+/// `__aeabi_uldivmod` (`compiler_builtins`' AEABI entry, which stays)
+/// calls for every `u64` division ([`crate::div64`]).
+///
+/// # Safety
+/// `rem` null or writable.
+#[no_mangle]
+pub unsafe extern "C" fn __udivmoddi4(n: u64, d: u64, rem: *mut u64) -> u64 {
+    let (q, r) = crate::div64::div_rem_u64(n, d);
+    if !rem.is_null() {
+        // SAFETY: the caller's guarantee.
+        unsafe { rem.write(r) };
+    }
+    q
+}
+
+/// `a / b`, and `a % b` into `*rem`: what `__aeabi_ldivmod` calls for
+/// every `i64` division ([`crate::div64`]).
+///
+/// # Safety
+/// `rem` writable.
+#[no_mangle]
+pub unsafe extern "C" fn __divmoddi4(a: i64, b: i64, rem: *mut i64) -> i64 {
+    let (q, r) = crate::div64::div_rem_i64(a, b, |n, d| {
+        let mut r = 0;
+        // SAFETY: `r` is writable.
+        let q = unsafe { __udivmoddi4(n, d, &mut r) };
+        (q, r)
+    });
+    // SAFETY: the caller's guarantee.
+    unsafe { rem.write(r) };
+    q
+}

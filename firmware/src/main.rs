@@ -719,10 +719,7 @@ mod app {
                 let effect = match cmd {
                     Command::SelectProfile(p) if !built_in(profile_of(p)) => {
                         // Put the screen's selector back as well.
-                        let screen = cx.shared.machine.lock(|m| m.screen_settings());
-                        cx.shared.hmi.lock(|hmi| {
-                            let _ = hmi.set_settings(screen);
-                        });
+                        refresh_settings(cx);
                         Effect::Message(NOT_BUILT_IN)
                     }
                     // Start only with the stop input proven closed; it also
@@ -736,23 +733,16 @@ mod app {
                 match effect {
                     Effect::None => {}
                     Effect::SettingsChanged => {
-                        let screen = cx.shared.machine.lock(|m| m.screen_settings());
-                        cx.shared.hmi.lock(|hmi| {
-                            let _ = hmi.set_settings(screen);
-                        });
+                        refresh_settings(cx);
                     }
                     Effect::Save => {
                         if cx.local.saves_in.try_send(()).is_err() {
-                            cx.shared.hmi.lock(|hmi| {
-                                let _ = hmi.show_message("Save already in progress");
-                            });
+                            say(cx, "Save already in progress");
                         }
                     }
                     Effect::Message(text) => {
                         defmt::warn!("screen message: {=str}", text);
-                        cx.shared.hmi.lock(|hmi| {
-                            let _ = hmi.show_message(text);
-                        });
+                        say(cx, text);
                     }
                     Effect::AlarmCleared => {
                         defmt::info!("alarm acknowledged");
@@ -768,10 +758,7 @@ mod app {
             }
             Event::Connected => {
                 defmt::info!("touchscreen connected");
-                let screen = cx.shared.machine.lock(|m| m.screen_settings());
-                cx.shared.hmi.lock(|hmi| {
-                    let _ = hmi.set_settings(screen);
-                });
+                refresh_settings(cx);
                 // An alarm latched while the screen was away, or before it
                 // restarted, goes back on it.
                 #[cfg(feature = "profile-a")]
@@ -784,9 +771,7 @@ mod app {
                     });
                 }
                 if let Some(notice) = cx.local.boot_notice.take() {
-                    cx.shared.hmi.lock(|hmi| {
-                        let _ = hmi.show_message(notice);
-                    });
+                    say(cx, notice);
                 }
             }
             Event::Disconnected => {
@@ -795,6 +780,25 @@ mod app {
             Event::ScreenError(code) => defmt::warn!("screen error: {}", code),
             Event::ReplyTimeout(field) => defmt::warn!("screen reply timeout: {}", field),
         }
+    }
+
+    /// Shows `text` in the screen's message box (hmi task; one copy of the
+    /// lock for the event handler's messages, to keep the image small).
+    #[inline(never)]
+    fn say(cx: &mut hmi::Context, text: &str) {
+        cx.shared.hmi.lock(|hmi| {
+            let _ = hmi.show_message(text);
+        });
+    }
+
+    /// Writes the machine's settings to the screen (hmi task; what changed
+    /// since the screen last got them).
+    #[inline(never)]
+    fn refresh_settings(cx: &mut hmi::Context) {
+        let screen = cx.shared.machine.lock(|m| m.screen_settings());
+        cx.shared.hmi.lock(|hmi| {
+            let _ = hmi.set_settings(screen);
+        });
     }
 
     /// A change of the work switch, and at a lift the figures of the pass

@@ -38,7 +38,14 @@ defmt::timestamp!("{=u32:ms}", uptime_ms());
 
 /// Milliseconds since boot (the monotonic runs at 1 kHz; wraps after 49 days).
 fn uptime_ms() -> u32 {
-    Mono::now().duration_since_epoch().as_millis()
+    mono_now().duration_since_epoch().as_millis()
+}
+
+/// The monotonic's time. Not inlined: reading it takes a critical section
+/// and an overflow check, ≈ 34 B of code at each of its calls.
+#[inline(never)]
+fn mono_now() -> <Mono as rtic_monotonics::Timebase>::Instant {
+    Mono::now()
 }
 
 /// Control period.
@@ -60,8 +67,8 @@ const EDGE_QUEUE: usize = if cfg!(feature = "board-qemu") { 2 } else { 16 };
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [CAN_RX1, CAN_SCE, ADC1_2])]
 mod app {
     use super::{
-        board, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS, RX_QUEUE,
-        STATUS_LOG_EVERY, STATUS_PERIOD_MS,
+        board, mono_now, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS,
+        RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS,
     };
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
@@ -462,7 +469,7 @@ mod app {
     /// - Budget: 1 ms (measured cost: docs/PERFORMANCE.md).
     #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop])]
     async fn control(mut cx: control::Context) {
-        let mut next = Mono::now();
+        let mut next = mono_now();
         #[cfg(feature = "profile-a")]
         let (mut last_alarm, mut last_run) = (None::<Alarm>, RunState::Stopped);
         // The work switch (PB11), debounced here every period (profile A;
@@ -658,7 +665,7 @@ mod app {
 
             stats::CONTROL_LOOPS.inc();
             next += CONTROL_PERIOD_MS.millis();
-            if Mono::now() > next {
+            if mono_now() > next {
                 stats::CONTROL_OVERRUNS.inc();
             } else {
                 cx.local.watchdog.feed();
@@ -889,7 +896,7 @@ mod app {
     /// - Budget: 2 ms.
     #[task(priority = 1, local = [led, run_limit_ms], shared = [machine, hmi])]
     async fn status(mut cx: status::Context) {
-        let mut next = Mono::now();
+        let mut next = mono_now();
         let mut runs: u32 = 0;
         loop {
             let uptime = uptime_ms();

@@ -255,3 +255,23 @@ fn calibration_round_trips_through_bytes() {
         Err(TableError::CoefficientOutOfRange)
     );
 }
+
+/// `Gear::monitored`/`Gear::actual` (what the firmware links) give each
+/// gear's speeds of paper A Table 11, as the preset table's `f64` columns
+/// print them (rounded to the typed value's resolution).
+#[test]
+fn gear_speed_accessors_match_table_11() {
+    use kinematics::consts::Gear;
+    for gear in Gear::ALL {
+        let p = gear.preset();
+        let to_f64 = |v: kinematics::units::KilometresPerHour| v.to_fixed().to_num::<f64>();
+        assert!(
+            (to_f64(gear.monitored()) - p.monitored_kmh_f64).abs() < 1e-4,
+            "{gear:?}"
+        );
+        assert!(
+            (to_f64(gear.actual()) - p.actual_kmh_f64).abs() < 1e-4,
+            "{gear:?}"
+        );
+    }
+}

@@ -1165,10 +1165,10 @@ impl Supervisor {
     /// gear's monitored (k1) or actual (k2) speed, at the Fixed-mode drum
     /// speed (k3).
     fn hand_set_abscissa(&self) -> U16F16 {
-        let preset = self.settings.gear.preset();
+        let gear = self.settings.gear;
         match self.calibration_kind {
-            CalibrationKind::SpeedK1 => U16F16::saturating_from_num(preset.monitored.to_fixed()),
-            CalibrationKind::SlipK2 => U16F16::saturating_from_num(preset.actual.to_fixed()),
+            CalibrationKind::SpeedK1 => U16F16::saturating_from_num(gear.monitored().to_fixed()),
+            CalibrationKind::SlipK2 => U16F16::saturating_from_num(gear.actual().to_fixed()),
             CalibrationKind::BeltK3 => {
                 U16F16::saturating_from_num(self.settings.fixed_drum_speed.raw())
                     .checked_div_int(100)

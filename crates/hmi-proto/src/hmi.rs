@@ -660,17 +660,16 @@ impl Hmi {
     fn on_value(&mut self, field: Field, raw: i32) {
         match field.validate(raw) {
             Ok(cmd) => {
-                let mut s = self.settings;
+                // In place: a copy of the settings out and back costs ≈ 300 B
+                // of flash.
+                let s = &mut self.settings;
                 match cmd {
                     Command::SetSpacing(v) => s.spacing = v,
                     Command::SetFixedDrumSpeed(v) => s.fixed_drum_speed = v,
                     Command::SetMotorCoefficient(v) => s.motor_coefficient = v,
                     Command::CalibrationActualDistance(v) => s.calibration_distance = v,
                     Command::SetCalibrationCoefficient(v) => s.calibration_coefficient = v,
-                    Command::SetBrightness(v) => {
-                        s.brightness = v;
-                        let _ = self.send(&Instruction::Dims(v.raw()));
-                    }
+                    Command::SetBrightness(v) => s.brightness = v,
                     Command::SetBeltSpacing(v) => s.belt.spacing = v,
                     Command::SetSeedlingPitch(v) => s.belt.seedling_pitch = v,
                     Command::SetClampAngle(v) => s.belt.clamp_angle = v,
@@ -681,7 +680,9 @@ impl Hmi {
                     Command::SetFirstPlantDistance(v) => s.first_plant_distance = v,
                     _ => {}
                 }
-                self.settings = s;
+                if let Command::SetBrightness(v) = cmd {
+                    let _ = self.send(&Instruction::Dims(v.raw()));
+                }
                 let _ = self.show_message("");
                 self.event(Event::Command(cmd));
             }

@@ -420,10 +420,7 @@ impl Hmi {
             self.page_before_alarm = self.page;
         }
         self.show_page(Page::Alarm)?;
-        let cut = text
-            .char_indices()
-            .nth(crate::encoder::MAX_TEXT_LEN)
-            .map_or(text, |(i, _)| text.get(..i).unwrap_or(""));
+        let cut = crate::encoder::first_chars(text, crate::encoder::MAX_TEXT_LEN);
         if let (Ok(t), Some(comp)) = (
             ScreenText::new(cut),
             Component::on_page(Page::Alarm).find(|c| c.role == Role::AlarmText),

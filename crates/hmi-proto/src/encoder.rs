@@ -338,14 +338,18 @@ impl<'a> Instruction<'a> {
             Self::SetText(obj, text) => {
                 c.put(obj.as_str().as_bytes())?;
                 c.put(b".txt=\"")?;
-                for ch in text.as_str().chars() {
-                    match ch {
-                        '"' => c.put(b"\\\"")?,
-                        '\\' => c.put(b"\\\\")?,
-                        '\n' => c.put(b"\\r")?,
-                        ' '..='~' => c.byte(u8::try_from(ch).unwrap_or(b'?'))?,
-                        _ if ch.is_ascii_control() => {}
-                        _ => c.byte(b'?')?,
+                // By bytes (no UTF-8 decoder): a non-ASCII character is one
+                // start byte (0xC0..) and continuation bytes (0x80..0xBF), so
+                // `?` per start byte is `?` per character.
+                for &b in text.as_str().as_bytes() {
+                    match b {
+                        b'"' => c.put(b"\\\"")?,
+                        b'\\' => c.put(b"\\\\")?,
+                        b'\n' => c.put(b"\\r")?,
+                        b' '..=b'~' => c.byte(b)?,
+                        0xC0.. => c.byte(b'?')?,
+                        // ASCII control characters, DEL, continuation bytes.
+                        _ => {}
                     }
                 }
                 c.byte(b'"')?;
@@ -426,6 +430,38 @@ mod tests {
                 .nth(n)
                 .map_or(text.as_str(), |(i, _)| &text[..i]);
             prop_assert_eq!(first_chars(&text, n), reference);
+        }
+    }
+
+    /// The text escaping as it was written per character (`chars()`), the
+    /// reference for the per-byte one.
+    fn escaped_per_char(text: &str) -> std::vec::Vec<u8> {
+        let mut out = b"t0.txt=\"".to_vec();
+        for ch in text.chars() {
+            match ch {
+                '"' => out.extend_from_slice(b"\\\""),
+                '\\' => out.extend_from_slice(b"\\\\"),
+                '\n' => out.extend_from_slice(b"\\r"),
+                ' '..='~' => out.push(ch as u8),
+                _ if ch.is_ascii_control() => {}
+                _ => out.push(b'?'),
+            }
+        }
+        out.extend_from_slice(b"\"\xff\xff\xff");
+        out
+    }
+
+    proptest! {
+        /// Any text up to the limit, ASCII, controls or not: the bytes sent
+        /// are those of the per-character escaping.
+        #[test]
+        fn text_escaping_matches_the_per_character_rules(text in "(\\PC|[\\x00-\\x7f\"\\\\\n]){0,40}") {
+            let obj = super::ObjName::new("t0").unwrap();
+            let ins = super::Instruction::set_text(obj, &text).unwrap();
+            let mut buf = [0u8; super::MAX_INSTRUCTION_LEN];
+            let n = ins.emit(&mut buf).unwrap();
+            let expected = escaped_per_char(&text);
+            prop_assert_eq!(&buf[..n], expected.as_slice());
         }
     }
 

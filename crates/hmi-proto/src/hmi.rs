@@ -63,8 +63,8 @@ use crate::decoder::{Decoder, DecoderStats};
 use crate::encoder::{Attr, BkCmd, Instruction, ScreenText, MAX_INSTRUCTION_LEN};
 use crate::frame::{ErrorCode, Frame, TouchEvent};
 use crate::screen::{
-    page_instructions, status_instructions, Action, Command, Component, Field, MachineProfile,
-    Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
+    component_instruction, page_instructions, status_instructions, Action, Command, Component,
+    Field, MachineProfile, Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
 };
 
 /// Bytes the transmit queue holds (a page refresh plus a message fits: 313
@@ -377,13 +377,14 @@ impl Hmi {
             // change writes every value itself), and page 6's full set
             // twice plus two messages — the profile refusal — would not fit
             // the transmit queue. The version text never changes.
-            let before = page_instructions(self.page, &old, self.version);
-            for (i, ins) in page_instructions(self.page, &self.settings, self.version)
-                .into_iter()
-                .enumerate()
-            {
-                if before.get(i) != Some(&ins) {
-                    self.send(&ins)?;
+            // Component by component (no lists of both versions' page
+            // instructions to compare: smaller in flash and on the stack).
+            for comp in Component::on_page(self.page) {
+                let ins = component_instruction(comp, &self.settings, self.version);
+                if let Some(ins) = ins {
+                    if component_instruction(comp, &old, self.version) != Some(ins) {
+                        self.send(&ins)?;
+                    }
                 }
             }
         }

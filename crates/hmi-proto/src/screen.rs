@@ -1595,36 +1595,47 @@ pub fn page_instructions(
 ) -> heapless::Vec<Instruction<'static>, MAX_PAGE_INSTRUCTIONS> {
     let mut out = heapless::Vec::new();
     for comp in Component::on_page(page) {
-        let ins = match comp.role {
-            Role::Input(f) => Instruction::SetValue(comp.obj(), f.current(settings)),
-            Role::GearLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(settings.gear.label()).unwrap_or(version),
-            ),
-            Role::CalibrationLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(settings.calibration_kind.label()).unwrap_or(version),
-            ),
-            Role::ProfileLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(settings.profile.label()).unwrap_or(version),
-            ),
-            Role::Version => Instruction::SetText(comp.obj(), version),
-            Role::EncoderDirectionLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
-                    .unwrap_or(version),
-            ),
-            Role::WorkSwitchLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(work_switch_label(settings.work_switch_fitted)).unwrap_or(version),
-            ),
-            _ => continue,
-        };
-        // Capacity is checked by a test for every page.
-        let _ = out.push(ins);
+        if let Some(ins) = component_instruction(comp, settings, version) {
+            // Capacity is checked by a test for every page.
+            let _ = out.push(ins);
+        }
     }
     out
+}
+
+/// What [`page_instructions`] writes for one component (`None`: a component
+/// that shows no setting).
+pub(crate) fn component_instruction(
+    comp: &'static Component,
+    settings: &Settings,
+    version: ScreenText<'static>,
+) -> Option<Instruction<'static>> {
+    Some(match comp.role {
+        Role::Input(f) => Instruction::SetValue(comp.obj(), f.current(settings)),
+        Role::GearLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(settings.gear.label()).unwrap_or(version),
+        ),
+        Role::CalibrationLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(settings.calibration_kind.label()).unwrap_or(version),
+        ),
+        Role::ProfileLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(settings.profile.label()).unwrap_or(version),
+        ),
+        Role::Version => Instruction::SetText(comp.obj(), version),
+        Role::EncoderDirectionLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
+                .unwrap_or(version),
+        ),
+        Role::WorkSwitchLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(work_switch_label(settings.work_switch_fitted)).unwrap_or(version),
+        ),
+        _ => return None,
+    })
 }
 
 /// The instructions that show `status` on `page` (only its status

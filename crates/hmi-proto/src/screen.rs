@@ -523,28 +523,63 @@ impl CalibrationCoefficient {
 impl Field {
     /// Validates a raw value read from the screen into the command it asks for.
     pub fn validate(self, raw: i32) -> Result<Command, ParamError> {
+        // One range check for every field (table-driven, to keep the image
+        // small), then the value in its type: within its bounds it fits.
+        let (min, max) = self.bounds();
+        let v = check_range(raw, min, max, self)?;
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let (v8, v16, v32) = (v as u8, v as u16, v as u32);
         Ok(match self {
-            Self::MotorCoefficient => Command::SetMotorCoefficient(MotorCoefficient::new(raw)?),
-            Self::FixedDrumSpeed => Command::SetFixedDrumSpeed(DrumSpeed::new(raw)?),
-            Self::Spacing => Command::SetSpacing(Spacing::new(raw)?),
+            Self::MotorCoefficient => Command::SetMotorCoefficient(MotorCoefficient(v16)),
+            Self::FixedDrumSpeed => Command::SetFixedDrumSpeed(DrumSpeed(v16)),
+            Self::Spacing => Command::SetSpacing(Spacing(v16)),
             Self::CalibrationDistance => {
-                Command::CalibrationActualDistance(CalibrationDistance::new(raw)?)
+                Command::CalibrationActualDistance(CalibrationDistance(v32))
             }
             Self::CalibrationCoefficient => {
-                Command::SetCalibrationCoefficient(CalibrationCoefficient::new(raw)?)
+                Command::SetCalibrationCoefficient(CalibrationCoefficient(v16))
             }
-            Self::Brightness => Command::SetBrightness(Brightness::new(raw)?),
-            Self::BeltSpacing => Command::SetBeltSpacing(BeltSpacing::new(raw)?),
-            Self::SeedlingPitch => Command::SetSeedlingPitch(SeedlingPitch::new(raw)?),
-            Self::ClampAngle => Command::SetClampAngle(ClampAngle::new(raw)?),
-            Self::ClampCount => Command::SetClampCount(ClampCount::new(raw)?),
-            Self::RollerRadius => Command::SetRollerRadius(RollerRadius::new(raw)?),
-            Self::BeltThickness => Command::SetBeltThickness(BeltThickness::new(raw)?),
-            Self::SpeedThreshold => Command::SetSpeedThreshold(SpeedThreshold::new(raw)?),
-            Self::FirstPlantDistance => {
-                Command::SetFirstPlantDistance(FirstPlantDistance::new(raw)?)
-            }
+            Self::Brightness => Command::SetBrightness(Brightness(v8)),
+            Self::BeltSpacing => Command::SetBeltSpacing(BeltSpacing(v16)),
+            Self::SeedlingPitch => Command::SetSeedlingPitch(SeedlingPitch(v16)),
+            Self::ClampAngle => Command::SetClampAngle(ClampAngle(v16)),
+            Self::ClampCount => Command::SetClampCount(ClampCount(v8)),
+            Self::RollerRadius => Command::SetRollerRadius(RollerRadius(v16)),
+            Self::BeltThickness => Command::SetBeltThickness(BeltThickness(v16)),
+            Self::SpeedThreshold => Command::SetSpeedThreshold(SpeedThreshold(v16)),
+            Self::FirstPlantDistance => Command::SetFirstPlantDistance(FirstPlantDistance(v16)),
         })
+    }
+
+    /// The field's accepted raw range (its type's `MIN` and `MAX`).
+    const fn bounds(self) -> (i32, i32) {
+        // Every bound is within 0..=100 000: exact in `i32`.
+        #[allow(clippy::cast_possible_wrap)]
+        match self {
+            Self::MotorCoefficient => (MotorCoefficient::MIN as i32, MotorCoefficient::MAX as i32),
+            Self::FixedDrumSpeed => (DrumSpeed::MIN as i32, DrumSpeed::MAX as i32),
+            Self::Spacing => (Spacing::MIN as i32, Spacing::MAX as i32),
+            Self::CalibrationDistance => (
+                CalibrationDistance::MIN as i32,
+                CalibrationDistance::MAX as i32,
+            ),
+            Self::CalibrationCoefficient => (
+                CalibrationCoefficient::MIN as i32,
+                CalibrationCoefficient::MAX as i32,
+            ),
+            Self::Brightness => (Brightness::MIN as i32, Brightness::MAX as i32),
+            Self::BeltSpacing => (BeltSpacing::MIN as i32, BeltSpacing::MAX as i32),
+            Self::SeedlingPitch => (SeedlingPitch::MIN as i32, SeedlingPitch::MAX as i32),
+            Self::ClampAngle => (ClampAngle::MIN as i32, ClampAngle::MAX as i32),
+            Self::ClampCount => (ClampCount::MIN as i32, ClampCount::MAX as i32),
+            Self::RollerRadius => (RollerRadius::MIN as i32, RollerRadius::MAX as i32),
+            Self::BeltThickness => (BeltThickness::MIN as i32, BeltThickness::MAX as i32),
+            Self::SpeedThreshold => (SpeedThreshold::MIN as i32, SpeedThreshold::MAX as i32),
+            Self::FirstPlantDistance => (
+                FirstPlantDistance::MIN as i32,
+                FirstPlantDistance::MAX as i32,
+            ),
+        }
     }
 
     /// The field's current value in `settings`, raw (as written to the screen).

@@ -63,8 +63,8 @@ use crate::decoder::{Decoder, DecoderStats};
 use crate::encoder::{Attr, BkCmd, Instruction, ScreenText, MAX_INSTRUCTION_LEN};
 use crate::frame::{ErrorCode, Frame, TouchEvent};
 use crate::screen::{
-    component_instruction, page_instructions, status_instructions, Action, Command, Component,
-    Field, MachineProfile, Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
+    component_instruction, status_instructions, Action, Command, Component, Field, MachineProfile,
+    Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
 };
 
 /// Bytes the transmit queue holds (a page refresh plus a message fits: 313
@@ -362,8 +362,12 @@ impl Hmi {
     pub fn show_page(&mut self, page: Page) -> Result<(), TxFull> {
         self.page = page;
         self.send(&Instruction::Page(page.id()))?;
-        for ins in page_instructions(page, &self.settings, self.version) {
-            self.send(&ins)?;
+        // `page_instructions`, component by component (no list on the
+        // stack).
+        for comp in Component::on_page(page) {
+            if let Some(ins) = component_instruction(comp, &self.settings, self.version) {
+                self.send(&ins)?;
+            }
         }
         Ok(())
     }

@@ -275,3 +275,17 @@ fn gear_speed_accessors_match_table_11() {
         );
     }
 }
+
+proptest::proptest! {
+    /// `table_x` (what the firmware uses for a table abscissa) is `fixed`'s
+    /// own saturating conversion to `U16F16` (the reference) for every
+    /// value of the units it is used on.
+    #[test]
+    fn table_x_is_fixeds_saturating_conversion(bits in proptest::prelude::any::<u32>()) {
+        use kinematics::units::{KilometresPerHour, RevPerMin};
+        let v = KilometresPerHour::from_bits(bits);
+        proptest::prop_assert_eq!(v.table_x(), U16F16::saturating_from_num(v.to_fixed()));
+        let n = RevPerMin::from_bits(bits);
+        proptest::prop_assert_eq!(n.table_x(), U16F16::saturating_from_num(n.to_fixed()));
+    }
+}

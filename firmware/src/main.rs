@@ -26,6 +26,8 @@
 compile_error!("enable at least one machine: feature `profile-a` or `profile-b`");
 
 mod board;
+mod div64;
+mod mem;
 mod stats;
 
 use rtic_monotonics::systick::prelude::*;
@@ -36,7 +38,14 @@ defmt::timestamp!("{=u32:ms}", uptime_ms());
 
 /// Milliseconds since boot (the monotonic runs at 1 kHz; wraps after 49 days).
 fn uptime_ms() -> u32 {
-    Mono::now().duration_since_epoch().as_millis()
+    mono_now().duration_since_epoch().as_millis()
+}
+
+/// The monotonic's time. Not inlined: reading it takes a critical section
+/// and an overflow check, ≈ 34 B of code at each of its calls.
+#[inline(never)]
+fn mono_now() -> <Mono as rtic_monotonics::Timebase>::Instant {
+    Mono::now()
 }
 
 /// Control period.
@@ -58,8 +67,8 @@ const EDGE_QUEUE: usize = if cfg!(feature = "board-qemu") { 2 } else { 16 };
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [CAN_RX1, CAN_SCE, ADC1_2])]
 mod app {
     use super::{
-        board, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS, RX_QUEUE,
-        STATUS_LOG_EVERY, STATUS_PERIOD_MS,
+        board, mono_now, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS,
+        RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS,
     };
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
@@ -460,7 +469,7 @@ mod app {
     /// - Budget: 1 ms (measured cost: docs/PERFORMANCE.md).
     #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop])]
     async fn control(mut cx: control::Context) {
-        let mut next = Mono::now();
+        let mut next = mono_now();
         #[cfg(feature = "profile-a")]
         let (mut last_alarm, mut last_run) = (None::<Alarm>, RunState::Stopped);
         // The work switch (PB11), debounced here every period (profile A;
@@ -656,7 +665,7 @@ mod app {
 
             stats::CONTROL_LOOPS.inc();
             next += CONTROL_PERIOD_MS.millis();
-            if Mono::now() > next {
+            if mono_now() > next {
                 stats::CONTROL_OVERRUNS.inc();
             } else {
                 cx.local.watchdog.feed();
@@ -717,10 +726,7 @@ mod app {
                 let effect = match cmd {
                     Command::SelectProfile(p) if !built_in(profile_of(p)) => {
                         // Put the screen's selector back as well.
-                        let screen = cx.shared.machine.lock(|m| m.screen_settings());
-                        cx.shared.hmi.lock(|hmi| {
-                            let _ = hmi.set_settings(screen);
-                        });
+                        refresh_settings(cx);
                         Effect::Message(NOT_BUILT_IN)
                     }
                     // Start only with the stop input proven closed; it also
@@ -734,23 +740,16 @@ mod app {
                 match effect {
                     Effect::None => {}
                     Effect::SettingsChanged => {
-                        let screen = cx.shared.machine.lock(|m| m.screen_settings());
-                        cx.shared.hmi.lock(|hmi| {
-                            let _ = hmi.set_settings(screen);
-                        });
+                        refresh_settings(cx);
                     }
                     Effect::Save => {
                         if cx.local.saves_in.try_send(()).is_err() {
-                            cx.shared.hmi.lock(|hmi| {
-                                let _ = hmi.show_message("Save already in progress");
-                            });
+                            say(cx, "Save already in progress");
                         }
                     }
                     Effect::Message(text) => {
                         defmt::warn!("screen message: {=str}", text);
-                        cx.shared.hmi.lock(|hmi| {
-                            let _ = hmi.show_message(text);
-                        });
+                        say(cx, text);
                     }
                     Effect::AlarmCleared => {
                         defmt::info!("alarm acknowledged");
@@ -766,10 +765,7 @@ mod app {
             }
             Event::Connected => {
                 defmt::info!("touchscreen connected");
-                let screen = cx.shared.machine.lock(|m| m.screen_settings());
-                cx.shared.hmi.lock(|hmi| {
-                    let _ = hmi.set_settings(screen);
-                });
+                refresh_settings(cx);
                 // An alarm latched while the screen was away, or before it
                 // restarted, goes back on it.
                 #[cfg(feature = "profile-a")]
@@ -782,9 +778,7 @@ mod app {
                     });
                 }
                 if let Some(notice) = cx.local.boot_notice.take() {
-                    cx.shared.hmi.lock(|hmi| {
-                        let _ = hmi.show_message(notice);
-                    });
+                    say(cx, notice);
                 }
             }
             Event::Disconnected => {
@@ -793,6 +787,25 @@ mod app {
             Event::ScreenError(code) => defmt::warn!("screen error: {}", code),
             Event::ReplyTimeout(field) => defmt::warn!("screen reply timeout: {}", field),
         }
+    }
+
+    /// Shows `text` in the screen's message box (hmi task; one copy of the
+    /// lock for the event handler's messages, to keep the image small).
+    #[inline(never)]
+    fn say(cx: &mut hmi::Context, text: &str) {
+        cx.shared.hmi.lock(|hmi| {
+            let _ = hmi.show_message(text);
+        });
+    }
+
+    /// Writes the machine's settings to the screen (hmi task; what changed
+    /// since the screen last got them).
+    #[inline(never)]
+    fn refresh_settings(cx: &mut hmi::Context) {
+        let screen = cx.shared.machine.lock(|m| m.screen_settings());
+        cx.shared.hmi.lock(|hmi| {
+            let _ = hmi.set_settings(screen);
+        });
     }
 
     /// A change of the work switch, and at a lift the figures of the pass
@@ -883,7 +896,7 @@ mod app {
     /// - Budget: 2 ms.
     #[task(priority = 1, local = [led, run_limit_ms], shared = [machine, hmi])]
     async fn status(mut cx: status::Context) {
-        let mut next = Mono::now();
+        let mut next = mono_now();
         let mut runs: u32 = 0;
         loop {
             let uptime = uptime_ms();

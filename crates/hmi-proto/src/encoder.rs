@@ -241,7 +241,7 @@ impl<'a> ScreenText<'a> {
 
     /// Checked construction.
     pub fn new(text: &'a str) -> Result<Self, EncodeError> {
-        if text.chars().count() > MAX_TEXT_LEN {
+        if char_count(text) > MAX_TEXT_LEN {
             Err(EncodeError::TextTooLong)
         } else {
             Ok(Self(text))
@@ -252,6 +252,28 @@ impl<'a> ScreenText<'a> {
     pub const fn as_str(&self) -> &'a str {
         self.0
     }
+}
+
+/// The number of characters of `text`: its bytes that start a character
+/// (UTF-8 continuation bytes are `0b10xx_xxxx`). The same count as
+/// `text.chars().count()`, whose unrolled version costs ≈ 300 B of flash.
+pub(crate) fn char_count(text: &str) -> usize {
+    text.bytes().filter(|&b| b & 0xC0 != 0x80).count()
+}
+
+/// `text` cut to its first `n` characters (all of it if shorter): the same
+/// cut as through `char_indices().nth(n)`, without its decoder.
+pub(crate) fn first_chars(text: &str, n: usize) -> &str {
+    let mut seen = 0usize;
+    for (i, b) in text.bytes().enumerate() {
+        if b & 0xC0 != 0x80 {
+            if seen == n {
+                return text.get(..i).unwrap_or("");
+            }
+            seen = seen.wrapping_add(1);
+        }
+    }
+    text
 }
 
 /// One instruction to the screen. Build it, then [`emit`](Self::emit) it.
@@ -316,14 +338,18 @@ impl<'a> Instruction<'a> {
             Self::SetText(obj, text) => {
                 c.put(obj.as_str().as_bytes())?;
                 c.put(b".txt=\"")?;
-                for ch in text.as_str().chars() {
-                    match ch {
-                        '"' => c.put(b"\\\"")?,
-                        '\\' => c.put(b"\\\\")?,
-                        '\n' => c.put(b"\\r")?,
-                        ' '..='~' => c.byte(u8::try_from(ch).unwrap_or(b'?'))?,
-                        _ if ch.is_ascii_control() => {}
-                        _ => c.byte(b'?')?,
+                // By bytes (no UTF-8 decoder): a non-ASCII character is one
+                // start byte (0xC0..) and continuation bytes (0x80..0xBF), so
+                // `?` per start byte is `?` per character.
+                for &b in text.as_str().as_bytes() {
+                    match b {
+                        b'"' => c.put(b"\\\"")?,
+                        b'\\' => c.put(b"\\\\")?,
+                        b'\n' => c.put(b"\\r")?,
+                        b' '..=b'~' => c.byte(b)?,
+                        0xC0.. => c.byte(b'?')?,
+                        // ASCII control characters, DEL, continuation bytes.
+                        _ => {}
                     }
                 }
                 c.byte(b'"')?;
@@ -385,5 +411,65 @@ impl<'a> Instruction<'a> {
         let n = self.emit(&mut buf)?;
         heapless::Vec::from_slice(buf.get(..n).unwrap_or(&[]))
             .map_err(|_| EncodeError::BufferTooSmall)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{char_count, first_chars};
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The byte-level count and cut against the standard library's
+        /// UTF-8 decoder (the reference), on any text, ASCII or not.
+        #[test]
+        fn count_and_cut_match_the_decoder(text in "\\PC{0,60}", n in 0usize..64) {
+            prop_assert_eq!(char_count(&text), text.chars().count());
+            let reference = text
+                .char_indices()
+                .nth(n)
+                .map_or(text.as_str(), |(i, _)| &text[..i]);
+            prop_assert_eq!(first_chars(&text, n), reference);
+        }
+    }
+
+    /// The text escaping as it was written per character (`chars()`), the
+    /// reference for the per-byte one.
+    fn escaped_per_char(text: &str) -> std::vec::Vec<u8> {
+        let mut out = b"t0.txt=\"".to_vec();
+        for ch in text.chars() {
+            match ch {
+                '"' => out.extend_from_slice(b"\\\""),
+                '\\' => out.extend_from_slice(b"\\\\"),
+                '\n' => out.extend_from_slice(b"\\r"),
+                ' '..='~' => out.push(ch as u8),
+                _ if ch.is_ascii_control() => {}
+                _ => out.push(b'?'),
+            }
+        }
+        out.extend_from_slice(b"\"\xff\xff\xff");
+        out
+    }
+
+    proptest! {
+        /// Any text up to the limit, ASCII, controls or not: the bytes sent
+        /// are those of the per-character escaping.
+        #[test]
+        fn text_escaping_matches_the_per_character_rules(text in "(\\PC|[\\x00-\\x7f\"\\\\\n]){0,40}") {
+            let obj = super::ObjName::new("t0").unwrap();
+            let ins = super::Instruction::set_text(obj, &text).unwrap();
+            let mut buf = [0u8; super::MAX_INSTRUCTION_LEN];
+            let n = ins.emit(&mut buf).unwrap();
+            let expected = escaped_per_char(&text);
+            prop_assert_eq!(&buf[..n], expected.as_slice());
+        }
+    }
+
+    #[test]
+    fn multibyte_text_is_counted_in_characters() {
+        // "é" is 2 bytes, "€" 3, "𝄞" 4 (UTF-8, RFC 3629 §3).
+        assert_eq!(char_count("aé€𝄞"), 4);
+        assert_eq!(first_chars("aé€𝄞", 2), "aé");
+        assert_eq!(first_chars("abc", 5), "abc");
     }
 }

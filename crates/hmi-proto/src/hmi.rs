@@ -63,7 +63,7 @@ use crate::decoder::{Decoder, DecoderStats};
 use crate::encoder::{Attr, BkCmd, Instruction, ScreenText, MAX_INSTRUCTION_LEN};
 use crate::frame::{ErrorCode, Frame, TouchEvent};
 use crate::screen::{
-    page_instructions, status_instructions, Action, Command, Component, Field, MachineProfile,
+    component_instruction, status_instructions, Action, Command, Component, Field, MachineProfile,
     Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
 };
 
@@ -362,8 +362,12 @@ impl Hmi {
     pub fn show_page(&mut self, page: Page) -> Result<(), TxFull> {
         self.page = page;
         self.send(&Instruction::Page(page.id()))?;
-        for ins in page_instructions(page, &self.settings, self.version) {
-            self.send(&ins)?;
+        // `page_instructions`, component by component (no list on the
+        // stack).
+        for comp in Component::on_page(page) {
+            if let Some(ins) = component_instruction(comp, &self.settings, self.version) {
+                self.send(&ins)?;
+            }
         }
         Ok(())
     }
@@ -377,13 +381,14 @@ impl Hmi {
             // change writes every value itself), and page 6's full set
             // twice plus two messages — the profile refusal — would not fit
             // the transmit queue. The version text never changes.
-            let before = page_instructions(self.page, &old, self.version);
-            for (i, ins) in page_instructions(self.page, &self.settings, self.version)
-                .into_iter()
-                .enumerate()
-            {
-                if before.get(i) != Some(&ins) {
-                    self.send(&ins)?;
+            // Component by component (no lists of both versions' page
+            // instructions to compare: smaller in flash and on the stack).
+            for comp in Component::on_page(self.page) {
+                let ins = component_instruction(comp, &self.settings, self.version);
+                if let Some(ins) = ins {
+                    if component_instruction(comp, &old, self.version) != Some(ins) {
+                        self.send(&ins)?;
+                    }
                 }
             }
         }
@@ -420,10 +425,7 @@ impl Hmi {
             self.page_before_alarm = self.page;
         }
         self.show_page(Page::Alarm)?;
-        let cut = text
-            .char_indices()
-            .nth(crate::encoder::MAX_TEXT_LEN)
-            .map_or(text, |(i, _)| text.get(..i).unwrap_or(""));
+        let cut = crate::encoder::first_chars(text, crate::encoder::MAX_TEXT_LEN);
         if let (Ok(t), Some(comp)) = (
             ScreenText::new(cut),
             Component::on_page(Page::Alarm).find(|c| c.role == Role::AlarmText),
@@ -660,17 +662,16 @@ impl Hmi {
     fn on_value(&mut self, field: Field, raw: i32) {
         match field.validate(raw) {
             Ok(cmd) => {
-                let mut s = self.settings;
+                // In place: a copy of the settings out and back costs ≈ 300 B
+                // of flash.
+                let s = &mut self.settings;
                 match cmd {
                     Command::SetSpacing(v) => s.spacing = v,
                     Command::SetFixedDrumSpeed(v) => s.fixed_drum_speed = v,
                     Command::SetMotorCoefficient(v) => s.motor_coefficient = v,
                     Command::CalibrationActualDistance(v) => s.calibration_distance = v,
                     Command::SetCalibrationCoefficient(v) => s.calibration_coefficient = v,
-                    Command::SetBrightness(v) => {
-                        s.brightness = v;
-                        let _ = self.send(&Instruction::Dims(v.raw()));
-                    }
+                    Command::SetBrightness(v) => s.brightness = v,
                     Command::SetBeltSpacing(v) => s.belt.spacing = v,
                     Command::SetSeedlingPitch(v) => s.belt.seedling_pitch = v,
                     Command::SetClampAngle(v) => s.belt.clamp_angle = v,
@@ -681,7 +682,9 @@ impl Hmi {
                     Command::SetFirstPlantDistance(v) => s.first_plant_distance = v,
                     _ => {}
                 }
-                self.settings = s;
+                if let Command::SetBrightness(v) = cmd {
+                    let _ = self.send(&Instruction::Dims(v.raw()));
+                }
                 let _ = self.show_message("");
                 self.event(Event::Command(cmd));
             }

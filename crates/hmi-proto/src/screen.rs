@@ -385,6 +385,18 @@ impl fmt::Display for ParamError {
     }
 }
 
+/// `raw` if within `min..=max`, else the field's [`ParamError`]: the one
+/// check behind every bounded value's `new` (shared, not repeated per type,
+/// to keep the image small).
+#[inline(never)]
+fn check_range(raw: i32, min: i32, max: i32, field: Field) -> Result<i32, ParamError> {
+    if (min..=max).contains(&raw) {
+        Ok(raw)
+    } else {
+        Err(ParamError { field, value: raw })
+    }
+}
+
 macro_rules! bounded {
     ($(#[$doc:meta])* $name:ident, $t:ty, $field:expr, $min:expr, $max:expr, $default:expr) => {
         $(#[$doc])*
@@ -402,11 +414,10 @@ macro_rules! bounded {
 
             /// Checked construction from the raw (scaled) value.
             pub fn new(raw: i32) -> Result<Self, ParamError> {
-                <$t>::try_from(raw)
-                    .ok()
-                    .filter(|v| (Self::MIN..=Self::MAX).contains(v))
-                    .map(Self)
-                    .ok_or(ParamError { field: $field, value: raw })
+                // Every bound is within 0..=100 000 (below), so it fits an
+                // `i32`, and a value between two bounds fits `$t`.
+                #[allow(clippy::cast_possible_truncation, clippy::cast_possible_wrap, clippy::cast_sign_loss)]
+                check_range(raw, Self::MIN as i32, Self::MAX as i32, $field).map(|v| Self(v as $t))
             }
 
             /// The raw (scaled) value.
@@ -512,28 +523,63 @@ impl CalibrationCoefficient {
 impl Field {
     /// Validates a raw value read from the screen into the command it asks for.
     pub fn validate(self, raw: i32) -> Result<Command, ParamError> {
+        // One range check for every field (table-driven, to keep the image
+        // small), then the value in its type: within its bounds it fits.
+        let (min, max) = self.bounds();
+        let v = check_range(raw, min, max, self)?;
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let (v8, v16, v32) = (v as u8, v as u16, v as u32);
         Ok(match self {
-            Self::MotorCoefficient => Command::SetMotorCoefficient(MotorCoefficient::new(raw)?),
-            Self::FixedDrumSpeed => Command::SetFixedDrumSpeed(DrumSpeed::new(raw)?),
-            Self::Spacing => Command::SetSpacing(Spacing::new(raw)?),
+            Self::MotorCoefficient => Command::SetMotorCoefficient(MotorCoefficient(v16)),
+            Self::FixedDrumSpeed => Command::SetFixedDrumSpeed(DrumSpeed(v16)),
+            Self::Spacing => Command::SetSpacing(Spacing(v16)),
             Self::CalibrationDistance => {
-                Command::CalibrationActualDistance(CalibrationDistance::new(raw)?)
+                Command::CalibrationActualDistance(CalibrationDistance(v32))
             }
             Self::CalibrationCoefficient => {
-                Command::SetCalibrationCoefficient(CalibrationCoefficient::new(raw)?)
+                Command::SetCalibrationCoefficient(CalibrationCoefficient(v16))
             }
-            Self::Brightness => Command::SetBrightness(Brightness::new(raw)?),
-            Self::BeltSpacing => Command::SetBeltSpacing(BeltSpacing::new(raw)?),
-            Self::SeedlingPitch => Command::SetSeedlingPitch(SeedlingPitch::new(raw)?),
-            Self::ClampAngle => Command::SetClampAngle(ClampAngle::new(raw)?),
-            Self::ClampCount => Command::SetClampCount(ClampCount::new(raw)?),
-            Self::RollerRadius => Command::SetRollerRadius(RollerRadius::new(raw)?),
-            Self::BeltThickness => Command::SetBeltThickness(BeltThickness::new(raw)?),
-            Self::SpeedThreshold => Command::SetSpeedThreshold(SpeedThreshold::new(raw)?),
-            Self::FirstPlantDistance => {
-                Command::SetFirstPlantDistance(FirstPlantDistance::new(raw)?)
-            }
+            Self::Brightness => Command::SetBrightness(Brightness(v8)),
+            Self::BeltSpacing => Command::SetBeltSpacing(BeltSpacing(v16)),
+            Self::SeedlingPitch => Command::SetSeedlingPitch(SeedlingPitch(v16)),
+            Self::ClampAngle => Command::SetClampAngle(ClampAngle(v16)),
+            Self::ClampCount => Command::SetClampCount(ClampCount(v8)),
+            Self::RollerRadius => Command::SetRollerRadius(RollerRadius(v16)),
+            Self::BeltThickness => Command::SetBeltThickness(BeltThickness(v16)),
+            Self::SpeedThreshold => Command::SetSpeedThreshold(SpeedThreshold(v16)),
+            Self::FirstPlantDistance => Command::SetFirstPlantDistance(FirstPlantDistance(v16)),
         })
+    }
+
+    /// The field's accepted raw range (its type's `MIN` and `MAX`).
+    const fn bounds(self) -> (i32, i32) {
+        // Every bound is within 0..=100 000: exact in `i32`.
+        #[allow(clippy::cast_possible_wrap)]
+        match self {
+            Self::MotorCoefficient => (MotorCoefficient::MIN as i32, MotorCoefficient::MAX as i32),
+            Self::FixedDrumSpeed => (DrumSpeed::MIN as i32, DrumSpeed::MAX as i32),
+            Self::Spacing => (Spacing::MIN as i32, Spacing::MAX as i32),
+            Self::CalibrationDistance => (
+                CalibrationDistance::MIN as i32,
+                CalibrationDistance::MAX as i32,
+            ),
+            Self::CalibrationCoefficient => (
+                CalibrationCoefficient::MIN as i32,
+                CalibrationCoefficient::MAX as i32,
+            ),
+            Self::Brightness => (Brightness::MIN as i32, Brightness::MAX as i32),
+            Self::BeltSpacing => (BeltSpacing::MIN as i32, BeltSpacing::MAX as i32),
+            Self::SeedlingPitch => (SeedlingPitch::MIN as i32, SeedlingPitch::MAX as i32),
+            Self::ClampAngle => (ClampAngle::MIN as i32, ClampAngle::MAX as i32),
+            Self::ClampCount => (ClampCount::MIN as i32, ClampCount::MAX as i32),
+            Self::RollerRadius => (RollerRadius::MIN as i32, RollerRadius::MAX as i32),
+            Self::BeltThickness => (BeltThickness::MIN as i32, BeltThickness::MAX as i32),
+            Self::SpeedThreshold => (SpeedThreshold::MIN as i32, SpeedThreshold::MAX as i32),
+            Self::FirstPlantDistance => (
+                FirstPlantDistance::MIN as i32,
+                FirstPlantDistance::MAX as i32,
+            ),
+        }
     }
 
     /// The field's current value in `settings`, raw (as written to the screen).
@@ -1584,36 +1630,47 @@ pub fn page_instructions(
 ) -> heapless::Vec<Instruction<'static>, MAX_PAGE_INSTRUCTIONS> {
     let mut out = heapless::Vec::new();
     for comp in Component::on_page(page) {
-        let ins = match comp.role {
-            Role::Input(f) => Instruction::SetValue(comp.obj(), f.current(settings)),
-            Role::GearLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(settings.gear.label()).unwrap_or(version),
-            ),
-            Role::CalibrationLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(settings.calibration_kind.label()).unwrap_or(version),
-            ),
-            Role::ProfileLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(settings.profile.label()).unwrap_or(version),
-            ),
-            Role::Version => Instruction::SetText(comp.obj(), version),
-            Role::EncoderDirectionLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
-                    .unwrap_or(version),
-            ),
-            Role::WorkSwitchLabel => Instruction::SetText(
-                comp.obj(),
-                ScreenText::new(work_switch_label(settings.work_switch_fitted)).unwrap_or(version),
-            ),
-            _ => continue,
-        };
-        // Capacity is checked by a test for every page.
-        let _ = out.push(ins);
+        if let Some(ins) = component_instruction(comp, settings, version) {
+            // Capacity is checked by a test for every page.
+            let _ = out.push(ins);
+        }
     }
     out
+}
+
+/// What [`page_instructions`] writes for one component (`None`: a component
+/// that shows no setting).
+pub(crate) fn component_instruction(
+    comp: &'static Component,
+    settings: &Settings,
+    version: ScreenText<'static>,
+) -> Option<Instruction<'static>> {
+    Some(match comp.role {
+        Role::Input(f) => Instruction::SetValue(comp.obj(), f.current(settings)),
+        Role::GearLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(settings.gear.label()).unwrap_or(version),
+        ),
+        Role::CalibrationLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(settings.calibration_kind.label()).unwrap_or(version),
+        ),
+        Role::ProfileLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(settings.profile.label()).unwrap_or(version),
+        ),
+        Role::Version => Instruction::SetText(comp.obj(), version),
+        Role::EncoderDirectionLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
+                .unwrap_or(version),
+        ),
+        Role::WorkSwitchLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(work_switch_label(settings.work_switch_fitted)).unwrap_or(version),
+        ),
+        _ => return None,
+    })
 }
 
 /// The instructions that show `status` on `page` (only its status

@@ -182,6 +182,43 @@ fn out_of_range_value_shows_message_and_changes_nothing() {
     assert_eq!(screen.text("tmsg"), Some(""));
 }
 
+/// `Field::validate` (one table-driven range check) gives, for every field
+/// and every raw value around its range, what the field's own type accepts
+/// (`X::new`, whose bounds are the spec's, test below).
+#[test]
+fn validate_agrees_with_each_types_constructor() {
+    let expected = |f: Field, raw: i32| -> Result<Command, ParamError> {
+        Ok(match f {
+            Field::MotorCoefficient => Command::SetMotorCoefficient(MotorCoefficient::new(raw)?),
+            Field::FixedDrumSpeed => Command::SetFixedDrumSpeed(DrumSpeed::new(raw)?),
+            Field::Spacing => Command::SetSpacing(Spacing::new(raw)?),
+            Field::CalibrationDistance => {
+                Command::CalibrationActualDistance(CalibrationDistance::new(raw)?)
+            }
+            Field::CalibrationCoefficient => {
+                Command::SetCalibrationCoefficient(CalibrationCoefficient::new(raw)?)
+            }
+            Field::Brightness => Command::SetBrightness(Brightness::new(raw)?),
+            Field::BeltSpacing => Command::SetBeltSpacing(BeltSpacing::new(raw)?),
+            Field::SeedlingPitch => Command::SetSeedlingPitch(SeedlingPitch::new(raw)?),
+            Field::ClampAngle => Command::SetClampAngle(ClampAngle::new(raw)?),
+            Field::ClampCount => Command::SetClampCount(ClampCount::new(raw)?),
+            Field::RollerRadius => Command::SetRollerRadius(RollerRadius::new(raw)?),
+            Field::BeltThickness => Command::SetBeltThickness(BeltThickness::new(raw)?),
+            Field::SpeedThreshold => Command::SetSpeedThreshold(SpeedThreshold::new(raw)?),
+            Field::FirstPlantDistance => {
+                Command::SetFirstPlantDistance(FirstPlantDistance::new(raw)?)
+            }
+        })
+    };
+    let extremes = [i32::MIN, -65_536, 65_535, 65_536, 65_791, i32::MAX];
+    for f in Field::ALL {
+        for raw in (-2..=100_002).chain(extremes) {
+            assert_eq!(f.validate(raw), expected(f, raw), "{f:?} {raw}");
+        }
+    }
+}
+
 #[test]
 fn validation_ranges_match_the_spec() {
     assert!(Spacing::new(29).is_err() && Spacing::new(30).is_ok());

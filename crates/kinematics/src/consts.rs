@@ -168,6 +168,35 @@ impl Gear {
         }
     }
 
+    /// The speed the Hall sensor monitored in this gear (paper A Table 11):
+    /// `self.preset().monitored`, without linking the whole preset table
+    /// (its `f64` columns are for the host) into an image.
+    #[must_use]
+    pub const fn monitored(self) -> KilometresPerHour {
+        match self {
+            Gear::Low1 => GEAR_PRESETS[0].monitored,
+            Gear::Low2 => GEAR_PRESETS[1].monitored,
+            Gear::Low3 => GEAR_PRESETS[2].monitored,
+            Gear::High1 => GEAR_PRESETS[3].monitored,
+            Gear::High2 => GEAR_PRESETS[4].monitored,
+            Gear::High3 => GEAR_PRESETS[5].monitored,
+        }
+    }
+
+    /// The actual travel speed in this gear (paper A Table 11):
+    /// `self.preset().actual`, as [`Gear::monitored`].
+    #[must_use]
+    pub const fn actual(self) -> KilometresPerHour {
+        match self {
+            Gear::Low1 => GEAR_PRESETS[0].actual,
+            Gear::Low2 => GEAR_PRESETS[1].actual,
+            Gear::Low3 => GEAR_PRESETS[2].actual,
+            Gear::High1 => GEAR_PRESETS[3].actual,
+            Gear::High2 => GEAR_PRESETS[4].actual,
+            Gear::High3 => GEAR_PRESETS[5].actual,
+        }
+    }
+
     /// Parses `low1`, `Low 1`, `LOW-1`, `high3`, … (case and separators ignored).
     #[must_use]
     pub fn parse(s: &str) -> Option<Gear> {

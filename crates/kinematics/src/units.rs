@@ -121,9 +121,11 @@ macro_rules! unit {
                     .map(Self::from_bits)
                     .ok_or(Error::Overflow)
             }
-            /// As a table abscissa (`U16F16`, rounded down, saturating).
-            #[allow(dead_code)]
-            pub(crate) fn table_x(self) -> U16F16 {
+            /// As a table abscissa (`U16F16`, rounded down, saturating): the
+            /// same value as `U16F16::saturating_from_num(self.to_fixed())`,
+            /// without `fixed`'s generic conversion (≈ 0.3 KB of flash).
+            #[must_use]
+            pub fn table_x(self) -> U16F16 {
                 U16F16::from_bits(fx::narrow_bits(self.w(), 16).unwrap_or(u32::MAX))
             }
             /// Saturating at [`Self::MAX`].

@@ -255,3 +255,37 @@ fn calibration_round_trips_through_bytes() {
         Err(TableError::CoefficientOutOfRange)
     );
 }
+
+/// `Gear::monitored`/`Gear::actual` (what the firmware links) give each
+/// gear's speeds of paper A Table 11, as the preset table's `f64` columns
+/// print them (rounded to the typed value's resolution).
+#[test]
+fn gear_speed_accessors_match_table_11() {
+    use kinematics::consts::Gear;
+    for gear in Gear::ALL {
+        let p = gear.preset();
+        let to_f64 = |v: kinematics::units::KilometresPerHour| v.to_fixed().to_num::<f64>();
+        assert!(
+            (to_f64(gear.monitored()) - p.monitored_kmh_f64).abs() < 1e-4,
+            "{gear:?}"
+        );
+        assert!(
+            (to_f64(gear.actual()) - p.actual_kmh_f64).abs() < 1e-4,
+            "{gear:?}"
+        );
+    }
+}
+
+proptest::proptest! {
+    /// `table_x` (what the firmware uses for a table abscissa) is `fixed`'s
+    /// own saturating conversion to `U16F16` (the reference) for every
+    /// value of the units it is used on.
+    #[test]
+    fn table_x_is_fixeds_saturating_conversion(bits in proptest::prelude::any::<u32>()) {
+        use kinematics::units::{KilometresPerHour, RevPerMin};
+        let v = KilometresPerHour::from_bits(bits);
+        proptest::prop_assert_eq!(v.table_x(), U16F16::saturating_from_num(v.to_fixed()));
+        let n = RevPerMin::from_bits(bits);
+        proptest::prop_assert_eq!(n.table_x(), U16F16::saturating_from_num(n.to_fixed()));
+    }
+}

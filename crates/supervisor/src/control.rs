@@ -692,7 +692,10 @@ impl Monitor {
 }
 
 fn rpm_to_fix(n: RevPerMin) -> I16F16 {
-    I16F16::saturating_from_num(n.to_fixed())
+    // U12F20 → I16F16: drop 4 fractional bits (rounding down, as `fixed`'s
+    // conversions); below 4096 r/min it always fits (test
+    // `rpm_to_fix_is_fixeds_conversion`).
+    I16F16::from_bits(i32::try_from(n.to_bits() >> 4).unwrap_or(i32::MAX))
 }
 
 /// `x × 1000`, rounded to nearest (halves up), negative values as 0:
@@ -815,7 +818,12 @@ impl Supervisor {
     }
 
     fn plan_for(settings: &Settings, hw: Hardware) -> Result<DrumPlan, Error> {
-        let spacing = Metres::from_mm(u32::from(settings.spacing.raw()));
+        Self::plan_of(settings.spacing, hw)
+    }
+
+    /// The drum plan of a spacing (all of the settings it depends on).
+    fn plan_of(spacing: screen::Spacing, hw: Hardware) -> Result<DrumPlan, Error> {
+        let spacing = Metres::from_mm(u32::from(spacing.raw()));
         DrumSettings::new(spacing, hw.pwm_arr)
             .build()
             .map_err(|_| Error::DrumPlan)
@@ -994,12 +1002,12 @@ impl Supervisor {
                 Effect::SettingsChanged
             }
             Command::SetSpacing(spacing) => {
-                let mut next = self.settings.clone();
-                next.spacing = spacing;
-                match Self::plan_for(&next, self.hw) {
+                // The plan depends on the spacing alone: no copy of the
+                // settings to try it on (≈ 130 B of flash).
+                match Self::plan_of(spacing, self.hw) {
                     Ok(plan) => {
                         self.plan = plan;
-                        self.settings = next;
+                        self.settings.spacing = spacing;
                         self.phase.set_spacing(spacing.raw());
                         if self.run == RunState::Running {
                             // The new spacing from one spacing ahead.
@@ -1177,10 +1185,10 @@ impl Supervisor {
     /// gear's monitored (k1) or actual (k2) speed, at the Fixed-mode drum
     /// speed (k3).
     fn hand_set_abscissa(&self) -> U16F16 {
-        let preset = self.settings.gear.preset();
+        let gear = self.settings.gear;
         match self.calibration_kind {
-            CalibrationKind::SpeedK1 => U16F16::saturating_from_num(preset.monitored.to_fixed()),
-            CalibrationKind::SlipK2 => U16F16::saturating_from_num(preset.actual.to_fixed()),
+            CalibrationKind::SpeedK1 => gear.monitored().table_x(),
+            CalibrationKind::SlipK2 => gear.actual().table_x(),
             CalibrationKind::BeltK3 => {
                 U16F16::saturating_from_num(self.settings.fixed_drum_speed.raw())
                     .checked_div_int(100)
@@ -1219,7 +1227,7 @@ impl Supervisor {
                 turns.zip(time).and_then(|(turns, time)| {
                     kinematics::calib::k2_from_wheel_turns(turns, distance, time)
                         .ok()
-                        .map(|r| (U16F16::saturating_from_num(r.wheel_speed.to_fixed()), r.k2))
+                        .map(|r| (r.wheel_speed.table_x(), r.k2))
                 })
             }
             CalibrationKind::SpeedK1 => {
@@ -1239,11 +1247,14 @@ impl Supervisor {
                     let corrected = kinematics::units::KilometresPerHour::from_fixed(
                         monitored
                             .to_fixed()
-                            .saturating_mul(fixed::types::U10F22::saturating_from_num(k2)),
+                            // U2F30 → U10F22: drop 8 fractional bits
+                            // (rounding down, as `fixed`'s conversion); k2 < 4
+                            // always fits.
+                            .saturating_mul(fixed::types::U10F22::from_bits(k2.to_bits() >> 8)),
                     );
                     kinematics::calib::k1_from_speeds(actual, corrected)
                         .ok()
-                        .map(|r| (U16F16::saturating_from_num(monitored.to_fixed()), r.k1))
+                        .map(|r| (monitored.table_x(), r.k1))
                 })
             }
             CalibrationKind::BeltK3 => {
@@ -1262,7 +1273,7 @@ impl Supervisor {
                     .and_then(|(n, belt)| {
                         kinematics::calib::k3_from_belt_test(n, belt)
                             .ok()
-                            .map(|r| (U16F16::saturating_from_num(n.to_fixed()), r.k3))
+                            .map(|r| (n.table_x(), r.k3))
                     })
             }
         };
@@ -2005,6 +2016,23 @@ mod tests {
     }
 
     proptest! {
+        /// The shift conversions that replace `fixed`'s generic ones give
+        /// `fixed`'s results (the reference) for every representable value:
+        /// drum speeds U12F20 → I16F16, k2 U2F30 → U10F22, and (machine.rs)
+        /// the clamping angle's whole degrees U16F16 → u32.
+        #[test]
+        fn shift_conversions_are_fixeds_conversions(bits in any::<u32>()) {
+            let n = RevPerMin::from_bits(bits);
+            prop_assert_eq!(rpm_to_fix(n), I16F16::saturating_from_num(n.to_fixed()));
+            let k2 = fixed::types::U2F30::from_bits(bits);
+            prop_assert_eq!(
+                fixed::types::U10F22::from_bits(k2.to_bits() >> 8),
+                fixed::types::U10F22::saturating_from_num(k2)
+            );
+            let angle = U16F16::from_bits(bits);
+            prop_assert_eq!(angle.to_bits() >> 16, angle.to_num::<u32>());
+        }
+
         /// Every `I16F16` the supervisor can hold (the whole type, so any
         /// drum speed up to any `n_max`) against the f64 reference.
         #[test]

@@ -55,7 +55,9 @@ pub fn belt_to_screen(c: &ProfileBConfig) -> screen::BeltSettings {
     screen::BeltSettings {
         spacing: screen::BeltSpacing::new(scaled(s.plant_spacing, 1000)).unwrap_or_default(),
         seedling_pitch: screen::SeedlingPitch::new(scaled(s.belt_pitch, 1000)).unwrap_or_default(),
-        clamp_angle: screen::ClampAngle::new(int(s.clamping_angle_deg.to_num::<u32>()))
+        // Whole degrees: the integer bits (`to_num::<u32>()` rounds down
+        // the same way, through `fixed`'s generic conversion).
+        clamp_angle: screen::ClampAngle::new(int(s.clamping_angle_deg.to_bits() >> 16))
             .unwrap_or_default(),
         clamp_count: screen::ClampCount::new(i32::from(s.seedlings_clamped)).unwrap_or_default(),
         roller_radius: screen::RollerRadius::new(scaled(s.roller_radius, 10_000))

@@ -119,7 +119,7 @@ fn a_profile_a_image_keeps_a_saved_profile_b_record_and_says_so() {
     let mut bench = boot(Image::ProfileAOnly, &[], &flash, 3_000);
     wait_page(&mut bench, MODE_PAGE);
     wait_message(&mut bench, "This firmware runs profile A only");
-    let logs = bench.fw.logs();
+    let logs = bench.fw.logs_caught_up();
     assert!(
         logs.iter()
             .any(|l| l.contains("settings: saved profile not in this image")),

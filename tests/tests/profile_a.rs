@@ -545,7 +545,7 @@ fn calibration_run(bench: &mut Bench, drive_ms: u32) -> (f64, f64, f64) {
         .expect("the firmware logged the stop");
     // The truth just after the stop, for the interpolation.
     pump_until_firmware_ms(bench, stopped + 200);
-    let logs = bench.fw.logs();
+    let logs = bench.fw.logs_caught_up();
     let samples = sim_samples(&logs);
     let (g0, e0) = truth_at(&samples, started);
     let (g1, e1) = truth_at(&samples, stopped);
@@ -600,7 +600,7 @@ fn k2_and_k1_calibrated_on_the_screen_make_a_machine_that_slips_twice_the_paper_
         .expect("the drum started");
     pump_until_firmware_ms(&mut bench, started + 6_000);
     bench.tap("bstop").unwrap();
-    let logs = bench.fw.logs();
+    let logs = bench.fw.logs_caught_up();
     let uncalibrated =
         worst_tracking_error(&sim_samples(&logs), started + 2_000, started + 5_500, 0.20);
     assert!(

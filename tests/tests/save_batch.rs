@@ -70,7 +70,7 @@ fn save_batched_with_stop_and_start_never_writes_flash_while_the_drum_runs() {
         touch_fixed(&mut bench, 4);
         bench.pump(Duration::from_millis(200)).unwrap();
     }
-    let logs = bench.fw.logs();
+    let logs = bench.fw.logs_caught_up();
     drop(bench);
     let _ = std::fs::remove_file(&flash);
 

@@ -1442,8 +1442,13 @@ impl Supervisor {
         if self.run == RunState::Running {
             let k1k2 = travel
                 .map(|t| u64::from(t.k1.to_milli()).saturating_mul(u64::from(t.k2.to_milli())));
-            self.phase
-                .advance_ground(self.teeth, m.since_edge_ticks, travel_kmh_x1000, k1k2);
+            self.phase.advance_ground(
+                self.teeth,
+                m.since_edge_ticks,
+                m.state == MotionState::Decaying,
+                travel_kmh_x1000,
+                k1k2,
+            );
         }
         self.phase.advance_belt(delta, k3_x1000);
 

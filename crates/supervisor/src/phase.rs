@@ -6,10 +6,14 @@
 //! position error. The phase loop knows two positions, both since Start:
 //!
 //! - the **ground distance** `g`: Hall edges × the calibrated distance per
-//!   edge (π·0.20 m / 25 · k1 · k2 at the current speed), extrapolated
-//!   between edges with the current travel speed, never more than one edge's
-//!   distance beyond the last edge (so it never runs ahead of the next edge by
-//!   more than one edge) and never backwards. The first Hall edge after Start
+//!   edge (π·0.20 m / 25 · k1 · k2 at the current speed), exact at each
+//!   edge; between edges the newest edge plus the current travel speed ×
+//!   the time since it, and once the next edge is late (the estimator's
+//!   `Decaying` state, speed bounded by one gap / time since the edge)
+//!   integrated step by step from the last step's ground instead: the
+//!   product bound × elapsed is always one whole gap, which put a slowing
+//!   tractor's ground at the next edge as soon as that edge was late.
+//!   Never beyond the next edge's position, never backwards. The first Hall edge after Start
 //!   is the origin (`g` = 0): where the wheel stood between two teeth at Start
 //!   is unknown, so counting that first edge as a whole pitch would put up to
 //!   25 mm of error into every plant of the pass.
@@ -141,6 +145,8 @@ pub struct Phase {
     pass_started: bool,
     /// The last phase error, belt nm (positive: belt ahead).
     error_nm: i64,
+    /// The time since the newest edge at the last step, µs.
+    last_since_us: u32,
     /// The last step's events (ground µm).
     events: [u64; MAX_EVENTS],
     n_events: u8,
@@ -172,6 +178,7 @@ impl Phase {
             ref_ground_nm: 0,
             pass_started: false,
             error_nm: 0,
+            last_since_us: 0,
             events: [0; MAX_EVENTS],
             n_events: 0,
         };
@@ -212,6 +219,7 @@ impl Phase {
             ref_ground_nm: 0,
             pass_started: false,
             error_nm: 0,
+            last_since_us: 0,
             events: [0; MAX_EVENTS],
             n_events: 0,
             ..*other
@@ -267,7 +275,8 @@ impl Phase {
     }
 
     /// Advances the ground: `edges` is the supervisor's edge counter,
-    /// `since_edge_us` the time since the newest edge, `travel_mh` the
+    /// `since_edge_us` the time since the newest edge, `late` whether the
+    /// next edge is overdue (the estimator's `Decaying` state), `travel_mh` the
     /// travel speed (m/h) and `k1k2_x1e6` the product of k1 and k2 × 10⁶ at
     /// it (`None` when no speed is known: the last is kept).
     #[inline(never)]
@@ -275,6 +284,7 @@ impl Phase {
         &mut self,
         edges: u32,
         since_edge_us: u32,
+        late: bool,
         travel_mh: u32,
         k1k2_x1e6: Option<u64>,
     ) {
@@ -306,14 +316,27 @@ impl Phase {
         self.ground_edges_nm = self
             .ground_edges_nm
             .saturating_add(new.wrapping_mul(self.edge_nm));
-        // m/h · µs = nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶). The
-        // time clamped to 16.7 s (beyond any edge at any speed that moves
-        // the ground) and the speed to 1000 km/h keep the product < 2⁶¹.
+        // From the newest edge (exact) with the time since it, or, while
+        // the next edge is late, from the last step's ground with the time
+        // since the last step. m/h · µs = nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶).
+        // The time clamped to 16.7 s (beyond any edge at any speed that
+        // moves the ground) and the speed to 1000 km/h keep the product
+        // < 2⁶¹.
+        let (from, dt) = if new > 0 || !late {
+            (self.ground_edges_nm, since_edge_us)
+        } else {
+            (
+                self.ground_nm,
+                since_edge_us.saturating_sub(self.last_since_us),
+            )
+        };
+        self.last_since_us = since_edge_us;
         let extra = u64::from(travel_mh.min(1 << 20))
-            .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
+            .wrapping_mul(u64::from(dt.min(1 << 24)))
             .wrapping_mul(72_818)
             >> 18;
-        let g = self.ground_edges_nm.saturating_add(extra.min(self.edge_nm));
+        let cap = self.ground_edges_nm.saturating_add(self.edge_nm);
+        let g = from.saturating_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
     }
 
@@ -470,17 +493,44 @@ mod tests {
         p.start(7);
         p.realign(first_plant_place_um(70));
         // First edge: the origin.
-        p.advance_ground(8, 0, 500, Some(1_000_000));
+        p.advance_ground(8, 0, false, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 0);
         // 0.5 km/h = 500 m/h for 100 ms = 13 888.9 µm.
-        p.advance_ground(8, 100_000, 500, Some(1_000_000));
+        p.advance_ground(8, 100_000, false, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 13_888);
         // A second without an edge: capped at one edge (25 132 µm).
-        p.advance_ground(8, 1_000_000, 500, Some(1_000_000));
+        p.advance_ground(8, 1_000_000, false, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 25_132);
         // Two edges at k1·k2 = 0.98: 2 · 25 132 741 · 0.98 = 49 260 172 nm.
-        p.advance_ground(10, 0, 500, Some(980_000));
+        p.advance_ground(10, 0, false, 500, Some(980_000));
         assert_eq!(p.ground_um(), 49_260);
+    }
+
+    #[test]
+    fn ground_between_edges_integrates_the_speed_of_each_step() {
+        // Slowing down between two edges (the estimator's speed decays when
+        // the next edge is late): the ground is the sum of speed × time of
+        // each step, not the newest speed × the whole time since the edge.
+        // By hand: 500 m/h for 0.1 s = 13.889 mm, then 250 m/h for 0.1 s =
+        // 6.944 mm: 20.833 mm (the m/h → nm/µs factor 72 818 / 2¹⁸ is
+        // 4·10⁻⁶ low, < 1 µm here). The old rule gave 250 m/h × 0.2 s =
+        // 13.889 mm.
+        let mut p = Phase::new(47_200, 70);
+        p.start(0);
+        p.realign(first_plant_place_um(70));
+        p.advance_ground(1, 0, false, 0, Some(1_000_000)); // the origin
+        p.advance_ground(1, 100_000, false, 500, Some(1_000_000));
+        assert_eq!(p.ground_um(), 13_888);
+        p.advance_ground(1, 200_000, true, 250, Some(1_000_000));
+        assert_eq!(p.ground_um(), 20_833);
+        // Never past the next edge (25.133 mm): 2 s more at 250 m/h would
+        // be 138.9 mm.
+        p.advance_ground(1, 2_200_000, true, 250, Some(1_000_000));
+        assert_eq!(p.ground_um(), 25_132);
+        // The next edge 0.05 s ago at 250 m/h: 25.132 741 + 3.472 222 mm
+        // = 28.604 963 mm.
+        p.advance_ground(2, 50_000, false, 250, Some(1_000_000));
+        assert_eq!(p.ground_um(), 28_604);
     }
 
     #[test]
@@ -490,8 +540,8 @@ mod tests {
         let mut p = Phase::new(47_200, 70);
         p.start(0);
         p.realign(first_plant_place_um(70));
-        p.advance_ground(1, 0, 0, None);
-        p.advance_ground(2, 0, 0, Some(1_000_000));
+        p.advance_ground(1, 0, false, 0, None);
+        p.advance_ground(2, 0, false, 0, Some(1_000_000));
         p.clear_events();
         p.advance_belt(10_731, 1000);
         assert_eq!(p.events().count(), 0);

@@ -38,7 +38,14 @@
 //! (ISO 7256-1). Before the first partition of a pass leaves there is no
 //! earlier plant to crowd, so the drum may sprint up to +100 % to reach the
 //! first place. At rest (feed-forward 0) there is no correction: the drum
-//! waits for the ground.
+//! waits for the ground. A rest (travel speed 0, also the first edge after
+//! it, whose speed is not known yet) gives the next plant the same
+//! allowance: the plant before the rest lies behind, and the belt stood
+//! while the tractor moved to the first edges after it, so the restart's lag
+//! is caught up before that plant rather than over many spacings at 0.91 X
+//! (bench §9: stop-and-go phase p95 7.4 → 6.0 mm at 7 cm Low 1). It can
+//! crowd that plant only by the phase error the belt had when the tractor
+//! came to rest.
 //!
 //! **First plant.** Start calls [`Phase::realign`] with the place of the
 //! first plant, [`first_plant_place_um`]: `X` plus one Hall pitch past the
@@ -312,6 +319,13 @@ impl Phase {
         if !self.armed {
             return;
         }
+        if travel_mh == 0 {
+            // At rest (or the first edge after it, speed not known yet):
+            // the plant before the rest lies behind, so the first plant
+            // after the restart gets the first plant's allowance (+100 %,
+            // T/2) to absorb the lag of the restart (module docs).
+            self.pass_started = false;
+        }
         // new < 2³², edge_nm < 2²⁷: the product < 2⁵⁹.
         self.ground_edges_nm = self
             .ground_edges_nm
@@ -531,6 +545,30 @@ mod tests {
         // = 28.604 963 mm.
         p.advance_ground(2, 50_000, false, 250, Some(1_000_000));
         assert_eq!(p.ground_um(), 28_604);
+    }
+
+    #[test]
+    fn after_a_rest_the_lag_is_recovered_with_the_first_plants_allowance() {
+        // Running, a partition already left (+10 % bound): 50 mm behind
+        // wants 2 · 0.05/0.5 · 60/0.219 911 = 27.3 r/min, capped at +10 %
+        // of 20 r/min = 2 r/min (as `the_correction_is_bounded_...`).
+        let mut p = Phase::new(47_200, 70);
+        p.start(0);
+        p.advance_ground(1, 0, false, 0, Some(1_000_000)); // the origin
+        p.pass_started = true;
+        p.belt_nm = 0;
+        p.ref_belt_nm = PARTITION_NM;
+        p.ref_ground_nm = 0;
+        p.advance_ground(1, 10_000, false, 500, Some(1_000_000));
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
+        // The tractor came to rest (travel 0), then moves again: the
+        // first plant after the rest may be reached at up to +100 %
+        // (20 r/min) with twice the gain: 2 · 27.3 → capped at 20.
+        p.advance_ground(1, 2_000_000, true, 0, Some(1_000_000));
+        p.advance_ground(2, 10_000, false, 500, Some(1_000_000));
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!((19.999..=20.0).contains(&c), "{c}");
     }
 
     #[test]

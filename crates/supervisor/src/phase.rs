@@ -7,8 +7,9 @@
 //!
 //! - the **ground distance** `g`: Hall edges × the calibrated distance per
 //!   edge (π·0.20 m / 25 · k1 · k2 at the current speed), exact at each
-//!   edge; between edges the newest edge plus the current travel speed ×
-//!   the time since it, and once the next edge is late (the estimator's
+//!   edge; between edges the newest edge plus the travel speed of the last
+//!   M/T window (the supervisor passes the estimator's value, not the
+//!   predictor's slope-carried one) × the time since it, and once the next edge is late (the estimator's
 //!   `Decaying` state, speed bounded by one gap / time since the edge)
 //!   integrated step by step from the last step's ground instead: the
 //!   product bound × elapsed is always one whole gap, which put a slowing

@@ -1447,14 +1447,10 @@ impl Supervisor {
             // single-gap estimates is mostly the gear's ±2 % tooth errors,
             // which the feed-forward can average but a position cannot
             // (docs/placement.md, "Positions").
-            // As the travel speed · M/T / predicted, i.e. with k1·k2 at the
-            // predicted speed (the two differ by ≤ 10 %; paper A's k1 moves
-            // by ≤ 0.2 % over that, ≤ 0.05 mm of a 25 mm gap), which saves
-            // a second pass through the tables (136 B of flash).
-            let raw_mh = u64::from(travel_kmh_x1000)
-                .saturating_mul(u64::from(m.gear_speed.to_bits()))
-                .checked_div(u64::from(gear_speed.to_bits()))
-                .map_or(0, |v| u32::try_from(v).unwrap_or(u32::MAX));
+            let raw_mh = travel::travel_speed(m.gear_speed, &self.settings.calibration)
+                .ok()
+                .and_then(|t| t.travel_speed_kmh().ok())
+                .map_or(0, |v| v.to_milli());
             self.phase.advance_ground(
                 self.teeth,
                 m.since_edge_ticks,

@@ -89,6 +89,13 @@ const DOWN_Q16: i64 = (MAX_SLOW_DOWN_PCT as i64) * 65_536 / 100;
 /// already turning on the feed-forward), nm: 1 mm, far above an encoder
 /// count's 4.7 µm and a standing drum's jitter.
 const ROLLING_START_NM: u64 = 1_000_000;
+/// No Hall edge for this long, µs, with the next one overdue, counts as a
+/// rest even before the estimator's 1.5 s stop timeout: below 25 mm/s
+/// (0.09 km/h), a third of the slowest working speed (0.30 km/h, one edge
+/// every 0.30 s). A 2 s stop often ends before the timeout has run from the
+/// last edge before it, and the rest's lag then deserves the same allowance
+/// (bench §9: stop-and-go at Low 2 phase p95 16.6 / 15.5 → 12.0 / 8.2 mm).
+const REST_US: u32 = 1_000_000;
 /// Events kept per control step: at most one partition leaves per 10 ms
 /// below 150 r/min; four leave room for a step released late.
 const MAX_EVENTS: usize = 4;
@@ -320,8 +327,9 @@ impl Phase {
         if !self.armed {
             return;
         }
-        if travel_mh == 0 {
-            // At rest (or the first edge after it, speed not known yet):
+        if travel_mh == 0 || (late && since_edge_us > REST_US) {
+            // At rest ([`REST_US`]; or the first edge after it, speed not
+            // known yet):
             // the plant before the rest lies behind, so the first plant
             // after the restart gets the first plant's allowance (+100 %,
             // T/2) to absorb the lag of the restart (module docs).
@@ -570,6 +578,38 @@ mod tests {
         p.advance_ground(2, 10_000, false, 500, Some(1_000_000));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!((19.999..=20.0).contains(&c), "{c}");
+    }
+
+    #[test]
+    fn a_second_without_an_edge_is_a_rest_before_the_stop_timeout() {
+        // As `after_a_rest_…`, but the estimator still reports a decaying
+        // speed (one gap / 1.2 s = 75 m/h, the next edge overdue) when the
+        // tractor moves again: 1.2 s > REST_US counts as a rest, so the
+        // first plant after it may be reached at +100 % (20 r/min).
+        // Before: the +10 % bound, 2 r/min.
+        let mut p = Phase::new(47_200, 70);
+        p.start(0);
+        p.advance_ground(1, 0, false, 0, Some(1_000_000)); // the origin
+        p.pass_started = true;
+        p.belt_nm = 0;
+        p.ref_belt_nm = PARTITION_NM;
+        p.ref_ground_nm = 0;
+        p.advance_ground(1, 1_200_000, true, 75, Some(1_000_000));
+        p.advance_ground(2, 10_000, false, 500, Some(1_000_000));
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!((19.999..=20.0).contains(&c), "{c}");
+        // 0.9 s without an edge is not a rest: +10 %.
+        let mut p = Phase::new(47_200, 70);
+        p.start(0);
+        p.advance_ground(1, 0, false, 0, Some(1_000_000));
+        p.pass_started = true;
+        p.belt_nm = 0;
+        p.ref_belt_nm = PARTITION_NM;
+        p.ref_ground_nm = 0;
+        p.advance_ground(1, 900_000, true, 100, Some(1_000_000));
+        p.advance_ground(2, 10_000, false, 500, Some(1_000_000));
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
     }
 
     #[test]

@@ -552,10 +552,11 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          stop timeout counted from the last edge before it, so the first edge after the \
          rest closes an M/T window that spans the rest: the first speed is a fraction of \
          the real one, the drum starts late and is ≈ 25 mm behind at the next edge. Since \
-         2026-11-23 a rest gives the next plant the first plant's allowance (+100 %, T/2), \
-         so that lag is caught up before it instead of over half a metre of 0.91 X \
-         spacings (phase p95 at 7 cm Low 1 7.4 → 6.0 mm, share outside ±5 % 20.2 → \
-         18.5 %). Tried and not taken: starting the drum at the first edge after a rest \
+         2026-11-23 a rest (travel speed 0, or no edge for 1 s with the next one overdue) \
+         gives the next plant the first plant's allowance (+100 %, T/2), so that lag is \
+         caught up before it instead of over half a metre of 0.91 X spacings (phase p95 \
+         7.4 / 16.8 / 6.7 / 16.2 → 6.0 / 16.8 / 5.4 / 16.3 mm with travel speed 0 alone, \
+         then 5.4 / 16.6 / 4.8 / 15.5 → 5.3 / 11.9 / 4.8 / 8.1 mm with the 1 s rule). Tried and not taken: starting the drum at the first edge after a rest \
          with the speed of the run before it, at most one gap / time since the edge \
          (phase p95 6.0 / 17.3 / 5.2 / 14.9 mm, spacing p95 30.3 / 30.5 / 10.5 / 13.8 % \
          against 6.0 / 16.8 / 5.4 / 16.3 mm and 29.6 / 29.8 / 11.1 / 12.9 %: the belt is \

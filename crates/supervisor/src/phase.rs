@@ -9,13 +9,13 @@
 //!   edge (π·0.20 m / 25 · k1 · k2 at the current speed), exact at each
 //!   edge; between edges the newest edge plus the travel speed of the last
 //!   M/T window (the supervisor passes the estimator's value, not the
-//!   predictor's slope-carried one) × the time since it, and once the next edge is late (the estimator's
-//!   `Decaying` state, speed bounded by one gap / time since the edge)
-//!   integrated step by step from the last step's ground instead: the
-//!   product bound × elapsed is always one whole gap, which put a slowing
-//!   tractor's ground at the next edge as soon as that edge was late.
-//!   Never beyond the next edge's position, never backwards. The first Hall edge after Start
-//!   is the origin (`g` = 0): where the wheel stood between two teeth at Start
+//!   predictor's slope-carried one) × the time since it; once the next edge
+//!   is late (the estimator's `Decaying` state, speed bounded by one gap /
+//!   time since the edge) it holds where it was: that bound × the elapsed
+//!   time is always one whole gap, which put a slowing tractor's ground at
+//!   the next edge as soon as that edge was late.
+//!   Never beyond the next edge's position, never backwards. The first Hall
+//!   edge after Start is the origin (`g` = 0): where the wheel stood between two teeth at Start
 //!   is unknown, so counting that first edge as a whole pitch would put up to
 //!   25 mm of error into every plant of the pass.
 //! - the **belt position** `b`: drum encoder counts × belt per count
@@ -160,8 +160,6 @@ pub struct Phase {
     pass_started: bool,
     /// The last phase error, belt nm (positive: belt ahead).
     error_nm: i64,
-    /// The time since the newest edge at the last step, µs.
-    last_since_us: u32,
     /// The last step's events (ground µm).
     events: [u64; MAX_EVENTS],
     n_events: u8,
@@ -193,7 +191,6 @@ impl Phase {
             ref_ground_nm: 0,
             pass_started: false,
             error_nm: 0,
-            last_since_us: 0,
             events: [0; MAX_EVENTS],
             n_events: 0,
         };
@@ -234,7 +231,6 @@ impl Phase {
             ref_ground_nm: 0,
             pass_started: false,
             error_nm: 0,
-            last_since_us: 0,
             events: [0; MAX_EVENTS],
             n_events: 0,
             ..*other
@@ -345,21 +341,15 @@ impl Phase {
         // The time clamped to 16.7 s (beyond any edge at any speed that
         // moves the ground) and the speed to 1000 km/h keep the product
         // < 2⁶¹.
-        let (from, dt) = if new > 0 || !late {
-            (self.ground_edges_nm, since_edge_us)
-        } else {
-            (
-                self.ground_nm,
-                since_edge_us.saturating_sub(self.last_since_us),
-            )
-        };
-        self.last_since_us = since_edge_us;
+        if late && new == 0 {
+            return;
+        }
         let extra = u64::from(travel_mh.min(1 << 20))
-            .wrapping_mul(u64::from(dt.min(1 << 24)))
+            .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
             .wrapping_mul(72_818)
             >> 18;
         let cap = self.ground_edges_nm.saturating_add(self.edge_nm);
-        let g = from.saturating_add(extra).min(cap);
+        let g = self.ground_edges_nm.saturating_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
     }
 
@@ -530,26 +520,22 @@ mod tests {
     }
 
     #[test]
-    fn ground_between_edges_integrates_the_speed_of_each_step() {
-        // Slowing down between two edges (the estimator's speed decays when
-        // the next edge is late): the ground is the sum of speed × time of
-        // each step, not the newest speed × the whole time since the edge.
-        // By hand: 500 m/h for 0.1 s = 13.889 mm, then 250 m/h for 0.1 s =
-        // 6.944 mm: 20.833 mm (the m/h → nm/µs factor 72 818 / 2¹⁸ is
-        // 4·10⁻⁶ low, < 1 µm here). The old rule gave 250 m/h × 0.2 s =
-        // 13.889 mm.
+    fn ground_holds_while_the_next_edge_is_late() {
+        // Slowing down: the next edge is late and the estimator's speed is
+        // its bound, one gap over the time since the edge (25.132 741 mm /
+        // 0.4 s = 226 m/h). The ground holds where it was when the edge
+        // became late: 500 m/h × 0.1 s = 13.889 mm (the m/h → nm/µs factor
+        // 72 818 / 2¹⁸ is 4·10⁻⁶ low, < 1 µm here). The old rule, speed ×
+        // the whole time since the edge, gave 226 m/h × 0.4 s = 25.11 mm:
+        // the next edge's position at once.
         let mut p = Phase::new(47_200, 70);
         p.start(0);
         p.realign(first_plant_place_um(70));
         p.advance_ground(1, 0, false, 0, Some(1_000_000)); // the origin
         p.advance_ground(1, 100_000, false, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 13_888);
-        p.advance_ground(1, 200_000, true, 250, Some(1_000_000));
-        assert_eq!(p.ground_um(), 20_833);
-        // Never past the next edge (25.133 mm): 2 s more at 250 m/h would
-        // be 138.9 mm.
-        p.advance_ground(1, 2_200_000, true, 250, Some(1_000_000));
-        assert_eq!(p.ground_um(), 25_132);
+        p.advance_ground(1, 400_000, true, 226, Some(1_000_000));
+        assert_eq!(p.ground_um(), 13_888);
         // The next edge 0.05 s ago at 250 m/h: 25.132 741 + 3.472 222 mm
         // = 28.604 963 mm.
         p.advance_ground(2, 50_000, false, 250, Some(1_000_000));

@@ -494,8 +494,8 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          from rest at the second Hall edge and the phase loop has one spacing, 0.5 s, to \
          absorb its start lag). **The measured ground** (docs/placement.md, \
          \"Positions\") is exact at each Hall edge and moves on between edges at the last \
-         M/T window's speed; once the next edge is late it is integrated step by step \
-         under the estimator's bound (one gap / time since the edge). Before 2026-11-23 \
+         M/T window's speed; once the next edge is late (the estimator's speed bounded by \
+         one gap / time since the edge) it holds where it was. Before 2026-11-23 \
          it was the predictor's speed (carried along the slope of the last two \
          single-gap speeds) × the whole time since the edge: hills p95 spacing at 7 cm \
          was 2.95 / 1.91 % (Low 1 / Low 2), the default terrain's 2.39 / 2.08 %, and the \

@@ -1451,13 +1451,8 @@ impl Supervisor {
                 .ok()
                 .and_then(|t| t.travel_speed_kmh().ok())
                 .map_or(0, |v| v.to_milli());
-            self.phase.advance_ground(
-                self.teeth,
-                m.since_edge_ticks,
-                m.state == MotionState::Decaying,
-                raw_mh,
-                k1k2,
-            );
+            self.phase
+                .advance_ground(self.teeth, m.since_edge_ticks, raw_mh, k1k2);
         }
         self.phase.advance_belt(delta, k3_x1000);
 

@@ -9,11 +9,9 @@
 //!   edge (π·0.20 m / 25 · k1 · k2 at the current speed), exact at each
 //!   edge; between edges the newest edge plus the travel speed of the last
 //!   M/T window (the supervisor passes the estimator's value, not the
-//!   predictor's slope-carried one) × the time since it; once the next edge
-//!   is late (the estimator's `Decaying` state, speed bounded by one gap /
-//!   time since the edge) it holds where it was: that bound × the elapsed
-//!   time is always one whole gap, which put a slowing tractor's ground at
-//!   the next edge as soon as that edge was late.
+//!   predictor's slope-carried one) × the time since it. That reaches the
+//!   next edge's position exactly when the estimator calls the edge late
+//!   (later than the last gap), so a late edge needs no rule of its own.
 //!   Never beyond the next edge's position, never backwards. The first Hall
 //!   edge after Start is the origin (`g` = 0): where the wheel stood between two teeth at Start
 //!   is unknown, so counting that first edge as a whole pitch would put up to
@@ -89,10 +87,10 @@ const DOWN_Q16: i64 = (MAX_SLOW_DOWN_PCT as i64) * 65_536 / 100;
 /// already turning on the feed-forward), nm: 1 mm, far above an encoder
 /// count's 4.7 µm and a standing drum's jitter.
 const ROLLING_START_NM: u64 = 1_000_000;
-/// No Hall edge for this long, µs, with the next one overdue, counts as a
-/// rest even before the estimator's 1.5 s stop timeout: below 25 mm/s
-/// (0.09 km/h), a third of the slowest working speed (0.30 km/h, one edge
-/// every 0.30 s). A 2 s stop often ends before the timeout has run from the
+/// No Hall edge for this long, µs, counts as a rest even before the
+/// estimator's 1.5 s stop timeout: below 25 mm/s (0.09 km/h), a third of
+/// the slowest working speed (0.30 km/h, one edge every 0.30 s); a tractor
+/// crawling slower gets the first plant's allowance at every edge. A 2 s stop often ends before the timeout has run from the
 /// last edge before it, and the rest's lag then deserves the same allowance
 /// (bench §9: stop-and-go at Low 2 phase p95 16.6 / 15.5 → 12.0 / 8.2 mm).
 const REST_US: u32 = 1_000_000;
@@ -286,16 +284,15 @@ impl Phase {
     }
 
     /// Advances the ground: `edges` is the supervisor's edge counter,
-    /// `since_edge_us` the time since the newest edge, `late` whether the
-    /// next edge is overdue (the estimator's `Decaying` state), `travel_mh` the
-    /// travel speed (m/h) and `k1k2_x1e6` the product of k1 and k2 × 10⁶ at
-    /// it (`None` when no speed is known: the last is kept).
+    /// `since_edge_us` the time since the newest edge, `travel_mh` the
+    /// travel speed of the last M/T window (m/h, 0 at rest) and `k1k2_x1e6`
+    /// the product of k1 and k2 × 10⁶ at it (`None` when no speed is known:
+    /// the last is kept).
     #[inline(never)]
     pub fn advance_ground(
         &mut self,
         edges: u32,
         since_edge_us: u32,
-        late: bool,
         travel_mh: u32,
         k1k2_x1e6: Option<u64>,
     ) {
@@ -323,10 +320,9 @@ impl Phase {
         if !self.armed {
             return;
         }
-        if travel_mh == 0 || (late && since_edge_us > REST_US) {
+        if travel_mh == 0 || since_edge_us > REST_US {
             // At rest ([`REST_US`]; or the first edge after it, speed not
-            // known yet):
-            // the plant before the rest lies behind, so the first plant
+            // known yet): the plant before the rest lies behind, so the first plant
             // after the restart gets the first plant's allowance (+100 %,
             // T/2) to absorb the lag of the restart (module docs).
             self.pass_started = false;
@@ -335,15 +331,10 @@ impl Phase {
         self.ground_edges_nm = self
             .ground_edges_nm
             .saturating_add(new.wrapping_mul(self.edge_nm));
-        // From the newest edge (exact) with the time since it, or, while
-        // the next edge is late, from the last step's ground with the time
-        // since the last step. m/h · µs = nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶).
-        // The time clamped to 16.7 s (beyond any edge at any speed that
-        // moves the ground) and the speed to 1000 km/h keep the product
-        // < 2⁶¹.
-        if late && new == 0 {
-            return;
-        }
+        // From the newest edge (exact) with the time since it. m/h · µs =
+        // nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶). The time clamped
+        // to 16.7 s (beyond any edge at any speed that moves the ground)
+        // and the speed to 1000 km/h keep the product < 2⁶¹.
         let extra = u64::from(travel_mh.min(1 << 20))
             .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
             .wrapping_mul(72_818)
@@ -506,40 +497,17 @@ mod tests {
         p.start(7);
         p.realign(first_plant_place_um(70));
         // First edge: the origin.
-        p.advance_ground(8, 0, false, 500, Some(1_000_000));
+        p.advance_ground(8, 0, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 0);
         // 0.5 km/h = 500 m/h for 100 ms = 13 888.9 µm.
-        p.advance_ground(8, 100_000, false, 500, Some(1_000_000));
+        p.advance_ground(8, 100_000, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 13_888);
         // A second without an edge: capped at one edge (25 132 µm).
-        p.advance_ground(8, 1_000_000, false, 500, Some(1_000_000));
+        p.advance_ground(8, 1_000_000, 500, Some(1_000_000));
         assert_eq!(p.ground_um(), 25_132);
         // Two edges at k1·k2 = 0.98: 2 · 25 132 741 · 0.98 = 49 260 172 nm.
-        p.advance_ground(10, 0, false, 500, Some(980_000));
+        p.advance_ground(10, 0, 500, Some(980_000));
         assert_eq!(p.ground_um(), 49_260);
-    }
-
-    #[test]
-    fn ground_holds_while_the_next_edge_is_late() {
-        // Slowing down: the next edge is late and the estimator's speed is
-        // its bound, one gap over the time since the edge (25.132 741 mm /
-        // 0.4 s = 226 m/h). The ground holds where it was when the edge
-        // became late: 500 m/h × 0.1 s = 13.889 mm (the m/h → nm/µs factor
-        // 72 818 / 2¹⁸ is 4·10⁻⁶ low, < 1 µm here). The old rule, speed ×
-        // the whole time since the edge, gave 226 m/h × 0.4 s = 25.11 mm:
-        // the next edge's position at once.
-        let mut p = Phase::new(47_200, 70);
-        p.start(0);
-        p.realign(first_plant_place_um(70));
-        p.advance_ground(1, 0, false, 0, Some(1_000_000)); // the origin
-        p.advance_ground(1, 100_000, false, 500, Some(1_000_000));
-        assert_eq!(p.ground_um(), 13_888);
-        p.advance_ground(1, 400_000, true, 226, Some(1_000_000));
-        assert_eq!(p.ground_um(), 13_888);
-        // The next edge 0.05 s ago at 250 m/h: 25.132 741 + 3.472 222 mm
-        // = 28.604 963 mm.
-        p.advance_ground(2, 50_000, false, 250, Some(1_000_000));
-        assert_eq!(p.ground_um(), 28_604);
     }
 
     #[test]
@@ -549,19 +517,19 @@ mod tests {
         // of 20 r/min = 2 r/min (as `the_correction_is_bounded_...`).
         let mut p = Phase::new(47_200, 70);
         p.start(0);
-        p.advance_ground(1, 0, false, 0, Some(1_000_000)); // the origin
+        p.advance_ground(1, 0, 0, Some(1_000_000)); // the origin
         p.pass_started = true;
         p.belt_nm = 0;
         p.ref_belt_nm = PARTITION_NM;
         p.ref_ground_nm = 0;
-        p.advance_ground(1, 10_000, false, 500, Some(1_000_000));
+        p.advance_ground(1, 10_000, 500, Some(1_000_000));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
         // The tractor came to rest (travel 0), then moves again: the
         // first plant after the rest may be reached at up to +100 %
         // (20 r/min) with twice the gain: 2 · 27.3 → capped at 20.
-        p.advance_ground(1, 2_000_000, true, 0, Some(1_000_000));
-        p.advance_ground(2, 10_000, false, 500, Some(1_000_000));
+        p.advance_ground(1, 2_000_000, 0, Some(1_000_000));
+        p.advance_ground(2, 10_000, 500, Some(1_000_000));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!((19.999..=20.0).contains(&c), "{c}");
     }
@@ -569,31 +537,30 @@ mod tests {
     #[test]
     fn a_second_without_an_edge_is_a_rest_before_the_stop_timeout() {
         // As `after_a_rest_…`, but the estimator still reports a decaying
-        // speed (one gap / 1.2 s = 75 m/h, the next edge overdue) when the
-        // tractor moves again: 1.2 s > REST_US counts as a rest, so the
-        // first plant after it may be reached at +100 % (20 r/min).
-        // Before: the +10 % bound, 2 r/min.
+        // speed (one gap / 1.2 s = 75 m/h) when the tractor moves again:
+        // 1.2 s > REST_US counts as a rest, so the first plant after it may
+        // be reached at +100 % (20 r/min). Before: the +10 % bound, 2 r/min.
         let mut p = Phase::new(47_200, 70);
         p.start(0);
-        p.advance_ground(1, 0, false, 0, Some(1_000_000)); // the origin
+        p.advance_ground(1, 0, 0, Some(1_000_000)); // the origin
         p.pass_started = true;
         p.belt_nm = 0;
         p.ref_belt_nm = PARTITION_NM;
         p.ref_ground_nm = 0;
-        p.advance_ground(1, 1_200_000, true, 75, Some(1_000_000));
-        p.advance_ground(2, 10_000, false, 500, Some(1_000_000));
+        p.advance_ground(1, 1_200_000, 75, Some(1_000_000));
+        p.advance_ground(2, 10_000, 500, Some(1_000_000));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!((19.999..=20.0).contains(&c), "{c}");
         // 0.9 s without an edge is not a rest: +10 %.
         let mut p = Phase::new(47_200, 70);
         p.start(0);
-        p.advance_ground(1, 0, false, 0, Some(1_000_000));
+        p.advance_ground(1, 0, 0, Some(1_000_000));
         p.pass_started = true;
         p.belt_nm = 0;
         p.ref_belt_nm = PARTITION_NM;
         p.ref_ground_nm = 0;
-        p.advance_ground(1, 900_000, true, 100, Some(1_000_000));
-        p.advance_ground(2, 10_000, false, 500, Some(1_000_000));
+        p.advance_ground(1, 900_000, 100, Some(1_000_000));
+        p.advance_ground(2, 10_000, 500, Some(1_000_000));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
     }
@@ -605,8 +572,8 @@ mod tests {
         let mut p = Phase::new(47_200, 70);
         p.start(0);
         p.realign(first_plant_place_um(70));
-        p.advance_ground(1, 0, false, 0, None);
-        p.advance_ground(2, 0, false, 0, Some(1_000_000));
+        p.advance_ground(1, 0, 0, None);
+        p.advance_ground(2, 0, 0, Some(1_000_000));
         p.clear_events();
         p.advance_belt(10_731, 1000);
         assert_eq!(p.events().count(), 0);

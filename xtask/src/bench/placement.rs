@@ -494,8 +494,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          from rest at the second Hall edge and the phase loop has one spacing, 0.5 s, to \
          absorb its start lag). **The measured ground** (docs/placement.md, \
          \"Positions\") is exact at each Hall edge and moves on between edges at the last \
-         M/T window's speed; once the next edge is late (the estimator's speed bounded by \
-         one gap / time since the edge) it holds where it was. Before 2026-11-23 \
+         M/T window's speed, up to the next edge's position. Before 2026-11-23 \
          it was the predictor's speed (carried along the slope of the last two \
          single-gap speeds) × the whole time since the edge: hills p95 spacing at 7 cm \
          was 2.95 / 1.91 % (Low 1 / Low 2), the default terrain's 2.39 / 2.08 %, and the \
@@ -552,7 +551,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          stop timeout counted from the last edge before it, so the first edge after the \
          rest closes an M/T window that spans the rest: the first speed is a fraction of \
          the real one, the drum starts late and is ≈ 25 mm behind at the next edge. Since \
-         2026-11-23 a rest (travel speed 0, or no edge for 1 s with the next one overdue) \
+         2026-11-23 a rest (travel speed 0, or no edge for 1 s) \
          gives the next plant the first plant's allowance (+100 %, T/2), so that lag is \
          caught up before it instead of over half a metre of 0.91 X spacings (phase p95 \
          7.4 / 16.8 / 6.7 / 16.2 → 6.0 / 16.8 / 5.4 / 16.3 mm with travel speed 0 alone, \

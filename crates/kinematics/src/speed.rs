@@ -28,14 +28,14 @@
 //! dominant error. The estimator learns each gap's share of a revolution
 //! against the revolution centred on it (`share = gap·Z / T_rev`: exact at a
 //! steady speed and under a steady acceleration, which the centring cancels),
-//! as a running mean of each tooth's first 15 samples and then an IIR of
-//! 1/16, with a ±4 % plausibility guard, and weighs every gap by its learned
+//! as a running mean of each tooth's samples (the nominal share counted as
+//! the first) and after 15 an IIR of 1/16, with a ±4 % plausibility guard, and weighs every gap by its learned
 //! share. A sample is taken only when the speed around it is smooth enough
 //! for the centring to hold: the rolling revolution times a quarter
 //! revolution before and after the centred one in line with it within 1/400
 //! of a revolution (a share biased by at most 0.17 %) and within 2.5 % of
 //! each other. So the shares are learnt on terrain whose speed wanders (±3 %
-//! over 8 s: to 0.03 % RMS in 400 s, tests/estimator.rs), which the earlier
+//! over 8 s: to 0.1 % RMS in 400 s, tests/estimator.rs), which the earlier
 //! rule (learn only while the revolution time held within 0.2 %) never did on
 //! the machine model's default terrain; a chassis' answer to a speed step is
 //! mostly kept out. Until a tooth has a sample its gap counts as 1/Z. It
@@ -96,9 +96,10 @@ const CURVATURE_GATE: u64 = 400;
 /// exceeds this, the default terrain's wandering speed mostly does not
 /// (chosen on the machine model: docs/kinematics.md).
 const SLOPE_GATE: u64 = 40;
-/// A tooth's share is the running mean of its first samples, then an IIR of
-/// this weight (1/16).
-const SHARE_SAMPLES: u8 = 15;
+/// A tooth's share is the running mean of its samples with the nominal share
+/// counted as the first (so one sample moves it only halfway), up to this
+/// many samples; then an IIR of 1/16.
+const SHARE_SAMPLES: u8 = 14;
 /// Q16 unity for the learned tooth shares.
 const ONE_Q16: u32 = 1 << 16;
 
@@ -972,11 +973,12 @@ impl MtEstimator {
                 .wrapping_sub(p.checked_rem(z).unwrap_or(0))
                 .checked_rem(z)
                 .unwrap_or(0);
-            // A running mean over a tooth's first SHARE_SAMPLES samples, then
-            // an IIR of the same weight: the wandering speed's residual
-            // biases average out, and no single early sample sets a share.
+            // A running mean with the nominal share as its first sample, over
+            // SHARE_SAMPLES, then an IIR of the same weight (1/16): the
+            // wandering speed's residual biases average out, and no single
+            // early sample sets a share.
             let n = self.samples.get(tooth).copied().unwrap_or(0);
-            let k = u32::from(n).saturating_add(1);
+            let k = u32::from(n).saturating_add(2);
             let w = self.weight(tooth);
             let w = if w_new >= w {
                 w.saturating_add(w_new.saturating_sub(w).checked_div(k).unwrap_or(0))

@@ -463,7 +463,7 @@ fn position_errors(seed: u64) -> [f64; 25] {
 /// Tooth learning on a speed that never holds still: the terrain's ±3 %
 /// wander over 8 s at 0.5 km/h (Low 1's pace: a revolution in 4.5 s), the
 /// gear's teeth ±2 % of a pitch off. The shares must be learnt to within
-/// 0.3 % RMS in 400 s (89 revolutions; measured 0.03 %). Before the curvature-gated learning
+/// 0.3 % RMS in 400 s (89 revolutions; measured 0.11–0.13 %). Before the curvature-gated learning
 /// (the old rule learnt only while the revolution time held within 0.2 %)
 /// nothing was learnt on such a speed: the error stayed the gear's own,
 /// ≈ 1.6 % RMS here.

@@ -1465,11 +1465,20 @@ impl Supervisor {
         if self.run == RunState::Running {
             let k1k2 = travel
                 .map(|t| u64::from(t.k1.to_milli()).saturating_mul(u64::from(t.k2.to_milli())));
+            // The ground moves on between edges at the M/T speed (the last
+            // tooth gap's), not at the predictor's: the slope between two
+            // single-gap estimates is mostly the gear's ±2 % tooth errors,
+            // which the feed-forward can average but a position cannot
+            // (docs/placement.md, "Positions").
+            let raw_mh = travel::travel_speed(m.gear_speed, &self.settings.calibration)
+                .ok()
+                .and_then(|t| t.travel_speed_kmh().ok())
+                .map_or(0, |v| v.to_milli());
             self.phase.advance_ground(
                 self.teeth,
                 self.pitches_q16,
                 m.since_edge_ticks,
-                travel_kmh_x1000,
+                raw_mh,
                 k1k2,
             );
         }

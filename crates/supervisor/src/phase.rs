@@ -6,11 +6,14 @@
 //! position error. The phase loop knows two positions, both since Start:
 //!
 //! - the **ground distance** `g`: Hall edges × the calibrated distance per
-//!   edge (π·0.20 m / 25 · k1 · k2 at the current speed), extrapolated
-//!   between edges with the current travel speed, never more than one edge's
-//!   distance beyond the last edge (so it never runs ahead of the next edge by
-//!   more than one edge) and never backwards. The first Hall edge after Start
-//!   is the origin (`g` = 0): where the wheel stood between two teeth at Start
+//!   edge (π·0.20 m / 25 · k1 · k2 at the current speed), exact at each
+//!   edge; between edges the newest edge plus the travel speed of the last
+//!   M/T window (the supervisor passes the estimator's value, not the
+//!   predictor's slope-carried one) × the time since it. That reaches the
+//!   next edge's position exactly when the estimator calls the edge late
+//!   (later than the last gap), so a late edge needs no rule of its own.
+//!   Never beyond the next edge's position, never backwards. The first Hall
+//!   edge after Start is the origin (`g` = 0): where the wheel stood between two teeth at Start
 //!   is unknown, so counting that first edge as a whole pitch would put up to
 //!   25 mm of error into every plant of the pass.
 //! - the **belt position** `b`: drum encoder counts × belt per count
@@ -34,7 +37,14 @@
 //! (ISO 7256-1). Before the first partition of a pass leaves there is no
 //! earlier plant to crowd, so the drum may sprint up to +100 % to reach the
 //! first place. At rest (feed-forward 0) there is no correction: the drum
-//! waits for the ground.
+//! waits for the ground. A rest (travel speed 0, also the first edge after
+//! it, whose speed is not known yet) gives the next plant the same
+//! allowance: the plant before the rest lies behind, and the belt stood
+//! while the tractor moved to the first edges after it, so the restart's lag
+//! is caught up before that plant rather than over many spacings at 0.91 X
+//! (bench §9: stop-and-go phase p95 7.4 → 6.0 mm at 7 cm Low 1). It can
+//! crowd that plant only by the phase error the belt had when the tractor
+//! came to rest.
 //!
 //! **First plant.** Start calls [`Phase::realign`] with the place of the
 //! first plant, [`first_plant_place_um`]: `X` plus one Hall pitch past the
@@ -77,6 +87,13 @@ const DOWN_Q16: i64 = (MAX_SLOW_DOWN_PCT as i64) * 65_536 / 100;
 /// already turning on the feed-forward), nm: 1 mm, far above an encoder
 /// count's 4.7 µm and a standing drum's jitter.
 const ROLLING_START_NM: u64 = 1_000_000;
+/// No Hall edge for this long, µs, counts as a rest even before the
+/// estimator's 1.5 s stop timeout: below 25 mm/s (0.09 km/h), a third of
+/// the slowest working speed (0.30 km/h, one edge every 0.30 s); a tractor
+/// crawling slower gets the first plant's allowance at every edge. A 2 s stop often ends before the timeout has run from the
+/// last edge before it, and the rest's lag then deserves the same allowance
+/// (bench §9: stop-and-go at Low 2 phase p95 16.6 / 15.5 → 12.0 / 8.2 mm).
+const REST_US: u32 = 1_000_000;
 /// Events kept per control step: at most one partition leaves per 10 ms
 /// below 150 r/min; four leave room for a step released late.
 const MAX_EVENTS: usize = 4;
@@ -283,8 +300,9 @@ impl Phase {
     /// speed estimator learns each gap's share of a revolution,
     /// [`kinematics::speed::MtEstimator::newest_gap_pitches_q16`]),
     /// `since_edge_us` the time since the newest edge, `travel_mh` the
-    /// travel speed (m/h) and `k1k2_x1e6` the product of k1 and k2 × 10⁶ at
-    /// it (`None` when no speed is known: the last is kept).
+    /// travel speed of the last M/T window (m/h, 0 at rest) and `k1k2_x1e6`
+    /// the product of k1 and k2 × 10⁶ at it (`None` when no speed is known:
+    /// the last is kept).
     #[inline(never)]
     pub fn advance_ground(
         &mut self,
@@ -320,19 +338,28 @@ impl Phase {
         if !self.armed {
             return;
         }
+        if travel_mh == 0 || since_edge_us > REST_US {
+            // At rest ([`REST_US`]; or the first edge after it, speed not
+            // known yet): the plant before the rest lies behind, so the first plant
+            // after the restart gets the first plant's allowance (+100 %,
+            // T/2) to absorb the lag of the restart (module docs).
+            self.pass_started = false;
+        }
         // new_q16 < 2³², edge_nm < 2²⁷: the product < 2⁵⁹; the shift drops
         // < 1 nm a step.
         self.ground_edges_nm = self
             .ground_edges_nm
             .saturating_add(new_q16.wrapping_mul(self.edge_nm) >> 16);
-        // m/h · µs = nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶). The
-        // time clamped to 16.7 s (beyond any edge at any speed that moves
-        // the ground) and the speed to 1000 km/h keep the product < 2⁶¹.
+        // From the newest edge (exact) with the time since it. m/h · µs =
+        // nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶). The time clamped
+        // to 16.7 s (beyond any edge at any speed that moves the ground)
+        // and the speed to 1000 km/h keep the product < 2⁶¹.
         let extra = u64::from(travel_mh.min(1 << 20))
             .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
             .wrapping_mul(72_818)
             >> 18;
-        let g = self.ground_edges_nm.saturating_add(extra.min(self.edge_nm));
+        let cap = self.ground_edges_nm.saturating_add(self.edge_nm);
+        let g = self.ground_edges_nm.saturating_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
     }
 
@@ -526,6 +553,61 @@ mod tests {
             n.ground_at_edge_nm(),
             2 * ((1_000_000u64 * 1_647_095) >> 16)
         );
+    }
+
+    #[test]
+    fn after_a_rest_the_lag_is_recovered_with_the_first_plants_allowance() {
+        // Running, a partition already left (+10 % bound): 50 mm behind
+        // wants 2 · 0.05/0.5 · 60/0.219 911 = 27.3 r/min, capped at +10 %
+        // of 20 r/min = 2 r/min (as `the_correction_is_bounded_...`).
+        let mut p = Phase::new(47_200, 70);
+        p.start(0, 0 << 16);
+        p.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000)); // the origin
+        p.pass_started = true;
+        p.belt_nm = 0;
+        p.ref_belt_nm = PARTITION_NM;
+        p.ref_ground_nm = 0;
+        p.advance_ground(1, 1 << 16, 10_000, 500, Some(1_000_000));
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
+        // The tractor came to rest (travel 0), then moves again: the
+        // first plant after the rest may be reached at up to +100 %
+        // (20 r/min) with twice the gain: 2 · 27.3 → capped at 20.
+        p.advance_ground(1, 1 << 16, 2_000_000, 0, Some(1_000_000));
+        p.advance_ground(2, 2 << 16, 10_000, 500, Some(1_000_000));
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!((19.999..=20.0).contains(&c), "{c}");
+    }
+
+    #[test]
+    fn a_second_without_an_edge_is_a_rest_before_the_stop_timeout() {
+        // As `after_a_rest_…`, but the estimator still reports a decaying
+        // speed (one gap / 1.2 s = 75 m/h) when the tractor moves again:
+        // 1.2 s > REST_US counts as a rest, so the first plant after it may
+        // be reached at +100 % (20 r/min). Before: the +10 % bound, 2 r/min.
+        let mut p = Phase::new(47_200, 70);
+        p.start(0, 0 << 16);
+        p.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000)); // the origin
+        p.pass_started = true;
+        p.belt_nm = 0;
+        p.ref_belt_nm = PARTITION_NM;
+        p.ref_ground_nm = 0;
+        p.advance_ground(1, 1 << 16, 1_200_000, 75, Some(1_000_000));
+        p.advance_ground(2, 2 << 16, 10_000, 500, Some(1_000_000));
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!((19.999..=20.0).contains(&c), "{c}");
+        // 0.9 s without an edge is not a rest: +10 %.
+        let mut p = Phase::new(47_200, 70);
+        p.start(0, 0 << 16);
+        p.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000));
+        p.pass_started = true;
+        p.belt_nm = 0;
+        p.ref_belt_nm = PARTITION_NM;
+        p.ref_ground_nm = 0;
+        p.advance_ground(1, 1 << 16, 900_000, 100, Some(1_000_000));
+        p.advance_ground(2, 2 << 16, 10_000, 500, Some(1_000_000));
+        let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
+        assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
     }
 
     #[test]

@@ -218,3 +218,42 @@ fn the_ground_distance_keeps_every_tooth_through_stops() {
     assert!(truth > 6000.0, "{truth}");
     assert!((measured - truth).abs() <= 30.0, "{measured} vs {truth}");
 }
+
+/// Between two Hall edges the measured ground moves on at the speed of the
+/// last tooth gap (the M/T estimate), not at the predictor's speed carried
+/// along its slope: with the gear's ±2 % tooth errors that slope is mostly
+/// noise (bench §9: hills p95 spacing at 7 cm 2.96 → 2.72 %). Identity
+/// calibration (k1 = k2 = 1): one edge is π·0.20 m / 25 = 25 132.741 µm.
+/// Edges at 0 (the origin), 200, 380 and 540 ms: the last gap is 160 ms, so
+/// 80 ms later the ground is 3 edges + 25.132 741 mm · 80/160 = 75 398.2 +
+/// 12 566.4 = 87 964.6 µm (the travel speed passes through an integer m/h:
+/// 565.5 → 565 or 566 m/h, ±11 µm over 80 ms). The predictor's slope
+/// (139.6 → 157.1 mm/s over 170 ms, carried 160 ms, capped at +10 %) would
+/// put it at 13.8 mm past the edge: 1.3 mm further.
+#[test]
+fn between_edges_the_ground_moves_at_the_last_gaps_speed() {
+    let settings = Settings {
+        mode: Mode::SpeedAdaptive,
+        spacing: Spacing::new(70).unwrap(),
+        gear: Gear::Low2,
+        placement: Placement::DistanceLocked,
+        calibration: kinematics::travel::Calibration::identity(),
+        ..Settings::default()
+    };
+    let mut sup = Supervisor::new(HW, settings).unwrap();
+    sup.command(Command::Start);
+    let mut encoder = 0u16;
+    for t_ms in 0..=620u32 {
+        if t_ms % 10 != 0 {
+            continue;
+        }
+        if [0, 200, 380, 540].contains(&t_ms) {
+            sup.hall_edge(Ticks(t_ms * 1000));
+        }
+        // The drum turns (no stall alarm); the belt does not matter here.
+        encoder = encoder.wrapping_add(50);
+        sup.control_step(Ticks(t_ms * 1000), encoder);
+    }
+    let g = sup.ground_distance_um() as f64;
+    assert!((g - 87_964.6).abs() <= 12.0, "{g}");
+}

@@ -492,7 +492,13 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          row. The first plant is within ±3 mm of its place in {first_ok} of the {} \
          distance-locked cases, worst {first_worst:.1} mm (at Low 2: the drum starts \
          from rest at the second Hall edge and the phase loop has one spacing, 0.5 s, to \
-         absorb its start lag). \
+         absorb its start lag). **The measured ground** (docs/placement.md, \
+         \"Positions\") is exact at each Hall edge and moves on between edges at the last \
+         M/T window's speed, up to the next edge's position. Before 2026-11-23 \
+         it was the predictor's speed (carried along the slope of the last two \
+         single-gap speeds) × the whole time since the edge: hills p95 spacing at 7 cm \
+         was 2.95 / 1.91 % (Low 1 / Low 2), the default terrain's 2.39 / 2.08 %, and the \
+         phase p95 outside stop-and-go 1.7–2.4 mm. \
          **Against the true ground** every row carries the Hall measurement's own \
          error: the measured distance ends {g_lo:+.0} … {g_hi:+.0} mm off the true 70 m \
          (the k1·k2 tables against the model's slip), in both modes; \
@@ -501,29 +507,65 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          the Start point, so a 70 m row holds one place less than 70 m / X; add the \
          sensor's −0.07 … −0.14 % (up to 1.4 plants of 7 cm) and distance-locked rows at 7 cm come \
          out {c7_lo:+.1} … {c7_hi:+.1} plants: the target \"within one plant\" holds \
-         against the measured distance, not against the true one at 7 cm. **Hills \
-         spacing** (p95 at 7 cm): distance-locked {h7d_lo:.2}–{h7d_hi:.2} %, \
-         speed-following {h7s_lo:.2}–{h7s_hi:.2} %: the 1.0 % target is not reached, and \
-         not by the loop: the spacing error is the ground position the Hall gear cannot \
-         see between its edges while the speed changes. A step of 20 % of v through τ \
-         0.5 s accelerates at 0.4·v per second at first; the firmware knows the speed at \
-         the middle of the last tooth gap, so by the next edge (0.18 s at Low 2, 0.30 s \
-         at Low 1, plus half a gap of age: t = 0.27 s, 0.45 s) it misplaces the ground by \
-         up to ½·a·t² ≈ 2.0 mm at Low 2 and 3.3 mm at Low 1 — 2.9 % and 4.8 % of 7 cm. \
-         Without the random steps the same rows reach ≈ 1.0 % (measured with \
-         `terrain_step_amplitude` 0); the phase loop's time constant does not move it \
-         (0.25 s: 2.0 %, 0.5 s: 2.2 %, 1 s: 2.15 % on one hills row). Reaching 1 % needs a \
-         finer ground sensor (a Hall gear of 100 teeth, or profile B's 600 ppr encoder). \
-         **Stop-and-go**: the phase against the measured ground is {sg_lo:.1}–{sg_hi:.1} mm \
-         p95 and the spacing p95 {sgs_lo:.0}–{sgs_hi:.0} %, beyond the targets of 5 mm and \
-         3 %, with no alarm. Two physical limits: (1) after each rest the first speed \
-         needs two Hall edges (the first M/T window), 25–50 mm of ground during which the \
-         drum stands; the belt is then up to 36 mm (7 cm) behind, which the +10 % bound recovers \
-         over 0.5 m, compressing those spacings to ≈ 0.91 X (outside ±5 % by design); \
-         recovering faster would break the 0.9 X rule; (2) while the tractor slows to \
-         rest the extrapolated ground runs up to one tooth (25 mm) ahead of the truth, so \
-         the plants of the last tooth land early. Both are the 25 mm sensor, not the \
-         loop: a 3 % spacing at 7 cm is 2 mm.\n",
+         against the measured distance, not against the true one at 7 cm. The first \
+         place stays where it is: at X past the Start point it would ask the drum, which \
+         learns the speed at the second edge (25–50 mm past Start), to lay 50 mm of belt \
+         over the next 20–45 mm of ground at 7 cm (1.6–3.5 × the matched speed, beyond \
+         n_max at Low 2), and half a pitch earlier gains 0.2 plant on average, not the \
+         1–2 missing. **Hills spacing** (p95 at 7 cm): distance-locked \
+         {h7d_lo:.2}–{h7d_hi:.2} %, speed-following {h7s_lo:.2}–{h7s_hi:.2} %: the 1.0 % \
+         target is not reached. The same rows with the model's error sources switched \
+         off in turn (bench variants, not in the table): without the Hall gear's ±2 % \
+         tooth errors (`hall_pitch_error` 0) 2.53 / 1.69 %; without them and without the \
+         belt's and track's slip noise 2.41 / 1.64 %; without the random speed steps \
+         (`terrain_step_amplitude` 0) ≈ 1.0 % (measured before 2026-11-23). What is left \
+         is the speed steps: the gear reports the ground every 25 mm (0.30 s at Low 1, \
+         0.18 s at Low 2), a step of up to 40 % of v through τ 0.5 s changes the speed by \
+         up to 0.8·v per second, and between edges the ground is extrapolated at the last \
+         gap's mean speed, so by the next edge it is off by up to ½·a·t² (t = 0.45 s, \
+         0.27 s with the half gap of age: 7 mm and 4 mm for the largest steps); the belt \
+         follows that ground until the edge shows the error. Carrying the speed along \
+         its slope (second order) would remove part of it on a perfect gear, but on this \
+         gear the slope of two single-gap speeds is mostly the tooth errors: in the \
+         ground it gave the 2.95 / 1.91 % above; in the feed-forward it is worth its \
+         noise (the M/T value alone there: hills 3.43 / 2.61 %, default terrain 1.53 / \
+         1.35 %; the slope over two windows: 3.22 / 2.15 % and 1.86 / 1.67 %); the phase \
+         loop's time constant does not move it (0.25 s: 2.82 / 1.92 %). The firmware's \
+         tooth-share learning (kinematics' pitch compensation) never engages on these \
+         rows: it learns only from a revolution steady within 0.2 %, which neither the \
+         default terrain nor the hills give (the same edges fed to an `MtEstimator`: \
+         every share stays nominal). A tooth table learnt under varying speed would take \
+         the default terrain towards 0.7–0.8 % but not the hills below 2.5 %; reaching \
+         1 % there needs a finer ground sensor (a Hall gear of 100 teeth, or profile B's \
+         600 ppr encoder). **Stop-and-go**: the phase against the measured ground is \
+         {sg_lo:.1}–{sg_hi:.1} mm p95 and the spacing p95 {sgs_lo:.0}–{sgs_hi:.0} %, \
+         beyond the targets of 5 mm and 3 %, with no alarm. Followed step by step on one \
+         row (7 cm, Low 2, seed 8900): (1) while the tractor slows to rest (τ 0.5 s from \
+         0.14 m/s: 70 mm of ground, under three teeth) the drum's feed-forward follows \
+         the lagging M/T speed and the phase loop may slow it by at most 33 % of that (the \
+         1.5 X miss rule), so the belt ends up to 30 mm ahead of the measured ground and \
+         the last plant before the rest lands ≈ 10 mm early (its spacing −20 %); letting \
+         the loop stop the drum (−100 %) halves that lead, but the restart's lag then \
+         shows in full (phase p95 16.0 / 24.6 / 16.1 / 21.5 mm against 7.4 / 17.0 / 6.7 / \
+         15.9 mm): not taken. (2) A 2 s rest is often shorter than the estimator's 1.5 s \
+         stop timeout counted from the last edge before it, so the first edge after the \
+         rest closes an M/T window that spans the rest: the first speed is a fraction of \
+         the real one, the drum starts late and is ≈ 25 mm behind at the next edge. Since \
+         2026-11-23 a rest (travel speed 0, or no edge for 1 s) \
+         gives the next plant the first plant's allowance (+100 %, T/2), so that lag is \
+         caught up before it instead of over half a metre of 0.91 X spacings (phase p95 \
+         7.4 / 16.8 / 6.7 / 16.2 → 6.0 / 16.8 / 5.4 / 16.3 mm with travel speed 0 alone, \
+         then 5.4 / 16.6 / 4.8 / 15.5 → 5.3 / 11.9 / 4.8 / 8.1 mm with the 1 s rule). Tried and not taken: starting the drum at the first edge after a rest \
+         with the speed of the run before it, at most one gap / time since the edge \
+         (phase p95 6.0 / 17.3 / 5.2 / 14.9 mm, spacing p95 30.3 / 30.5 / 10.5 / 13.8 % \
+         against 6.0 / 16.8 / 5.4 / 16.3 mm and 29.6 / 29.8 / 11.1 / 12.9 %: the belt is \
+         then ahead while the tractor is still slow); absorbing a lag after a rest in one \
+         long spacing by re-phasing the plan (the realign machinery) instead of catching \
+         it up: spacing p95 34.1 / 30.8 / 13.5 / 14.7 % and the count −9.2 / −4.8 / −4.1 / \
+         −1.9 plants (each re-phase moves every later place and drops part of a plant): \
+         worse on every figure but the share outside ±5 % at 7 cm. A 3 % spacing at 7 cm \
+         is 2 mm, and where the tractor stands between two teeth is unknown by up to 25 mm: \
+         with this sensor the stop-and-go targets are out of reach.\n",
         checks.len()
     );
     let secs = started.elapsed().as_secs_f64();

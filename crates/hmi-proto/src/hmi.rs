@@ -653,6 +653,11 @@ impl Hmi {
                 let _ = self.set_settings(s);
                 Some(Command::SetWorkSwitchFitted(s.work_switch_fitted))
             }
+            // The label changes when the supervisor's settings come back
+            // (it refuses while the drum runs).
+            Action::TogglePlacement => {
+                Some(Command::SetSpeedFollowing(!self.settings.speed_following))
+            }
         };
         if let Some(c) = cmd {
             self.event(Event::Command(c));

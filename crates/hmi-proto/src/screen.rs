@@ -671,6 +671,10 @@ pub enum Command {
     SetWorkSwitchFitted(bool),
     /// Where the first plant of a pass lands after the work switch closes.
     SetFirstPlantDistance(FirstPlantDistance),
+    /// Plant placement: speed-following (`true`, the papers' law) or
+    /// distance-locked (`false`, the default); page 6 `bplace` toggles it.
+    /// Only with the drum stopped; persisted with *Save settings*.
+    SetSpeedFollowing(bool),
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -725,6 +729,18 @@ pub struct Settings {
     pub work_switch_fitted: bool,
     /// First-plant distance after the work switch closes (page 6 `nfirst`).
     pub first_plant_distance: FirstPlantDistance,
+    /// Plants placed by following the travel speed (the papers' law)
+    /// instead of locked to the ground distance (page 6 `tplace`).
+    pub speed_following: bool,
+}
+
+/// The label of the placement setting (page 6 `tplace`).
+pub const fn placement_label(speed_following: bool) -> &'static str {
+    if speed_following {
+        "speed-following"
+    } else {
+        "distance-locked"
+    }
 }
 
 /// The label of the work switch setting (page 6 `twork`).
@@ -920,6 +936,8 @@ pub enum Action {
     IdentifyDrive,
     /// [`Command::SetWorkSwitchFitted`] with the other state.
     ToggleWorkSwitch,
+    /// [`Command::SetSpeedFollowing`] with the other placement.
+    TogglePlacement,
     /// [`Command::AcceptDriveModel`].
     AcceptDriveModel,
 }
@@ -946,6 +964,8 @@ pub enum Role {
     EncoderDirectionLabel,
     /// The work switch setting's label, written with `twork.txt=`.
     WorkSwitchLabel,
+    /// The placement setting's label, written with `tplace.txt=`.
+    PlacementLabel,
     /// The alarm text, written with `talarm.txt=`.
     AlarmText,
     /// The page's message box for validation errors and notices.
@@ -1397,6 +1417,14 @@ pub const COMPONENTS: &[Component] = &[
         K::Button,
         R::Action(A::Apply(Field::FirstPlantDistance)),
     ),
+    c(
+        P::Settings,
+        16,
+        "bplace",
+        K::Button,
+        R::Action(A::TogglePlacement),
+    ),
+    c(P::Settings, 17, "tplace", K::Text, R::PlacementLabel),
     // 7 belt (profile B home)
     c(P::Belt, 1, "bstart", K::Button, R::Action(A::Start)),
     c(P::Belt, 2, "bstop", K::Button, R::Action(A::Stop)),
@@ -1669,6 +1697,10 @@ pub(crate) fn component_instruction(
             comp.obj(),
             ScreenText::new(work_switch_label(settings.work_switch_fitted)).unwrap_or(version),
         ),
+        Role::PlacementLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(placement_label(settings.speed_following)).unwrap_or(version),
+        ),
         _ => return None,
     })
 }
@@ -1723,6 +1755,7 @@ mod tests {
                                 | Role::ProfileLabel
                                 | Role::EncoderDirectionLabel
                                 | Role::WorkSwitchLabel
+                                | Role::PlacementLabel
                                 | Role::Version
                         )
                     })
@@ -1746,6 +1779,8 @@ mod tests {
             let l = encoder_direction_label(r);
             assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
             let l = work_switch_label(r);
+            assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
+            let l = placement_label(r);
             assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
         }
         let m = PROFILE_RESTART_MESSAGE;

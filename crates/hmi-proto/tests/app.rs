@@ -435,6 +435,27 @@ fn calibration_and_settings_pages() {
     );
     assert_eq!(screen.text("tenc"), Some("normal"));
 
+    // The placement: `bplace` asks for the other one; the label changes
+    // only when the supervisor's settings come back (it refuses while the
+    // drum runs), as the firmware's SettingsChanged does.
+    assert_eq!(screen.text("tplace"), Some("distance-locked"));
+    screen.release("bplace").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetSpeedFollowing(true))]
+    );
+    assert_eq!(screen.text("tplace"), Some("distance-locked"));
+    let mut back = *hmi.settings();
+    back.speed_following = true;
+    let _ = hmi.set_settings(back);
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tplace"), Some("speed-following"));
+    screen.release("bplace").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetSpeedFollowing(false))]
+    );
+
     // Page 9: the drive identification's buttons and values.
     screen.release("bdrive").unwrap();
     assert!(pump(&mut hmi, &mut screen).is_empty());

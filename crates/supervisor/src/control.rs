@@ -1139,6 +1139,16 @@ impl Supervisor {
                 self.settings.first_plant_distance = d;
                 Effect::SettingsChanged
             }
+            // Only with the drum stopped: switched while running, the phase
+            // error that speed-following let build up would be made up at
+            // the loop's bounded rate over the next plants (docs/placement.md).
+            Command::SetSpeedFollowing(f) => {
+                if self.run == RunState::Running {
+                    return Effect::Message(crate::machine::PLACEMENT_WHILE_RUNNING);
+                }
+                self.settings.placement = Placement::from_speed_following(f);
+                Effect::SettingsChanged
+            }
             // The machine profile applies after Save and a restart
             // (crate::machine).
             Command::SelectProfile(p) => {
@@ -1896,6 +1906,7 @@ impl Supervisor {
             drum_encoder_reversed: settings.drum_encoder_reversed,
             work_switch_fitted: settings.work_switch_fitted,
             first_plant_distance: settings.first_plant_distance,
+            speed_following: settings.placement == Placement::SpeedFollowing,
         }
     }
 }

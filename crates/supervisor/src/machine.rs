@@ -99,6 +99,10 @@ fn belt_error_text(e: BeltError) -> &'static str {
     }
 }
 
+/// The screen's message when the placement is changed with the drum or the
+/// motors running (both machines).
+pub const PLACEMENT_WHILE_RUNNING: &str = "Stop first to change the placement";
+
 /// Profile B with its settings: the [`BeltPlanter`] plus what the screen and
 /// the settings store need.
 pub struct BeltMachine {
@@ -183,6 +187,16 @@ impl BeltMachine {
                 self.settings.first_plant_distance = d;
                 Effect::SettingsChanged
             }
+            // Position-locked feeding or the linkage alone (docs/profile-b.md),
+            // changed only with the motors stopped.
+            Command::SetSpeedFollowing(f) => {
+                if self.planter.state() == PlanterState::Running {
+                    return Effect::Message(PLACEMENT_WHILE_RUNNING);
+                }
+                self.settings.placement = crate::settings::Placement::from_speed_following(f);
+                self.planter.set_position_lock(!f);
+                Effect::SettingsChanged
+            }
             other => match belt_with(&self.settings.belt, other) {
                 Some(Ok(config)) => match self.planter.set_config(config) {
                     Ok(()) => {
@@ -208,6 +222,7 @@ impl BeltMachine {
             drum_encoder_reversed: self.settings.drum_encoder_reversed,
             work_switch_fitted: self.settings.work_switch_fitted,
             first_plant_distance: self.settings.first_plant_distance,
+            speed_following: self.settings.placement == crate::settings::Placement::SpeedFollowing,
             ..screen::Settings::default()
         }
     }
@@ -345,6 +360,54 @@ mod tests {
         assert_eq!(belt_to_screen(&n).clamp_count.raw(), 3);
         // Not a profile B parameter.
         assert!(belt_with(&c, Command::Start).is_none());
+    }
+
+    #[test]
+    fn the_placement_changes_only_stopped_on_both_machines() {
+        use crate::settings::Placement;
+        // Profile A: refused while the drum runs, nothing changed.
+        let mut a =
+            crate::control::Supervisor::new(crate::control::Hardware::BOARD, Settings::default())
+                .unwrap();
+        assert_eq!(a.command(Command::Start), Effect::None);
+        assert_eq!(
+            a.command(Command::SetSpeedFollowing(true)),
+            Effect::Message(PLACEMENT_WHILE_RUNNING)
+        );
+        assert_eq!(a.settings().placement, Placement::DistanceLocked);
+        a.command(Command::Stop);
+        assert_eq!(
+            a.command(Command::SetSpeedFollowing(true)),
+            Effect::SettingsChanged
+        );
+        assert_eq!(a.settings().placement, Placement::SpeedFollowing);
+        assert!(a.screen_settings().speed_following);
+        // Profile B: the same rule, and the position lock follows.
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let mut b = BeltMachine::new(settings, ProfileBHardware::BOARD).unwrap();
+        assert!(b.planter.position_lock());
+        assert_eq!(b.command(Command::Start), Effect::None);
+        assert_eq!(
+            b.command(Command::SetSpeedFollowing(true)),
+            Effect::Message(PLACEMENT_WHILE_RUNNING)
+        );
+        assert!(b.planter.position_lock());
+        b.command(Command::Stop);
+        assert_eq!(
+            b.command(Command::SetSpeedFollowing(true)),
+            Effect::SettingsChanged
+        );
+        assert!(!b.planter.position_lock());
+        assert!(b.screen_settings().speed_following);
+        assert_eq!(
+            b.command(Command::SetSpeedFollowing(false)),
+            Effect::SettingsChanged
+        );
+        assert!(b.planter.position_lock());
+        assert_eq!(b.settings().placement, Placement::DistanceLocked);
     }
 
     #[test]

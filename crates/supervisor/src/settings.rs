@@ -106,6 +106,18 @@ pub enum Placement {
     SpeedFollowing,
 }
 
+impl Placement {
+    /// The placement the screen's toggle names (`true`: speed-following).
+    #[must_use]
+    pub const fn from_speed_following(speed_following: bool) -> Self {
+        if speed_following {
+            Self::SpeedFollowing
+        } else {
+            Self::DistanceLocked
+        }
+    }
+}
+
 /// Which machine the firmware runs (SPEC §1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

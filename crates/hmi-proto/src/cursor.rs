@@ -38,22 +38,22 @@ impl<'b> Cursor<'b> {
 
     /// Decimal ASCII, no leading zeros.
     pub(crate) fn u32(&mut self, mut n: u32) -> Result<(), EncodeError> {
+        // Digits from the last place up, into the end of the buffer (a
+        // `u32` has at most 10).
         let mut digits = [0u8; 10];
-        let mut count = 0usize;
-        loop {
+        let mut start = digits.len();
+        while let Some(i) = start.checked_sub(1) {
             let d = u8::try_from(n.wrapping_rem(10)).unwrap_or(0);
-            if let Some(slot) = digits.get_mut(count) {
+            if let Some(slot) = digits.get_mut(i) {
                 *slot = b'0'.wrapping_add(d);
             }
-            count = count.saturating_add(1);
+            start = i;
             n = n.wrapping_div(10);
-            if n == 0 || count >= digits.len() {
+            if n == 0 {
                 break;
             }
         }
-        let used = digits.get_mut(..count).ok_or(EncodeError::BufferTooSmall)?;
-        used.reverse();
-        self.put(used)
+        self.put(digits.get(start..).ok_or(EncodeError::BufferTooSmall)?)
     }
 
     /// Signed decimal ASCII (`-` then digits); handles `i32::MIN`.

@@ -96,9 +96,15 @@ const CURVATURE_GATE: u64 = 400;
 /// exceeds this, the default terrain's wandering speed mostly does not
 /// (chosen on the machine model: docs/kinematics.md).
 const SLOPE_GATE: u64 = 40;
-/// A tooth's share is the running mean of its samples with the nominal share
-/// counted as the first (so one sample moves it only halfway), up to this
-/// many samples; then an IIR of 1/16.
+/// A tooth-learning sample whose revolutions a quarter revolution apart agree
+/// within 1/1000 (0.1 %) is taken at a steady speed and counts in full (the
+/// first one sets the share, as a steady revolution did before 2026-11-23:
+/// learnt within a revolution, bench §2); any other is weighed against the
+/// nominal share.
+const STEADY_GATE: u64 = 1000;
+/// A tooth's share is the running mean of its samples (one not taken at a
+/// steady speed weighed against the nominal share), up to this many
+/// samples; then an IIR of 1/16.
 const SHARE_SAMPLES: u8 = 14;
 /// Q16 unity for the learned tooth shares.
 const ONE_Q16: u32 = 1 << 16;
@@ -973,12 +979,17 @@ impl MtEstimator {
                 .wrapping_sub(p.checked_rem(z).unwrap_or(0))
                 .checked_rem(z)
                 .unwrap_or(0);
-            // A running mean with the nominal share as its first sample, over
-            // SHARE_SAMPLES, then an IIR of the same weight (1/16): the
-            // wandering speed's residual biases average out, and no single
-            // early sample sets a share.
+            // A running mean over SHARE_SAMPLES, then an IIR of the same
+            // weight (1/16): the wandering speed's residual biases average
+            // out. A sample taken at a steady speed (the revolutions a
+            // quarter revolution apart within STEADY_GATE) counts in full;
+            // any other as if the nominal share were a sample before it, so
+            // that no single early sample from a changing speed sets a
+            // share.
             let n = self.samples.get(tooth).copied().unwrap_or(0);
-            let k = u32::from(n).saturating_add(2);
+            let steady = u64::from(r_before.abs_diff(r_after)).saturating_mul(STEADY_GATE)
+                <= u64::from(r_centre);
+            let k = u32::from(n).saturating_add(if steady { 1 } else { 2 });
             let w = self.weight(tooth);
             let w = if w_new >= w {
                 w.saturating_add(w_new.saturating_sub(w).checked_div(k).unwrap_or(0))

@@ -530,13 +530,12 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          ground it gave the 2.95 / 1.91 % above; in the feed-forward it is worth its \
          noise (the M/T value alone there: hills 3.43 / 2.61 %, default terrain 1.53 / \
          1.35 %; the slope over two windows: 3.22 / 2.15 % and 1.86 / 1.67 %); the phase \
-         loop's time constant does not move it (0.25 s: 2.82 / 1.92 %). The firmware's \
-         tooth-share learning (kinematics' pitch compensation) never engages on these \
-         rows: it learns only from a revolution steady within 0.2 %, which neither the \
-         default terrain nor the hills give (the same edges fed to an `MtEstimator`: \
-         every share stays nominal). A tooth table learnt under varying speed would take \
-         the default terrain towards 0.7–0.8 % but not the hills below 2.5 %; reaching \
-         1 % there needs a finer ground sensor (a Hall gear of 100 teeth, or profile B's \
+         loop's time constant does not move it (0.25 s: 2.82 / 1.92 %). The gear's \
+         tooth errors are learnt under the varying speed and each edge counts at its \
+         learnt pitch (docs/kinematics.md; before, the learning needed a revolution \
+         steady within 0.2 %, which neither profile gives, and the default terrain's \
+         distance-locked CV was 1.22 / 1.07 / 0.61 / 0.54 %); that does not take the \
+         hills below 2.5 % at 7 cm Low 1: reaching 1 % there needs a finer ground sensor (a Hall gear of 100 teeth, or profile B's \
          600 ppr encoder). **Stop-and-go**: the phase against the measured ground is \
          {sg_lo:.1}–{sg_hi:.1} mm p95 and the spacing p95 {sgs_lo:.0}–{sgs_hi:.0} %, \
          beyond the targets of 5 mm and 3 %, with no alarm. Followed step by step on one \

@@ -28,8 +28,9 @@
 //! dominant error. The estimator learns each gap's share of a revolution
 //! against the revolution centred on it (`share = gap·Z / T_rev`: exact at a
 //! steady speed and under a steady acceleration, which the centring cancels),
-//! as a running mean of each tooth's samples (the nominal share counted as
-//! the first) and after 15 an IIR of 1/16, with a ±4 % plausibility guard, and weighs every gap by its learned
+//! as a running mean of each tooth's samples (one not taken at a steady
+//! speed weighed against the nominal share) and after 15 an IIR of 1/16,
+//! with a ±4 % plausibility guard, and weighs every gap by its learned
 //! share. A sample is taken only when the speed around it is smooth enough
 //! for the centring to hold: the rolling revolution times a quarter
 //! revolution before and after the centred one in line with it within 1/400

@@ -555,18 +555,26 @@ mod tests {
         );
     }
 
-    #[test]
-    fn after_a_rest_the_lag_is_recovered_with_the_first_plants_allowance() {
-        // Running, a partition already left (+10 % bound): 50 mm behind
-        // wants 2 · 0.05/0.5 · 60/0.219 911 = 27.3 r/min, capped at +10 %
-        // of 20 r/min = 2 r/min (as `the_correction_is_bounded_...`).
+    /// A phase past its origin whose next partition is one partition
+    /// pitch (50 mm of belt) away with the ground already at its place,
+    /// a partition having left (so the +10 % bound applies).
+    fn running_a_partition_behind() -> Phase {
         let mut p = Phase::new(47_200, 70);
-        p.start(0, 0 << 16);
+        p.start(0, 0);
         p.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000)); // the origin
         p.pass_started = true;
         p.belt_nm = 0;
         p.ref_belt_nm = PARTITION_NM;
         p.ref_ground_nm = 0;
+        p
+    }
+
+    #[test]
+    fn after_a_rest_the_lag_is_recovered_with_the_first_plants_allowance() {
+        // Running, a partition already left (+10 % bound): 50 mm behind
+        // wants 2 · 0.05/0.5 · 60/0.219 911 = 27.3 r/min, capped at +10 %
+        // of 20 r/min = 2 r/min (as `the_correction_is_bounded_...`).
+        let mut p = running_a_partition_behind();
         p.advance_ground(1, 1 << 16, 10_000, 500, Some(1_000_000));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
@@ -585,20 +593,14 @@ mod tests {
         // speed (one gap / 1.2 s = 75 m/h) when the tractor moves again:
         // 1.2 s > REST_US counts as a rest, so the first plant after it may
         // be reached at +100 % (20 r/min). Before: the +10 % bound, 2 r/min.
-        let mut p = Phase::new(47_200, 70);
-        p.start(0, 0 << 16);
-        p.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000)); // the origin
-        p.pass_started = true;
-        p.belt_nm = 0;
-        p.ref_belt_nm = PARTITION_NM;
-        p.ref_ground_nm = 0;
+        let mut p = running_a_partition_behind();
         p.advance_ground(1, 1 << 16, 1_200_000, 75, Some(1_000_000));
         p.advance_ground(2, 2 << 16, 10_000, 500, Some(1_000_000));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!((19.999..=20.0).contains(&c), "{c}");
         // 0.9 s without an edge is not a rest: +10 %.
         let mut p = Phase::new(47_200, 70);
-        p.start(0, 0 << 16);
+        p.start(0, 0);
         p.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000));
         p.pass_started = true;
         p.belt_nm = 0;
@@ -615,7 +617,7 @@ mod tests {
         // 47 200 counts per turn at k3 = 1: 219 911 486 / 47 200 =
         // 4659.14 nm per count; 50 mm is 10 731.5 counts.
         let mut p = Phase::new(47_200, 70);
-        p.start(0, 0 << 16);
+        p.start(0, 0);
         p.realign(first_plant_place_um(70));
         p.advance_ground(1, 1 << 16, 0, 0, None);
         p.advance_ground(2, 2 << 16, 0, 0, Some(1_000_000));

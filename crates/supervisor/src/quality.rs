@@ -136,6 +136,18 @@ fn isqrt(v: u64) -> u64 {
 }
 
 impl Tally {
+    /// Nothing counted.
+    const ZERO: Self = Self {
+        plants: 0,
+        spacings: 0,
+        multiples: 0,
+        misses: 0,
+        within: 0,
+        distance_um: 0,
+        sum_dev: 0,
+        sum_sq_dev: 0,
+    };
+
     #[inline(never)]
     fn add_spacing(&mut self, s_um: u64, x_um: u32) {
         self.spacings = self.spacings.saturating_add(1);
@@ -239,26 +251,8 @@ impl Quality {
     pub const fn new() -> Self {
         Self {
             x_um: 0,
-            total: Tally {
-                plants: 0,
-                spacings: 0,
-                multiples: 0,
-                misses: 0,
-                within: 0,
-                distance_um: 0,
-                sum_dev: 0,
-                sum_sq_dev: 0,
-            },
-            pass: Tally {
-                plants: 0,
-                spacings: 0,
-                multiples: 0,
-                misses: 0,
-                within: 0,
-                distance_um: 0,
-                sum_dev: 0,
-                sum_sq_dev: 0,
-            },
+            total: Tally::ZERO,
+            pass: Tally::ZERO,
             pass_from_um: NONE,
             last_plant_um: NONE,
         }

@@ -919,7 +919,13 @@ impl Supervisor {
             Drum::Unbuilt => {}
             Drum::Identify(_) => {
                 self.identified = IdentifyState::Failed(IdentifyError::Aborted);
-                self.restore_controller();
+                // Rebuilt by the next control step, not here: a Stop comes
+                // through the screen task, and building the
+                // fuzzy controller (≈ 1.4 KB of stack) on top of its frame
+                // reached 4.7 KB on the QEMU board's 4 KB stack (static
+                // analysis of the image: handle_event → command → stop →
+                // restore_controller → Config::build).
+                self.drum = Drum::Unbuilt;
             }
         }
         self.stall_us = 0;
@@ -932,12 +938,15 @@ impl Supervisor {
             }
         }
         if self.run == RunState::Stopped {
-            self.ensure_controller();
-            let Drum::Control(c) = &mut self.drum else {
-                return Effect::Message("Drive identification running");
-            };
+            match &mut self.drum {
+                Drum::Identify(_) => return Effect::Message("Drive identification running"),
+                Drum::Control(c) => c.start(),
+                // Built (and started, since running) by the next control
+                // step's `ensure_controller`, not here on the screen task's
+                // stack (the QEMU board's 4 KB, see `stop`).
+                Drum::Unbuilt => {}
+            }
             self.run = RunState::Running;
-            c.start();
             self.stall_us = 0;
             self.distance_um = 0;
             self.belt_counts_k3_milli = 0;

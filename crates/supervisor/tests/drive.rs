@@ -440,3 +440,42 @@ fn no_false_instability_warning_in_the_field_at_every_gear() {
         assert!(!rig.sup.in_fallback(), "{gear:?}");
     }
 }
+
+/// Stop during the identification: it ends as aborted, the drum stays off,
+/// and the controller is back for the next Start (rebuilt by the next
+/// control step, not inside the Stop's command): Fixed 20.00 r/min is held
+/// within ±2 % of the partition mean 3 s after Start.
+#[test]
+fn a_stop_during_identification_aborts_it_and_the_next_start_runs_the_drum() {
+    use closed::*;
+    use hmi_proto::screen::Command;
+    use supervisor::control::{Effect, RunState};
+    let mut rig = Rig::new(drive(1.0, 0.025, 5), fixed(2000));
+    assert_eq!(
+        rig.sup.command(Command::IdentifyDrive),
+        Effect::Message(supervisor::control::IDENTIFY_MESSAGE)
+    );
+    for _ in 0..30 {
+        rig.period();
+    }
+    assert_eq!(rig.sup.run_state(), RunState::Identifying);
+    rig.sup.command(Command::Stop);
+    assert_eq!(rig.sup.run_state(), RunState::Stopped);
+    assert_eq!(
+        rig.sup.identify_state(),
+        IdentifyState::Failed(supervisor::drive::IdentifyError::Aborted)
+    );
+    for _ in 0..10 {
+        rig.period();
+        assert_eq!(rig.act.ccr, 0, "the drum stays off after the Stop");
+    }
+    assert_eq!(rig.sup.command(Command::Start), Effect::None);
+    let speeds: Vec<f64> = (0..500).map(|_| rig.period()).collect();
+    let f = figures(&speeds, 20.0, 300);
+    assert!(
+        f.pmin >= 19.6 && f.pmax <= 20.4,
+        "partition mean {:.2}..{:.2} r/min",
+        f.pmin,
+        f.pmax
+    );
+}

@@ -1,0 +1,348 @@
+//! The drum driver's RS-485 link as the supervisor sees it (issue 17,
+//! docs/drive-link.md): the settings (feedback source, command path, driver
+//! profile), the read-back as one more sensor sample with its age, and the
+//! alarms it raises (driver fault, link lost, encoder or driver speed wrong).
+//!
+//! The Modbus master itself (`drive_link::link`) runs in a task of its own
+//! in the firmware; each control period hands the supervisor a
+//! [`LinkSample`] and takes back the speed command and the driver's enable.
+
+use drive_link::cross_check::CrossCheck;
+use drive_link::profile::{DriverProfile, GenericSettings, ProfileError, ZLAC8015D};
+
+/// Where the drum's measured speed comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FeedbackSource {
+    /// The drum encoder (TIM3), as before the link existed. The default.
+    #[default]
+    Encoder,
+    /// The driver's speed read-back alone (no encoder fitted, paper A).
+    Driver,
+    /// The encoder controls; the read-back cross-checks it.
+    Both,
+}
+
+/// How the drum speed is commanded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CommandPath {
+    /// PWM duty on PA8, as before the link existed. The default.
+    #[default]
+    Pwm,
+    /// The driver's speed command register over Modbus.
+    Modbus,
+}
+
+/// Which driver is on the link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriverKind {
+    /// No driver on the link (the link stays idle). The default.
+    #[default]
+    None,
+    /// A ZLTECH ZLAC8015D ([`ZLAC8015D`]) with the slave id and baud rate of
+    /// [`DriveLinkSettings::generic`].
+    Zlac8015d,
+    /// Any driver, described by [`DriveLinkSettings::generic`].
+    Generic,
+}
+
+/// The link's persisted settings (settings format 5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DriveLinkSettings {
+    /// Feedback source. Default: the encoder.
+    pub feedback: FeedbackSource,
+    /// Command path. Default: PWM.
+    pub command: CommandPath,
+    /// The driver. Default: none.
+    pub kind: DriverKind,
+    /// Slave id and baud rate (both kinds) and the registers and scaling
+    /// (the generic kind). Default: the ZLAC8015D's.
+    pub generic: GenericSettings,
+}
+
+/// The generic block's defaults: the ZLAC8015D's registers and scaling.
+pub const GENERIC_DEFAULT: GenericSettings = GenericSettings {
+    slave: ZLAC8015D.slave,
+    baud: ZLAC8015D.baud,
+    speed_feedback: ZLAC8015D.speed_feedback,
+    milli_rpm_per_count: ZLAC8015D.milli_rpm_per_count,
+    fault_register: ZLAC8015D.fault_register,
+    fault_masks: ZLAC8015D.fault_masks,
+    speed_command: None,
+};
+
+impl Default for DriveLinkSettings {
+    fn default() -> Self {
+        Self {
+            feedback: FeedbackSource::Encoder,
+            command: CommandPath::Pwm,
+            kind: DriverKind::None,
+            generic: GENERIC_DEFAULT,
+        }
+    }
+}
+
+/// Why link settings were refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriveLinkError {
+    /// The driver read-back or the Modbus command chosen with no driver.
+    NoDriver,
+    /// The Modbus command chosen with a driver that takes none.
+    NoSpeedCommand,
+    /// The driver's profile was refused.
+    Profile(ProfileError),
+    /// A byte of the stored block is not a known value.
+    Byte(u8),
+}
+
+impl core::fmt::Display for DriveLinkError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NoDriver => f.write_str("driver feedback or command needs a driver profile"),
+            Self::NoSpeedCommand => f.write_str("this driver takes no speed command"),
+            Self::Profile(e) => write!(f, "driver profile: {e}"),
+            Self::Byte(b) => write!(f, "invalid drive link byte {b}"),
+        }
+    }
+}
+
+/// Bytes of [`DriveLinkSettings::to_bytes`].
+pub const DRIVE_LINK_BYTES: usize = 31;
+
+impl DriveLinkSettings {
+    /// The driver's profile (`None`: no driver), validated: a generic
+    /// profile through [`GenericSettings::build`], the ZLAC8015D with the
+    /// slave id and baud of the generic block (checked the same way).
+    pub fn build(&self) -> Result<Option<DriverProfile>, DriveLinkError> {
+        let profile = match self.kind {
+            DriverKind::None => None,
+            DriverKind::Zlac8015d => {
+                let zlac = GenericSettings {
+                    slave: self.generic.slave,
+                    baud: self.generic.baud,
+                    ..GENERIC_DEFAULT
+                }
+                .build()
+                .map_err(DriveLinkError::Profile)?;
+                Some(DriverProfile {
+                    slave: zlac.slave,
+                    baud: zlac.baud,
+                    ..ZLAC8015D
+                })
+            }
+            DriverKind::Generic => Some(self.generic.build().map_err(DriveLinkError::Profile)?),
+        };
+        let uses_link =
+            self.feedback != FeedbackSource::Encoder || self.command == CommandPath::Modbus;
+        match profile {
+            None if uses_link => Err(DriveLinkError::NoDriver),
+            Some(p) if self.command == CommandPath::Modbus && p.speed_command.is_none() => {
+                Err(DriveLinkError::NoSpeedCommand)
+            }
+            _ => Ok(profile),
+        }
+    }
+
+    /// Little-endian bytes: feedback (0 encoder, 1 driver, 2 both), command
+    /// (0 PWM, 1 Modbus), kind (0 none, 1 ZLAC8015D, 2 generic), slave,
+    /// baud (u32), speed register, scale (i32), fault register, six fault
+    /// masks, speed command register with a presence byte (1) before it.
+    #[must_use]
+    pub fn to_bytes(&self) -> [u8; DRIVE_LINK_BYTES] {
+        let g = &self.generic;
+        let mut out = [0u8; DRIVE_LINK_BYTES];
+        let mut w = Writer {
+            buf: &mut out,
+            at: 0,
+        };
+        w.put(&[
+            self.feedback as u8,
+            self.command as u8,
+            self.kind as u8,
+            g.slave,
+        ]);
+        w.put(&g.baud.to_le_bytes());
+        w.put(&g.speed_feedback.to_le_bytes());
+        w.put(&g.milli_rpm_per_count.to_le_bytes());
+        w.put(&g.fault_register.to_le_bytes());
+        for m in g.fault_masks {
+            w.put(&m.to_le_bytes());
+        }
+        w.put(&[u8::from(g.speed_command.is_some())]);
+        w.put(&g.speed_command.unwrap_or(0).to_le_bytes());
+        out
+    }
+
+    /// Reads [`Self::to_bytes`] and validates the result with
+    /// [`Self::build`].
+    pub fn from_bytes(b: &[u8; DRIVE_LINK_BYTES]) -> Result<Self, DriveLinkError> {
+        let mut r = Reader { buf: b, at: 0 };
+        let [f, c, k, slave] = r.take::<4>();
+        let feedback = match f {
+            0 => FeedbackSource::Encoder,
+            1 => FeedbackSource::Driver,
+            2 => FeedbackSource::Both,
+            other => return Err(DriveLinkError::Byte(other)),
+        };
+        let command = match c {
+            0 => CommandPath::Pwm,
+            1 => CommandPath::Modbus,
+            other => return Err(DriveLinkError::Byte(other)),
+        };
+        let kind = match k {
+            0 => DriverKind::None,
+            1 => DriverKind::Zlac8015d,
+            2 => DriverKind::Generic,
+            other => return Err(DriveLinkError::Byte(other)),
+        };
+        let baud = u32::from_le_bytes(r.take());
+        let speed_feedback = u16::from_le_bytes(r.take());
+        let milli_rpm_per_count = i32::from_le_bytes(r.take());
+        let fault_register = u16::from_le_bytes(r.take());
+        let mut fault_masks = [0u16; 6];
+        for m in &mut fault_masks {
+            *m = u16::from_le_bytes(r.take());
+        }
+        let [has] = r.take::<1>();
+        let reg = u16::from_le_bytes(r.take());
+        let speed_command = match has {
+            0 => None,
+            1 => Some(reg),
+            other => return Err(DriveLinkError::Byte(other)),
+        };
+        let s = Self {
+            feedback,
+            command,
+            kind,
+            generic: GenericSettings {
+                slave,
+                baud,
+                speed_feedback,
+                milli_rpm_per_count,
+                fault_register,
+                fault_masks,
+                speed_command,
+            },
+        };
+        s.build()?;
+        Ok(s)
+    }
+}
+
+struct Writer<'a> {
+    buf: &'a mut [u8],
+    at: usize,
+}
+
+impl Writer<'_> {
+    fn put(&mut self, bytes: &[u8]) {
+        let end = self.at.saturating_add(bytes.len());
+        if let Some(dst) = self.buf.get_mut(self.at..end) {
+            dst.copy_from_slice(bytes);
+        }
+        self.at = end;
+    }
+}
+
+struct Reader<'a> {
+    buf: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn take<const N: usize>(&mut self) -> [u8; N] {
+        let end = self.at.saturating_add(N);
+        let mut out = [0u8; N];
+        if let Some(src) = self.buf.get(self.at..end) {
+            out.copy_from_slice(src);
+        }
+        self.at = end;
+        out
+    }
+}
+
+/// The driver's speed read-back with its age: one more sensor sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ReadBack {
+    /// Drum speed, milli-r/min.
+    pub drum_milli_rpm: i32,
+    /// How old it is at this control step (since the driver sampled), µs.
+    pub age_us: u32,
+}
+
+/// What the link task reports to a control step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LinkSample {
+    /// The newest read-back (none while the link is down).
+    pub speed: Option<ReadBack>,
+    /// The link is lost (its retry budget used up) and not answering yet.
+    pub lost: bool,
+    /// The last transaction was answered.
+    pub answering: bool,
+    /// The driver's fault word as last read.
+    pub fault_word: u16,
+    /// Fault words read since boot (a new reading re-raises a fault the
+    /// operator acknowledged while it was still there).
+    pub fault_reads: u32,
+}
+
+/// The read-back older than this is not used (the link is failing; the
+/// link-lost alarm follows): three reply timeouts at 9600 baud.
+pub const READBACK_MAX_AGE_US: u32 = 100_000;
+
+/// The supervisor's side of the link: the newest sample, the encoder
+/// equivalent of the read-back, the cross-check.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Feedback {
+    /// The newest sample from the link task.
+    pub sample: LinkSample,
+    /// Fault reads seen when the operator last acknowledged a driver fault.
+    pub acked_fault_reads: Option<u32>,
+    /// Sub-count remainder of the read-back's integration (counts ×
+    /// 60 000 000 000, i.e. milli-r/min · µs · counts per rev).
+    remainder: i64,
+    /// Encoder against read-back.
+    pub cross: CrossCheck,
+}
+
+impl Feedback {
+    /// Encoder counts the read-back speed turns the drum by in
+    /// `elapsed_us` (what an encoder of `counts_per_rev` would have
+    /// counted), the fractions carried to the next period. 0 with no
+    /// usable read-back; never negative (the drum only runs forward).
+    pub fn readback_counts(&mut self, elapsed_us: u32, counts_per_rev: u32) -> u16 {
+        let Some(rb) = self
+            .sample
+            .speed
+            .filter(|r| r.age_us <= READBACK_MAX_AGE_US)
+        else {
+            self.remainder = 0;
+            return 0;
+        };
+        let rpm = i64::from(rb.drum_milli_rpm.max(0));
+        // milli-r/min · µs · counts/rev; one count = 60 000 000 000 of them.
+        const PER_COUNT: i64 = 60_000_000_000;
+        let total = rpm
+            .saturating_mul(i64::from(elapsed_us))
+            .saturating_mul(i64::from(counts_per_rev))
+            .saturating_add(self.remainder);
+        let counts = total / PER_COUNT;
+        self.remainder = total.saturating_sub(counts.saturating_mul(PER_COUNT));
+        u16::try_from(counts).unwrap_or(u16::MAX)
+    }
+
+    /// The read-back if it is fresh enough to use, milli-r/min.
+    #[must_use]
+    pub fn readback_milli_rpm(&self) -> Option<i32> {
+        self.sample
+            .speed
+            .filter(|r| r.age_us <= READBACK_MAX_AGE_US)
+            .map(|r| r.drum_milli_rpm)
+    }
+}

@@ -1,8 +1,10 @@
 //! The persisted settings and their versioned byte format.
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
-//! multi-byte number is little endian. Format version 4. [`decode`] still
-//! reads the older formats: version 3 is version 4 without its last 2 bytes
+//! multi-byte number is little endian. Format version 5. [`decode`] still
+//! reads the older formats: version 4 is version 5 without its last 31
+//! bytes (written before the drum driver's link; read with encoder
+//! feedback, PWM command and no driver, the behaviour then), version 3 is version 4 without its last 2 bytes
 //! and knows flag bit 0 only (written before the placement setting and the
 //! work switch; read as [`Placement::DistanceLocked`], with no work switch
 //! fitted and [`FirstPlantDistance::DEFAULT`]), version 2 is version 3 without its last 7 bytes
@@ -13,7 +15,7 @@
 //!
 //! | offset | size | field | encoding |
 //! |---|---|---|---|
-//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 4 |
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 5 |
 //! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
 //! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
 //! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
@@ -26,8 +28,9 @@
 //! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1 (format 4): [`Settings::placement`] is [`Placement::SpeedFollowing`]; bit 2 (format 4): [`Settings::work_switch_fitted`]; bits 3–7 zero |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
 //! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`], default 100) |
+//! | 252 | 31 | [`Settings::drive_link`] (format 5) | [`DriveLinkSettings::to_bytes`]: feedback, command path, driver kind, slave id, baud (u32), speed register, scale (i32, milli-r/min per count), fault register, six fault masks, speed command register (presence byte + u16) |
 //!
-//! Total 252 bytes (version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! Total 283 bytes (version 4: 252, version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -43,12 +46,12 @@
 //! s.spacing = Spacing::new(120).unwrap();
 //! let bytes = s.encode();
 //! assert_eq!(bytes.len(), SETTINGS_BYTES);
-//! // version 4, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // version 5, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
 //! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
 //! // brightness 100 (0x64).
 //! assert_eq!(
 //!     bytes[..10],
-//!     [4, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//!     [5, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
 //! );
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
@@ -304,7 +307,7 @@ const fn mode_from_byte(b: u8) -> Option<Mode> {
 }
 
 impl Settings {
-    /// Serialises in format version 4 (layout in the [module docs](self)).
+    /// Serialises in format version 5 (layout in the [module docs](self)).
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];

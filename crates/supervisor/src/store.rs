@@ -77,10 +77,10 @@
 //!
 //! // The bytes in flash follow the documented layout.
 //! let flash = store.into_inner();
-//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xFC\x00\x03\xFF"); // magic, seq 1, n = 252, !n
+//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\x1B\x01\xE4\xFE"); // magic, seq 1, n = 283, !n
 //! assert_eq!(flash.0[12], 5); // settings format version
-//! assert_eq!(&flash.0[268..272], b"DONE");
-//! assert_eq!(flash.0[272], 0xFF); // the record ends there
+//! assert_eq!(&flash.0[300..304], b"DONE");
+//! assert_eq!(flash.0[304], 0xFF); // the record ends there
 //! # Ok::<(), supervisor::store::StoreError<NorFlashErrorKind>>(())
 //! ```
 

@@ -41,8 +41,11 @@ pub enum DriverKind {
     /// No driver on the link (the link stays idle). The default.
     #[default]
     None,
-    /// A ZLTECH ZLAC8015D ([`ZLAC8015D`]) with the slave id and baud rate of
-    /// [`DriveLinkSettings::generic`].
+    /// A ZLTECH ZLAC8015D ([`ZLAC8015D`]'s registers) with the slave id,
+    /// baud rate and feedback scale of [`DriveLinkSettings::generic`] (the
+    /// scale carries the gearbox; the ZLAC's speed command counts whole
+    /// r/min where its feedback counts 0.1 r/min, so the command scale is
+    /// ten times the feedback's).
     Zlac8015d,
     /// Any driver, described by [`DriveLinkSettings::generic`].
     Generic,
@@ -63,12 +66,18 @@ pub struct DriveLinkSettings {
     pub generic: GenericSettings,
 }
 
-/// The generic block's defaults: the ZLAC8015D's registers and scaling.
+/// Paper A's drum gearbox (118:1) behind a driver counting 0.1 r/min of its
+/// motor: 100 000 µr/min / 118 = 847 µr/min of the drum per count (0.05 %
+/// rounding).
+pub const PAPER_A_MICRO_RPM_PER_COUNT: i32 = 847;
+
+/// The generic block's defaults: the ZLAC8015D's registers, paper A's
+/// gearbox in the scale.
 pub const GENERIC_DEFAULT: GenericSettings = GenericSettings {
     slave: ZLAC8015D.slave,
     baud: ZLAC8015D.baud,
     speed_feedback: ZLAC8015D.speed_feedback,
-    milli_rpm_per_count: ZLAC8015D.milli_rpm_per_count,
+    micro_rpm_per_count: PAPER_A_MICRO_RPM_PER_COUNT,
     fault_register: ZLAC8015D.fault_register,
     fault_masks: ZLAC8015D.fault_masks,
     speed_command: None,
@@ -124,13 +133,22 @@ impl DriveLinkSettings {
                 let zlac = GenericSettings {
                     slave: self.generic.slave,
                     baud: self.generic.baud,
+                    micro_rpm_per_count: self.generic.micro_rpm_per_count,
                     ..GENERIC_DEFAULT
                 }
                 .build()
                 .map_err(DriveLinkError::Profile)?;
+                let command =
+                    zlac.micro_rpm_per_count
+                        .checked_mul(10)
+                        .ok_or(DriveLinkError::Profile(ProfileError::Scale(
+                            zlac.micro_rpm_per_count,
+                        )))?;
                 Some(DriverProfile {
                     slave: zlac.slave,
                     baud: zlac.baud,
+                    micro_rpm_per_count: zlac.micro_rpm_per_count,
+                    speed_command: ZLAC8015D.speed_command.map(|(r, _)| (r, command)),
                     ..ZLAC8015D
                 })
             }
@@ -149,7 +167,7 @@ impl DriveLinkSettings {
 
     /// Little-endian bytes: feedback (0 encoder, 1 driver, 2 both), command
     /// (0 PWM, 1 Modbus), kind (0 none, 1 ZLAC8015D, 2 generic), slave,
-    /// baud (u32), speed register, scale (i32), fault register, six fault
+    /// baud (u32), speed register, scale (i32, µr/min per count), fault register, six fault
     /// masks, speed command register with a presence byte (1) before it.
     #[must_use]
     pub fn to_bytes(&self) -> [u8; DRIVE_LINK_BYTES] {
@@ -167,7 +185,7 @@ impl DriveLinkSettings {
         ]);
         w.put(&g.baud.to_le_bytes());
         w.put(&g.speed_feedback.to_le_bytes());
-        w.put(&g.milli_rpm_per_count.to_le_bytes());
+        w.put(&g.micro_rpm_per_count.to_le_bytes());
         w.put(&g.fault_register.to_le_bytes());
         for m in g.fault_masks {
             w.put(&m.to_le_bytes());
@@ -201,7 +219,7 @@ impl DriveLinkSettings {
         };
         let baud = u32::from_le_bytes(r.take());
         let speed_feedback = u16::from_le_bytes(r.take());
-        let milli_rpm_per_count = i32::from_le_bytes(r.take());
+        let micro_rpm_per_count = i32::from_le_bytes(r.take());
         let fault_register = u16::from_le_bytes(r.take());
         let mut fault_masks = [0u16; 6];
         for m in &mut fault_masks {
@@ -222,7 +240,7 @@ impl DriveLinkSettings {
                 slave,
                 baud,
                 speed_feedback,
-                milli_rpm_per_count,
+                micro_rpm_per_count,
                 fault_register,
                 fault_masks,
                 speed_command,

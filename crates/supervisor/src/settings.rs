@@ -28,7 +28,7 @@
 //! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1 (format 4): [`Settings::placement`] is [`Placement::SpeedFollowing`]; bit 2 (format 4): [`Settings::work_switch_fitted`]; bits 3–7 zero |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
 //! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`], default 100) |
-//! | 252 | 31 | [`Settings::drive_link`] (format 5) | [`DriveLinkSettings::to_bytes`]: feedback, command path, driver kind, slave id, baud (u32), speed register, scale (i32, milli-r/min per count), fault register, six fault masks, speed command register (presence byte + u16) |
+//! | 252 | 31 | [`Settings::drive_link`] (format 5) | [`DriveLinkSettings::to_bytes`]: feedback, command path, driver kind, slave id, baud (u32), speed register, scale (i32, micro-r/min per count), fault register, six fault masks, speed command register (presence byte + u16) |
 //!
 //! Total 283 bytes (version 4: 252, version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
@@ -541,7 +541,7 @@ mod tests {
                     slave: 17,
                     baud: 9600,
                     speed_feedback: 0x1234,
-                    milli_rpm_per_count: -250,
+                    micro_rpm_per_count: -250,
                     fault_register: 0x0100,
                     fault_masks: [1, 2, 4, 8, 0x10, 0x8000],
                     speed_command: Some(0x0200),

@@ -100,6 +100,9 @@ pub struct Counters {
     pub exceptions: u32,
     /// Times the link was lost.
     pub losses: u32,
+    /// Fault words read (a new reading re-raises a fault the operator
+    /// acknowledged while it was still there).
+    pub fault_reads: u32,
 }
 
 /// A speed read back from the driver.
@@ -347,6 +350,7 @@ impl Link {
                 });
             }
             (Job::Faults, Reply::Registers { first, .. }) => {
+                self.counters.fault_reads = self.counters.fault_reads.wrapping_add(1);
                 if first != self.faults {
                     event = Some(Event::Faults(first));
                 }

@@ -113,12 +113,29 @@ pub enum Alarm {
     DrumUnstable,
     /// The drive identification ended without a model (a warning).
     IdentifyFailed(IdentifyError),
+    /// The drum driver reports a fault over its link (the first named
+    /// one). Latched.
+    DriverFault(drive_link::profile::DriverFault),
+    /// No valid reply from the drum driver within the link's retry budget.
+    /// Latched; acknowledged only once the driver answers again.
+    LinkLost,
+    /// Encoder and driver read-back disagree beyond the cross-check's
+    /// margin for its hold time ([`drive_link::cross_check`]): a lost
+    /// encoder, or a driver reporting wrong. Latched.
+    SpeedMismatch,
 }
 
 impl Alarm {
     /// Latched alarms stop the drum and need an acknowledgement.
     pub const fn is_latched(&self) -> bool {
-        matches!(self, Self::DrumStall | Self::HallLost)
+        matches!(
+            self,
+            Self::DrumStall
+                | Self::HallLost
+                | Self::DriverFault(_)
+                | Self::LinkLost
+                | Self::SpeedMismatch
+        )
     }
 
     /// The text for the screen (ASCII, at most 40 characters).
@@ -128,6 +145,20 @@ impl Alarm {
             Self::HallLost => w.write_str("Hall speed signal lost"),
             Self::DrumUnstable => w.write_str(DRUM_UNSTABLE_TEXT),
             Self::IdentifyFailed(e) => w.write_str(e.text()),
+            Self::DriverFault(f) => {
+                use drive_link::profile::DriverFault as F;
+                w.write_str(match f {
+                    F::OverCurrent => "Driver fault: over-current",
+                    F::OverVoltage => "Driver fault: over-voltage",
+                    F::UnderVoltage => "Driver fault: under-voltage",
+                    F::Overload => "Driver fault: overload",
+                    F::HallOrEncoder => "Driver fault: Hall/encoder",
+                    F::OverTemperature => "Driver fault: over-temperature",
+                    F::Other(_) => "Driver fault (unnamed)",
+                })
+            }
+            Self::LinkLost => w.write_str("Drum driver link lost"),
+            Self::SpeedMismatch => w.write_str("Encoder or driver speed wrong"),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
                 // `core::fmt`'s number formatting (~2 KB of flash), and
@@ -375,6 +406,9 @@ pub struct Supervisor {
     pub(crate) work: crate::planting::Work,
     /// Live planting quality ([`crate::quality`]).
     pub(crate) quality: crate::quality::Quality,
+    /// The drum driver's link: its newest sample, the read-back's
+    /// integration, the cross-check ([`crate::drive_link`]).
+    pub(crate) link: crate::drive_link::Feedback,
 }
 
 /// Bridges the Hall sensor's sparse updates (one edge every 170 ms at Low 2)
@@ -802,6 +836,7 @@ impl Supervisor {
             phase,
             work: crate::planting::Work::new(),
             quality: crate::quality::Quality::new(),
+            link: crate::drive_link::Feedback::default(),
         })
     }
 
@@ -1054,6 +1089,9 @@ impl Supervisor {
                 }
             }
             Command::AcknowledgeAlarm => {
+                if let Some(effect) = self.acknowledge_link_alarm() {
+                    return effect;
+                }
                 if self.alarm.is_some() {
                     self.alarm = None;
                     Effect::AlarmCleared
@@ -1411,6 +1449,10 @@ impl Supervisor {
         self.phase.clear_events();
         let elapsed_us = self.elapsed_us(now);
         self.last_step_at = Some(now);
+        let encoder_delta = delta;
+        let delta = self.feedback_counts(encoder_delta, elapsed_us);
+        self.link.bus_command = None;
+        self.link.bus_ccr = None;
         let measured = self.drum_speed_of(delta, elapsed_us);
         self.reported = self.reported.saturating_add(
             measured
@@ -1503,9 +1545,11 @@ impl Supervisor {
         if self.run == RunState::Identifying {
             actuation = self.identify_step(measured, delta, elapsed_us);
         }
+        self.link_alarms(encoder_delta, elapsed_us);
         if self.run == RunState::Running {
-            // Fault: drum commanded but not turning.
-            if target >= STALL_MIN_COMMAND && delta == 0 {
+            // Fault: drum commanded but not turning (with both feedbacks:
+            // neither turning; the encoder alone still is the cross-check's).
+            if target >= STALL_MIN_COMMAND && delta == 0 && !self.driver_turning() {
                 self.stall_us = self.stall_us.saturating_add(elapsed_us);
             } else {
                 self.stall_us = 0;
@@ -1527,7 +1571,14 @@ impl Supervisor {
                 // alone; then advance the model with the target of
                 // `ref_delay − 1` periods ago (the drive's dead time).
                 let expected = self.reference;
-                let back = self.law.ref_delay.saturating_sub(2);
+                // The read-back as feedback is older by its age: the model's
+                // input is delayed by as many periods more.
+                let back = self
+                    .law
+                    .ref_delay
+                    .saturating_sub(2)
+                    .saturating_add(self.readback_delay_periods())
+                    .min(REF_HISTORY - 1);
                 let delayed = self
                     .ref_history
                     .get(
@@ -1557,10 +1608,7 @@ impl Supervisor {
                     Drum::Control(c) => c.step(expected, measured, target),
                     Drum::Unbuilt | Drum::Identify(_) => I16F16::ZERO,
                 };
-                actuation = Actuation {
-                    ccr: self.ccr_of(out),
-                    driver_enabled: true,
-                };
+                actuation = self.drum_output(out);
             }
         }
         if self.run != RunState::Running {
@@ -1582,6 +1630,11 @@ impl Supervisor {
         };
         self.snapshot.actual_drum_rpm_x1000 = milli(self.reported);
         self.snapshot.ccr = actuation.ccr;
+        if let Some(equivalent) = self.link.bus_ccr {
+            // The Modbus command path: the PWM is 0; the log and the
+            // instability supervisor see the equivalent duty.
+            self.snapshot.ccr = equivalent;
+        }
         self.snapshot.hall_edges = self.edges;
         let partitions_x1e6 = self.partitions_x1e6();
         self.snapshot.plants = u32::try_from(partitions_x1e6 / 1_000_000).unwrap_or(u32::MAX);
@@ -1594,6 +1647,151 @@ impl Supervisor {
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
         self.count_plants(partitions_x1e6);
         actuation
+    }
+
+    /// The drum link's newest sample (one more sensor sample, with the
+    /// read-back's age): call before [`Supervisor::control_step`].
+    pub fn set_link_sample(&mut self, sample: crate::drive_link::LinkSample) {
+        self.link.sample = sample;
+    }
+
+    /// The speed command for the driver's bus (drum milli-r/min) when the
+    /// command path is Modbus and the drum runs; `None` otherwise.
+    pub fn bus_speed_command(&self) -> Option<i32> {
+        self.link.bus_command
+    }
+
+    /// Whether the operator's acknowledgement asked the driver to clear its
+    /// latched alarm (taken once).
+    pub fn take_driver_clear(&mut self) -> bool {
+        core::mem::take(&mut self.link.clear_request)
+    }
+
+    /// Whether the link is in use (a driver profile and a feedback or
+    /// command that needs it, or a profile at all: its faults are read).
+    fn link_in_use(&self) -> bool {
+        self.settings.drive_link.kind != crate::drive_link::DriverKind::None
+    }
+
+    /// This period's drum counts from the feedback source in force: the
+    /// encoder's, or the read-back integrated over the period.
+    fn feedback_counts(&mut self, encoder_delta: u16, elapsed_us: u32) -> u16 {
+        use crate::drive_link::FeedbackSource;
+        self.link.clock_us = self.link.clock_us.saturating_add(u64::from(elapsed_us));
+        match self.settings.drive_link.feedback {
+            FeedbackSource::Encoder | FeedbackSource::Both => encoder_delta,
+            FeedbackSource::Driver => self
+                .link
+                .readback_counts(elapsed_us, self.hw.encoder_counts_per_drum_rev),
+        }
+    }
+
+    /// Control periods the feedback lags by: the read-back's age when it is
+    /// the feedback (rounded), else 0.
+    fn readback_delay_periods(&self) -> usize {
+        if self.settings.drive_link.feedback != crate::drive_link::FeedbackSource::Driver {
+            return 0;
+        }
+        let period = self.hw.control_period_us.max(1);
+        self.link
+            .sample
+            .speed
+            .map_or(0, |r| r.age_us.saturating_add(period / 2) / period) as usize
+    }
+
+    /// With both feedbacks: the driver's read-back says the drum turns (at
+    /// least the cross-check's floor, 1 r/min), so a still encoder is the
+    /// cross-check's alarm, not a stall.
+    fn driver_turning(&self) -> bool {
+        self.settings.drive_link.feedback == crate::drive_link::FeedbackSource::Both
+            && self
+                .link
+                .readback_milli_rpm()
+                .is_some_and(|n| i64::from(n) > drive_link::cross_check::MARGIN_FLOOR_MILLI_RPM)
+    }
+
+    /// The link's alarms: lost, a driver fault, the cross-check.
+    fn link_alarms(&mut self, encoder_delta: u16, elapsed_us: u32) {
+        if !self.link_in_use() {
+            return;
+        }
+        let sample = self.link.sample;
+        if sample.lost {
+            self.latch(Alarm::LinkLost);
+            return;
+        }
+        if sample.fault_word != 0 && self.link.acked_fault_reads != Some(sample.fault_reads) {
+            let fault = self
+                .settings
+                .drive_link
+                .build()
+                .ok()
+                .flatten()
+                .and_then(|p| p.faults(sample.fault_word).next())
+                .unwrap_or(drive_link::profile::DriverFault::Other(sample.fault_word));
+            if self.alarm != Some(Alarm::DriverFault(fault)) {
+                self.latch(Alarm::DriverFault(fault));
+            }
+            return;
+        }
+        if self.settings.drive_link.feedback == crate::drive_link::FeedbackSource::Both
+            && self.run == RunState::Running
+        {
+            let encoder = milli(self.drum_speed_of(encoder_delta, elapsed_us));
+            let driver = self.link.readback_milli_rpm();
+            let clock = self.link.clock_us;
+            let wrong = match driver {
+                Some(d) => {
+                    self.link
+                        .cross
+                        .update(clock, i32::try_from(encoder).unwrap_or(i32::MAX), d)
+                }
+                None => false,
+            };
+            if wrong {
+                self.latch(Alarm::SpeedMismatch);
+            }
+        } else {
+            self.link.cross = drive_link::cross_check::CrossCheck::new();
+        }
+    }
+
+    /// The operator acknowledges a link alarm: a lost link only once the
+    /// driver answers again; a driver fault asks the driver to clear its
+    /// alarm (a fault still there comes back with the next fault read).
+    fn acknowledge_link_alarm(&mut self) -> Option<Effect> {
+        match self.alarm {
+            Some(Alarm::LinkLost) if !self.link.sample.answering || self.link.sample.lost => {
+                Some(Effect::Message("Drum driver still not answering"))
+            }
+            Some(Alarm::DriverFault(_)) => {
+                self.link.acked_fault_reads = Some(self.link.sample.fault_reads);
+                self.link.clear_request = true;
+                self.alarm = None;
+                Some(Effect::AlarmCleared)
+            }
+            _ => None,
+        }
+    }
+
+    /// The drum's output for the controller's `out` (r/min): the PWM
+    /// compare value, or with the Modbus command path the driver's speed
+    /// command (PWM 0).
+    fn drum_output(&mut self, out: I16F16) -> Actuation {
+        let ccr = self.ccr_of(out);
+        if self.settings.drive_link.command == crate::drive_link::CommandPath::Modbus {
+            self.link.bus_command = Some(i32::try_from(milli(out)).unwrap_or(i32::MAX));
+            self.link.bus_ccr = Some(ccr);
+            Actuation {
+                ccr: 0,
+                driver_enabled: true,
+            }
+        } else {
+            Actuation {
+                ccr,
+                driver_enabled: true,
+            }
+        }
     }
 
     fn push_reference_input(&mut self, target: I16F16) {

@@ -327,6 +327,16 @@ pub struct Feedback {
     remainder: i64,
     /// Encoder against read-back.
     pub cross: CrossCheck,
+    /// Time since boot summed over the control steps, µs (the
+    /// cross-check's clock).
+    pub clock_us: u64,
+    /// This step's bus speed command (drum milli-r/min), Modbus path only.
+    pub bus_command: Option<i32>,
+    /// Its equivalent PWM compare value (for the log and the instability
+    /// supervisor).
+    pub bus_ccr: Option<u16>,
+    /// The operator acknowledged a driver fault: clear the driver's alarm.
+    pub clear_request: bool,
 }
 
 impl Feedback {

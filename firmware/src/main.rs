@@ -14,6 +14,8 @@
 //! | [`app::stop_input`] | 5 | each edge of the stop input (PB10, EXTI10) | 1 µs |
 //! | [`app::usart1_rx`] | 4 | each touchscreen byte (≤ 11.5 kHz) | 2 µs |
 //! | [`app::hall_capture`] | 3 | each Hall edge (≤ 1 kHz) and TIM2 overflow | 2 µs |
+//! | [`app::usart2`] | 3 | each RS-485 byte in or out (≤ 11.5 kHz), TC | 2 µs |
+//! | [`app::drive_link`] | 3 | every 1 ms while a driver profile is set | 20 µs |
 //! | [`app::control`] | 2 | every 10 ms | 1 ms |
 //! | [`app::hmi`] | 1 | each touchscreen byte, at least every 20 ms | 3 ms |
 //! | [`app::status`] | 1 | every 200 ms (5 Hz) | 2 ms |
@@ -61,6 +63,7 @@ mod app {
         board, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS, RX_QUEUE,
         STATUS_LOG_EVERY, STATUS_PERIOD_MS,
     };
+    use ::drive_link::link::{ControlAction, Event as LinkEvent, Link, LinkConfig};
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
@@ -105,7 +108,12 @@ mod app {
     /// What a control step decided, per profile.
     enum Step {
         #[cfg(feature = "profile-a")]
-        Drum(supervisor::control::Actuation, Option<Alarm>, RunState),
+        Drum(
+            supervisor::control::Actuation,
+            Option<Alarm>,
+            RunState,
+            (Option<i32>, bool),
+        ),
         #[cfg(feature = "profile-b")]
         Belt(
             supervisor::profile_b::StepperCommand,
@@ -128,6 +136,20 @@ mod app {
         /// The stop input: its interrupt (5), the control task (2, which
         /// writes the outputs under this lock) and Start (hmi, 1).
         stop: StopCircuit,
+        /// The drum driver's Modbus master: its task (3) and the control
+        /// task (2, the read-back in, the command and enable out).
+        drive: &'static mut DriveState,
+        /// USART2 and DE (PA1): its interrupt (3) and the link task (3).
+        drive_line: board::DriveLine,
+    }
+
+    /// The drum driver's link as the control task and the link task share
+    /// it (docs/drive-link.md).
+    pub struct DriveState {
+        /// The master, when the settings name a driver (profile A).
+        link: Option<Link>,
+        /// The driver's enable as last asked through its control word.
+        enabled: Option<bool>,
     }
 
     /// The stop input's pin and latch.
@@ -158,6 +180,7 @@ mod app {
     }
 
     #[init(local = [
+        drive_slot: MaybeUninit<DriveState> = MaybeUninit::uninit(),
         edge_queue: Queue<board::HallEdge, EDGE_QUEUE> = Queue::new(),
         machine_slot: MaybeUninit<Machine> = MaybeUninit::uninit(),
         hmi_slot: MaybeUninit<Hmi> = MaybeUninit::uninit(),
@@ -179,6 +202,7 @@ mod app {
         let (machine, machine_notice) = build_machine(cx.local.machine_slot, settings);
         let boot_notice = machine_notice.or(load_notice);
         let hmi = build_hmi(cx.local.hmi_slot, machine);
+        let drive = build_drive(cx.local.drive_slot, machine);
         let mut drum = board.drum;
         drum.set_enabled(false);
         let actuators = match machine {
@@ -198,10 +222,15 @@ mod app {
         status::spawn().ok();
         hmi::spawn().ok();
         settings::spawn().ok();
+        if drive.link.is_some() {
+            drive_link::spawn().ok();
+        }
         (
             Shared {
                 machine,
                 hmi,
+                drive,
+                drive_line: board.drive_line,
                 hall: board.hall,
                 stop: StopCircuit {
                     pin: board.stop_input,
@@ -371,6 +400,35 @@ mod app {
         }
     }
 
+    /// The drum driver's link in its static slot: a Modbus master when the
+    /// settings name a driver (profile A only), else none.
+    #[inline(never)]
+    fn build_drive(
+        slot: &'static mut MaybeUninit<DriveState>,
+        machine: &Machine,
+    ) -> &'static mut DriveState {
+        #[allow(unreachable_patterns)]
+        let profile = match machine {
+            #[cfg(feature = "profile-a")]
+            Machine::DrumBelt(sup) => sup.settings().drive_link.build().ok().flatten(),
+            _ => None,
+        };
+        let link = profile.and_then(|p| {
+            let config = LinkConfig::for_baud(p.baud)?;
+            defmt::info!(
+                "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us",
+                p.slave,
+                p.baud,
+                config.reply_timeout_us
+            );
+            Some(Link::new(p, config))
+        });
+        slot.write(DriveState {
+            link,
+            enabled: None,
+        })
+    }
+
     /// Builds the screen link in its static slot.
     #[inline(never)]
     fn build_hmi(slot: &'static mut MaybeUninit<Hmi>, machine: &Machine) -> &'static mut Hmi {
@@ -431,6 +489,116 @@ mod app {
         }
     }
 
+    /// USART2, the RS-485 line to the drum driver: the next byte out (TXE),
+    /// driver-enable low once the last stop bit has left (TC), each byte
+    /// in (RXNE) with its time.
+    ///
+    /// - Priority 3: a byte must be taken within one character (87 µs at
+    ///   115 200 baud); DE must drop before the driver answers (≥ 3.5
+    ///   characters).
+    /// - Released by each byte in or out and by TC: ≤ 11.5 k times a second.
+    /// - Budget: 2 µs.
+    #[task(binds = USART2, priority = 3, shared = [drive_line])]
+    fn usart2(mut cx: usart2::Context) {
+        let now = board::now_us64();
+        cx.shared.drive_line.lock(|line| line.on_interrupt(now));
+    }
+
+    /// The drum driver's Modbus master (`drive_link::link`, sans-IO): hands
+    /// it the line's events and sends what it asks, never waiting on the
+    /// line (the bytes go out in [`usart2`]).
+    ///
+    /// - Priority 3 (below the stop input and the screen's bytes, above
+    ///   the control task, which it never blocks).
+    /// - Period 1 ms while the settings name a driver; not started
+    ///   otherwise.
+    /// - Budget: 20 µs (a frame's encoding or a reply's parse).
+    #[task(priority = 3, shared = [drive, drive_line])]
+    async fn drive_link(mut cx: drive_link::Context) {
+        let baud = cx
+            .shared
+            .drive
+            .lock(|d| d.link.as_ref().map(|l| l.profile().baud));
+        let Some(baud) = baud else {
+            return;
+        };
+        cx.shared.drive_line.lock(|line| line.set_baud(baud));
+        let mut buf = [0u8; 16];
+        loop {
+            let now = board::now_us64();
+            let event = (&mut cx.shared.drive, &mut cx.shared.drive_line).lock(|d, line| {
+                let link = d.link.as_mut()?;
+                let mut event = None;
+                if let Some(t) = line.sent(now) {
+                    link.sent(t);
+                }
+                if let Some(n) = line.receive(now, &mut buf) {
+                    event = link.received(now, buf.get(..n).unwrap_or(&[]));
+                }
+                event = event.or(link.tick(now));
+                if let Some(n) = link.next_frame(now, &mut buf) {
+                    line.send(buf.get(..n).unwrap_or(&[]), now);
+                }
+                if event == Some(LinkEvent::Restored) {
+                    // The operator-facing latch is the supervisor's alarm;
+                    // the link's own clears so that a next loss reports.
+                    link.acknowledge();
+                }
+                event
+            });
+            match event {
+                Some(LinkEvent::Lost) => {
+                    defmt::warn!("drive link: lost (no reply after the retries)")
+                }
+                Some(LinkEvent::Restored) => defmt::info!("drive link: the driver answers again"),
+                Some(LinkEvent::Faults(word)) => {
+                    defmt::warn!("drive link: driver fault word {=u16:#06x}", word)
+                }
+                None => {}
+            }
+            Mono::delay(1.millis()).await;
+        }
+    }
+
+    /// The link's sample for a control step (profile A).
+    #[cfg(feature = "profile-a")]
+    fn link_sample(d: &DriveState, now_us: u64) -> supervisor::drive_link::LinkSample {
+        let Some(link) = d.link.as_ref() else {
+            return supervisor::drive_link::LinkSample::default();
+        };
+        supervisor::drive_link::LinkSample {
+            speed: link.speed().map(|s| supervisor::drive_link::ReadBack {
+                drum_milli_rpm: s.drum_milli_rpm,
+                age_us: u32::try_from(now_us.saturating_sub(s.sampled_at_us)).unwrap_or(u32::MAX),
+            }),
+            lost: link.is_lost(),
+            answering: link.is_answering(),
+            fault_word: link.fault_word(),
+            fault_reads: link.counters().fault_reads,
+        }
+    }
+
+    /// The control step's decisions for the driver: its enable through the
+    /// control word (on a change), the bus speed command, a clear request.
+    #[cfg(feature = "profile-a")]
+    fn link_apply(d: &mut DriveState, enabled: bool, command: Option<i32>, clear: bool) {
+        let Some(link) = d.link.as_mut() else {
+            return;
+        };
+        if clear {
+            link.control(ControlAction::ClearAlarm);
+            d.enabled = None;
+        } else if d.enabled != Some(enabled) {
+            link.control(if enabled {
+                ControlAction::Enable
+            } else {
+                ControlAction::Disable
+            });
+            d.enabled = Some(enabled);
+        }
+        link.set_speed_command(command);
+    }
+
     /// Hall edges: timestamps each tooth of the 25-tooth gear.
     ///
     /// - Priority 3: the capture register latches the edge time in hardware,
@@ -458,7 +626,7 @@ mod app {
     ///   ends after its next release is counted as an overrun and does not
     ///   feed the watchdog.
     /// - Budget: 1 ms (measured cost: docs/PERFORMANCE.md).
-    #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop])]
+    #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop, drive])]
     async fn control(mut cx: control::Context) {
         let mut next = Mono::now();
         #[cfg(feature = "profile-a")]
@@ -486,6 +654,8 @@ mod app {
                 work.sample(cx.local.work_switch.is_closed(), CONTROL_PERIOD_MS * 1000);
             #[cfg(feature = "profile-a")]
             let work_down = work.is_down();
+            #[cfg(feature = "profile-a")]
+            let link = cx.shared.drive.lock(|d| link_sample(d, board::now_us64()));
             let edges_out = &mut cx.local.edges_out;
             let step = cx.shared.machine.lock(|m| {
                 if stop_latched {
@@ -506,8 +676,10 @@ mod app {
                         }
                         // Idempotent; a change begins or ends a pass.
                         sup.set_work_switch(work_down);
+                        sup.set_link_sample(link);
                         let a = sup.control_step(now, sample.drum_encoder);
-                        Step::Drum(a, sup.alarm(), sup.run_state())
+                        let bus = (sup.bus_speed_command(), sup.take_driver_clear());
+                        Step::Drum(a, sup.alarm(), sup.run_state(), bus)
                     }
                     #[cfg(feature = "profile-b")]
                     Machine::SeedlingBelt(belt) => {
@@ -553,6 +725,13 @@ mod app {
                     _ => board::safe_state(),
                 }
             });
+            #[cfg(feature = "profile-a")]
+            #[allow(irrefutable_let_patterns)]
+            if let Step::Drum(a, _, _, (command, clear)) = &step {
+                let on = a.driver_enabled && !stop_latched;
+                let command = if on { *command } else { None };
+                cx.shared.drive.lock(|d| link_apply(d, on, command, *clear));
+            }
             match stop_change {
                 Some(StopChange::Opened) => {
                     defmt::warn!("stop input: open, outputs off (latched until closed and Start)");
@@ -568,7 +747,7 @@ mod app {
 
             match step {
                 #[cfg(feature = "profile-a")]
-                Step::Drum(actuation, alarm, run) => {
+                Step::Drum(actuation, alarm, run, _) => {
                     if alarm != last_alarm {
                         match alarm {
                             Some(a) => {

@@ -1652,7 +1652,20 @@ impl Supervisor {
     /// The drum link's newest sample (one more sensor sample, with the
     /// read-back's age): call before [`Supervisor::control_step`].
     pub fn set_link_sample(&mut self, sample: crate::drive_link::LinkSample) {
-        self.link.sample = sample;
+        // Field by field: a whole-struct assignment here compiled to a
+        // `memmove` call, which linked 1.6 KB of compiler-builtins.
+        let s = &mut self.link.sample;
+        let (milli, age) = sample
+            .speed
+            .map_or((None, 0), |r| (Some(r.drum_milli_rpm), r.age_us));
+        s.speed = milli.map(|drum_milli_rpm| crate::drive_link::ReadBack {
+            drum_milli_rpm,
+            age_us: age,
+        });
+        s.lost = sample.lost;
+        s.answering = sample.answering;
+        s.fault_word = sample.fault_word;
+        s.fault_reads = sample.fault_reads;
     }
 
     /// The speed command for the driver's bus (drum milli-r/min) when the

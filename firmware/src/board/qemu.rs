@@ -607,32 +607,35 @@ fn due(at: Option<u32>, from: u32, to: u32) -> bool {
 }
 
 /// The truth record of a control period, to the host's virtual driver:
-/// the true drum speed (milli-r/min, i32), then how many requests ended
+/// the firmware time (µs, u32), the true drum speed (milli-r/min, i32),
+/// then how many requests ended
 /// since the last record and each one's end (firmware µs, u32); all little
 /// endian. Written before the gate is read, so that the host, having read
 /// it, knows the period before has ended and its requests are on USART2.
 fn write_truth(d: &mut DriveSim, drum_rpm: f32) {
-    let mut rec = [0u8; 5 + 4 * TRUTH_MAX_FRAMES];
+    const HEAD: usize = 9;
+    let mut rec = [0u8; HEAD + 4 * TRUTH_MAX_FRAMES];
     let milli = (drum_rpm * 1000.0) as i32;
     let mut n = 0usize;
-    for (i, b) in milli.to_le_bytes().into_iter().enumerate() {
-        if let Some(r) = rec.get_mut(i) {
-            *r = b;
-        }
+    if let Some(dst) = rec.get_mut(..4) {
+        dst.copy_from_slice(&now_us().to_le_bytes());
+    }
+    if let Some(dst) = rec.get_mut(4..8) {
+        dst.copy_from_slice(&milli.to_le_bytes());
     }
     while n < TRUTH_MAX_FRAMES {
         let Some(end) = d.tx_ends.dequeue() else {
             break;
         };
-        if let Some(dst) = rec.get_mut(5 + 4 * n..9 + 4 * n) {
+        if let Some(dst) = rec.get_mut(HEAD + 4 * n..HEAD + 4 + 4 * n) {
             dst.copy_from_slice(&end.to_le_bytes());
         }
         n += 1;
     }
-    if let Some(c) = rec.get_mut(4) {
+    if let Some(c) = rec.get_mut(8) {
         *c = n as u8;
     }
-    let _ = sh::write(d.truth, rec.get(..5 + 4 * n).unwrap_or(&[]));
+    let _ = sh::write(d.truth, rec.get(..HEAD + 4 * n).unwrap_or(&[]));
 }
 
 /// The virtual driver's part of a gate record: a count (≤ 3) of reply

@@ -400,7 +400,7 @@ pub struct Supervisor {
     snapshot: Snapshot,
     /// Distance-locked placement: ground and belt positions, the phase
     /// loop and the partitions' events ([`crate::phase`]).
-    phase: Phase,
+    pub(crate) phase: Phase,
     /// The work switch's effect on the drum and the count
     /// ([`crate::planting`]).
     pub(crate) work: crate::planting::Work,
@@ -925,7 +925,9 @@ impl Supervisor {
     /// Stops the drum (no alarm).
     pub fn stop(&mut self) {
         if self.run == RunState::Running {
-            // The pass in progress ends here.
+            // The pass in progress ends here, with its partitions still
+            // waiting for a tooth.
+            self.flush_pending();
             self.quality.end_pass(self.distance_um);
         }
         self.run = RunState::Stopped;
@@ -1645,7 +1647,12 @@ impl Supervisor {
             );
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
-        self.count_plants(partitions_x1e6);
+        self.count_plants(
+            partitions_x1e6,
+            (self.teeth, self.last_tooth_at),
+            now.0,
+            elapsed_us,
+        );
         actuation
     }
 

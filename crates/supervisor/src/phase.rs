@@ -235,6 +235,12 @@ impl Phase {
         self.ground_nm / 1000
     }
 
+    /// Ground distance since Start at the newest Hall edge counted, nm
+    /// (edge-locked, without the extrapolation since that edge).
+    pub fn ground_at_edge_nm(&self) -> u64 {
+        self.ground_edges_nm
+    }
+
     /// The last phase error in ground µm (positive: the belt is ahead of the
     /// ground, plants land short of their places).
     pub fn error_ground_um(&self) -> i64 {

@@ -47,6 +47,74 @@ pub struct Work {
     /// The belt's partition count × 10⁶ and the ∫V1 dt distance (µm) after
     /// the last step, for [`Supervisor::count_plants`].
     last_step: (u64, u64),
+    /// The newest Hall tooth the control steps have seen, and the one
+    /// before it: the brackets of the partitions' ground stamps.
+    tooth: Tooth,
+    before: Tooth,
+    /// The partition that left after the newest tooth, waiting for the
+    /// next one. One is enough: the shortest spacing (50 mm) is two Hall
+    /// pitches; when a second leaves first (the ground stands while the
+    /// belt runs), the first takes its fallback.
+    pending: Option<Pending>,
+}
+
+/// A Hall tooth as the control step saw it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Tooth {
+    /// The supervisor's tooth count at it.
+    count: u32,
+    /// Its capture time, µs.
+    at_us: u32,
+    /// The edge-locked ground at it, nm ([`crate::phase::Phase::ground_at_edge_nm`]).
+    ground_nm: u64,
+    /// The gap from the tooth before it, µs (`u32::MAX`: unknown).
+    gap_us: u32,
+}
+
+impl Tooth {
+    const NONE: Self = Self {
+        count: 0,
+        at_us: 0,
+        ground_nm: 0,
+        gap_us: u32::MAX,
+    };
+}
+
+/// A partition that left after `after`, waiting for the next tooth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Pending {
+    /// When it left, µs.
+    at_us: u32,
+    /// The tooth before it.
+    after: Tooth,
+    /// The ground it gets if the bracket turns out unusable: interpolated
+    /// in its control step on ∫V1 dt, µm.
+    fallback_um: u64,
+}
+
+/// The ground of a partition that left at `at_us` between the teeth `a`
+/// and `b` (`a.at_us ≤ at_us ≤ b.at_us`), µm: linear in time between the
+/// two edges, whose ground is exact (the Hall sensor's own calibration
+/// aside). `None` when the bracket is unusable: no tooth between (same
+/// count), or the gap more than twice the one before — the travel speed
+/// changed within it (a stop, a start), where a straight line misplaces
+/// the partition by more than ∫V1 dt does.
+fn between(a: Tooth, b: Tooth, at_us: u32) -> Option<u64> {
+    let gap = b.at_us.wrapping_sub(a.at_us);
+    let into = at_us.wrapping_sub(a.at_us);
+    if b.count == a.count || into > gap || gap / 2 > a.gap_us {
+        return None;
+    }
+    // dg ≤ a few teeth (< 2³²·nm per step at any reachable speed) ×
+    // into ≤ gap < 2³²: the product < 2⁶⁴ while dg < 2³² nm (4.3 m).
+    let dg = b
+        .ground_nm
+        .checked_sub(a.ground_nm)?
+        .min(u64::from(u32::MAX));
+    let g = dg
+        .wrapping_mul(u64::from(into))
+        .checked_div(u64::from(gap))?;
+    Some(a.ground_nm.wrapping_add(g) / 1000)
 }
 
 impl Work {
@@ -57,6 +125,9 @@ impl Work {
             cap: I16F16::ZERO,
             hold_until_um: u64::MAX,
             last_step: (0, 0),
+            tooth: Tooth::NONE,
+            before: Tooth::NONE,
+            pending: None,
         }
     }
 }
@@ -125,7 +196,16 @@ impl Supervisor {
             let hold = at.saturating_sub(needs).saturating_sub(lag_um);
             self.work.hold_until_um = if hold > ground { hold } else { u64::MAX };
         } else {
+            self.flush_pending();
             self.quality.end_pass(ground);
+        }
+    }
+
+    /// The partition still waiting for a tooth takes its fallback ground
+    /// (a pass ends: it belongs to it).
+    pub(crate) fn flush_pending(&mut self) {
+        if let Some(p) = self.work.pending.take() {
+            self.quality.plant(p.fallback_um);
         }
     }
 
@@ -143,6 +223,7 @@ impl Supervisor {
         let x_um = u32::from(self.settings().spacing.raw()).saturating_mul(1000);
         self.quality.start(x_um);
         self.work.cap = I16F16::ZERO;
+        self.work.pending = None;
         if self.unit_down() {
             self.quality.begin_pass(0);
         }
@@ -170,16 +251,56 @@ impl Supervisor {
     }
 
     /// After a control step (`partitions_x1e6`: the belt's partition count
-    /// × 10⁶ now): the partition that left in the step, if one did, goes to
-    /// the quality figures when the unit is down, at the ground distance
-    /// interpolated in the step on the ∫V1 dt distance. Not the phase loop's
-    /// edge-locked ground ([`Supervisor::plants_left`]): between Hall edges
-    /// it is extrapolated and held at the next edge, steps of a few mm that
-    /// the spacings would count (tests/work_switch.rs: CV 2.6 % on it
-    /// against 1.36 % of the drops; on ∫V1 dt, which drifts by well under a
-    /// millimetre over one spacing, the figures match within 0.5 points).
+    /// × 10⁶ now, `now_us` the step's time, `elapsed_us` since the step
+    /// before): the partition that left in the step, if one did, goes to the
+    /// quality figures when the unit is down, at the ground distance of the
+    /// moment it left.
+    ///
+    /// That moment is interpolated in the step on the belt's counts; its
+    /// ground, once the next Hall tooth has come, linearly in time between
+    /// the two teeth around it, whose ground is exact. Not the phase loop's
+    /// causal ground ([`Supervisor::plants_left`]): between teeth it is
+    /// extrapolated and held at the next tooth, steps of a few mm the
+    /// spacings would count; nor ∫V1 dt alone, which smooths the drum's real
+    /// answer to those steps away (tests/work_switch.rs: CV 0.7 % on it
+    /// against 1.32 % of the drops). The figures are live one tooth gap
+    /// late (≤ 0.3 s at Low 1). ∫V1 dt, interpolated in the step, remains
+    /// the fallback when the teeth cannot bracket the moment ([`between`]).
     #[inline(never)]
-    pub(crate) fn count_plants(&mut self, partitions_x1e6: u64) {
+    pub(crate) fn count_plants(
+        &mut self,
+        partitions_x1e6: u64,
+        teeth: (u32, Option<u32>),
+        now_us: u32,
+        elapsed_us: u32,
+    ) {
+        // The newest tooth.
+        if let (count, Some(at_us)) = teeth {
+            if count != self.work.tooth.count {
+                let gap_us = if self.work.tooth.count == 0 {
+                    u32::MAX
+                } else {
+                    at_us.wrapping_sub(self.work.tooth.at_us)
+                };
+                self.work.before = self.work.tooth;
+                self.work.tooth = Tooth {
+                    count,
+                    at_us,
+                    ground_nm: self.phase.ground_at_edge_nm(),
+                    gap_us,
+                };
+            }
+        }
+        // Partitions waiting for this tooth.
+        let tooth = self.work.tooth;
+        if let Some(p) = self.work.pending {
+            if p.after.count != tooth.count {
+                self.work.pending = None;
+                self.quality
+                    .plant(between(p.after, tooth, p.at_us).unwrap_or(p.fallback_um));
+            }
+        }
+
         let after_um = self.distance_um;
         // Start zeroes both counts: then the step began at 0.
         let (mut before_x1e6, mut before_um) = self.work.last_step;
@@ -199,12 +320,34 @@ impl Supervisor {
         // `into` ≤ `dp`.
         let dp = u32::try_from(partitions_x1e6.wrapping_sub(before_x1e6)).unwrap_or(u32::MAX);
         let into = u32::try_from(boundary.wrapping_sub(before_x1e6)).unwrap_or(u32::MAX);
+        let share = |span: u32| {
+            u64::from(span)
+                .wrapping_mul(u64::from(into))
+                .checked_div(u64::from(dp))
+                .unwrap_or(0)
+        };
         let dd = u32::try_from(after_um.wrapping_sub(before_um)).unwrap_or(u32::MAX);
-        let part = u64::from(dd)
-            .wrapping_mul(u64::from(into))
-            .checked_div(u64::from(dp))
-            .unwrap_or(0);
-        self.quality.plant(before_um.wrapping_add(part));
+        let fallback_um = before_um.wrapping_add(share(dd));
+        // `share(elapsed) ≤ elapsed`: fits u32.
+        let at_us = now_us
+            .wrapping_sub(elapsed_us)
+            .wrapping_add(u32::try_from(share(elapsed_us)).unwrap_or(0));
+        let ahead = tooth.at_us.wrapping_sub(at_us);
+        if tooth.count != 0 && ahead > 0 && ahead <= elapsed_us {
+            // Left before the newest tooth (it came later in this step):
+            // bracketed already.
+            let g = between(self.work.before, tooth, at_us).unwrap_or(fallback_um);
+            self.quality.plant(g);
+            return;
+        }
+        let wait = Pending {
+            at_us,
+            after: tooth,
+            fallback_um,
+        };
+        if let Some(p) = self.work.pending.replace(wait) {
+            self.quality.plant(p.fallback_um);
+        }
     }
 
     /// The planting quality since Start and of the current pass.
@@ -220,5 +363,85 @@ impl Supervisor {
     /// The indices of the pass in progress (or of the last one).
     pub fn quality_of_pass(&self) -> Indices {
         self.quality.pass_at(self.ground_distance_um())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tooth(count: u32, at_us: u32, ground_mm: u64, gap_us: u32) -> Tooth {
+        Tooth {
+            count,
+            at_us,
+            ground_nm: ground_mm.saturating_mul(1_000_000),
+            gap_us,
+        }
+    }
+
+    #[test]
+    fn a_partition_between_two_teeth_takes_the_straight_line_between_them() {
+        // Teeth 25.133 mm apart (the Hall pitch, EDGE_NM in phase.rs)
+        // 180 ms apart; a partition 60 ms after the first is a third of the
+        // way: 100 mm + 25 133 µm / 3 = 108 377.67 µm (hand-computed).
+        let a = Tooth {
+            count: 4,
+            at_us: 1_000_000,
+            ground_nm: 100_000_000,
+            gap_us: 180_000,
+        };
+        let b = Tooth {
+            count: 5,
+            at_us: 1_180_000,
+            ground_nm: 125_133_000,
+            gap_us: 180_000,
+        };
+        assert_eq!(between(a, b, 1_060_000), Some(108_377));
+        // At the teeth themselves: their own ground.
+        assert_eq!(between(a, b, 1_000_000), Some(100_000));
+        assert_eq!(between(a, b, 1_180_000), Some(125_133));
+        // Two teeth in one control step: the line spans both (at half the
+        // time, half of 2 × 25 mm).
+        let c = tooth(6, 1_360_000, 150, 180_000);
+        let a2 = tooth(4, 1_000_000, 100, 180_000);
+        assert_eq!(between(a2, c, 1_180_000), Some(125_000));
+        // Across the 32-bit wrap of the µs clock (71.6 min): the same.
+        let off = u32::MAX - 50_000;
+        let aw = Tooth {
+            at_us: a.at_us.wrapping_add(off),
+            ..a
+        };
+        let bw = Tooth {
+            at_us: b.at_us.wrapping_add(off),
+            ..b
+        };
+        assert_eq!(
+            between(aw, bw, 1_060_000u32.wrapping_add(off)),
+            Some(108_377)
+        );
+    }
+
+    #[test]
+    fn no_straight_line_across_a_stop_or_outside_the_bracket() {
+        let a = tooth(4, 1_000_000, 100, 180_000);
+        // The next tooth 400 ms later: more than twice the 180 ms before, the
+        // speed changed within the gap.
+        assert_eq!(
+            between(a, tooth(5, 1_400_000, 125, 400_000), 1_100_000),
+            None
+        );
+        // 360 ms is twice: still a line.
+        assert!(between(a, tooth(5, 1_360_000, 125, 360_000), 1_100_000).is_some());
+        // No tooth between: nothing to bracket with.
+        assert_eq!(between(a, a, 1_000_000), None);
+        // Before the first tooth or after the second.
+        let b = tooth(5, 1_180_000, 125, 180_000);
+        assert_eq!(between(a, b, 999_999), None);
+        assert_eq!(between(a, b, 1_180_001), None);
+        // A ground that went backwards (a new Start's origin) is refused.
+        assert_eq!(
+            between(b, tooth(6, 1_360_000, 100, 180_000), 1_200_000),
+            None
+        );
     }
 }

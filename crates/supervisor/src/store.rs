@@ -411,12 +411,13 @@ impl<F: NorFlash> SettingsStore<F> {
 
     /// Reads both slots and returns the newest valid settings, or the
     /// defaults with the reason. Never writes.
+    #[inline(never)]
     pub fn load(&mut self) -> Loaded {
         // Statuses first, then the newest valid slot once more for its
         // settings: one decoded record on the stack at a time instead of
         // both slots' plus a copy (this runs in `init`, on the QEMU board's
         // 4.8 KB stack). Nothing writes the flash in between.
-        let slots = [self.scan(0).status(), self.scan(1).status()];
+        let slots = [self.status(0), self.status(1)];
         let newest = slots
             .iter()
             .enumerate()
@@ -597,7 +598,10 @@ impl<F: NorFlash> SettingsStore<F> {
         Ok(())
     }
 
-    /// CRC-32 of `[from, to)` within a slot.
+    /// CRC-32 of `[from, to)` within a slot. Out of line, like
+    /// [`Self::blank`] and [`Self::decode_slot`]: their buffers must not add up
+    /// in `scan`'s frame (it runs in `init`, on the QEMU board's 4.2 KB stack).
+    #[inline(never)]
     fn crc(&mut self, slot: SlotIndex, from: usize, to: usize) -> Result<u32, ReadFail<F::Error>> {
         let mut crc = Crc32::new();
         let mut pos = from;
@@ -613,6 +617,7 @@ impl<F: NorFlash> SettingsStore<F> {
     }
 
     /// Whether `[0, to)` of a slot reads erased.
+    #[inline(never)]
     fn blank(&mut self, slot: SlotIndex, to: usize) -> Result<bool, ReadFail<F::Error>> {
         let mut pos = 0usize;
         let mut buf = [0u8; MAX_ACCESS_SIZE];
@@ -675,14 +680,7 @@ impl<F: NorFlash> SettingsStore<F> {
             || lay.len == SETTINGS_V2_BYTES
             || lay.len == SETTINGS_V1_BYTES
         {
-            let mut buf = [0u8; SETTINGS_BYTES];
-            let payload = buf.get_mut(..lay.len).ok_or(ReadFail::Bounds)?;
-            self.read(slot, HEADER_BYTES, payload)?;
-            return Ok(match decode(payload) {
-                Ok(s) => Slot::Valid(sequence, s),
-                Err(SettingsError::UnsupportedVersion(_)) => Slot::Unsupported(sequence),
-                Err(_) => Slot::Corrupt,
-            });
+            return self.decode_slot(slot, sequence, lay.len);
         }
         // Another length: a different format version, or garbage.
         let mut version = [0u8; 1];
@@ -695,6 +693,34 @@ impl<F: NorFlash> SettingsStore<F> {
         } else {
             Slot::Unsupported(sequence)
         })
+    }
+}
+
+impl<F: NorFlash> SettingsStore<F> {
+    /// Reads and decodes the `len` payload bytes of a slot whose record is
+    /// complete (magic, commit word, CRC checked).
+    #[inline(never)]
+    fn decode_slot(
+        &mut self,
+        slot: SlotIndex,
+        sequence: u32,
+        len: usize,
+    ) -> Result<Slot<F::Error>, ReadFail<F::Error>> {
+        let mut buf = [0u8; SETTINGS_BYTES];
+        let payload = buf.get_mut(..len).ok_or(ReadFail::Bounds)?;
+        self.read(slot, HEADER_BYTES, payload)?;
+        Ok(match decode(payload) {
+            Ok(s) => Slot::Valid(sequence, s),
+            Err(SettingsError::UnsupportedVersion(_)) => Slot::Unsupported(sequence),
+            Err(_) => Slot::Corrupt,
+        })
+    }
+
+    /// What a slot holds, without keeping its settings (`load`'s first
+    /// pass: the decoded record stays in this frame).
+    #[inline(never)]
+    fn status(&mut self, slot: SlotIndex) -> SlotStatus {
+        self.scan(slot).status()
     }
 }
 

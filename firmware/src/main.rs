@@ -140,7 +140,7 @@ mod app {
         /// task (2, the read-back in, the command and enable out).
         drive: &'static mut DriveState,
         /// USART2 and DE (PA1): its interrupt (3) and the link task (3).
-        drive_line: board::DriveLine,
+        drive_line: &'static mut board::DriveLine,
     }
 
     /// The drum driver's link as the control task and the link task share
@@ -523,11 +523,11 @@ mod app {
             return;
         };
         cx.shared.drive_line.lock(|line| line.set_baud(baud));
-        let mut buf = [0u8; 16];
         loop {
             let now = board::now_us64();
             let event = (&mut cx.shared.drive, &mut cx.shared.drive_line).lock(|d, line| {
                 let link = d.link.as_mut()?;
+                let mut buf = [0u8; ::drive_link::rtu::MAX_FRAME + 1];
                 let mut event = None;
                 if let Some(t) = line.sent(now) {
                     link.sent(t);

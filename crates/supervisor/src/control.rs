@@ -1706,6 +1706,24 @@ impl Supervisor {
         }
     }
 
+    /// The drive model the controller is scheduled from: the drive's own,
+    /// with the driver read-back as the feedback its dead time lengthened
+    /// by the read-back's delay ([`crate::drive_link::DriveLinkSettings::readback_delay_us`]),
+    /// so that the gains shrink in the SIMC ratio (docs/drive-link.md).
+    fn control_model(&self) -> DriveModel {
+        let m = self.settings.drive;
+        if self.settings.drive_link.feedback != crate::drive_link::FeedbackSource::Driver {
+            return m;
+        }
+        let extra = u16::try_from(self.settings.drive_link.readback_delay_us() / 100)
+            .unwrap_or(u16::MAX);
+        let dead = m
+            .dead_time_x10_ms()
+            .saturating_add(extra)
+            .min(DriveModel::DEAD_TIME_MAX);
+        DriveModel::new(m.n_max_x100(), m.tau_x10_ms(), dead).unwrap_or(m)
+    }
+
     /// Control periods the feedback lags by: the read-back's age when it is
     /// the feedback (rounded), else 0.
     fn readback_delay_periods(&self) -> usize {
@@ -1847,7 +1865,7 @@ impl Supervisor {
     #[inline(never)]
     fn fall_back(&mut self) {
         self.fallback = true;
-        if let Ok(mut c) = fallback_config(&self.settings.drive).build() {
+        if let Ok(mut c) = fallback_config(&self.control_model()).build() {
             c.start();
             self.drum = Drum::Control(c);
         }
@@ -1899,10 +1917,11 @@ impl Supervisor {
     /// identification).
     #[inline(never)]
     fn restore_controller(&mut self) {
+        let model = self.control_model();
         let config = if self.fallback {
-            fallback_config(&self.settings.drive)
+            fallback_config(&model)
         } else {
-            scheduled_config(&self.settings.drive, self.hw.control_period_us)
+            scheduled_config(&model, self.hw.control_period_us)
         };
         if let Ok(c) = config.build() {
             self.drum = Drum::Control(c);

@@ -165,6 +165,20 @@ impl DriveLinkSettings {
         }
     }
 
+    /// The read-back's typical delay the controller allows for, µs: one
+    /// speed transaction on the line — request (8 characters), the
+    /// driver's 2 ms turnaround, reply (7 characters) and the two
+    /// 3.5-character gaps (27.2 ms at 9600 baud, 6.9 ms at 115 200).
+    #[must_use]
+    pub fn readback_delay_us(&self) -> u32 {
+        let baud = self.generic.baud;
+        let frames = drive_link::timing::frame_time_us(baud, 15).unwrap_or(0);
+        let gap = drive_link::timing::silent_interval_us(baud).unwrap_or(0);
+        frames
+            .saturating_add(2_000)
+            .saturating_add(gap.saturating_mul(2))
+    }
+
     /// Little-endian bytes: feedback (0 encoder, 1 driver, 2 both), command
     /// (0 PWM, 1 Modbus), kind (0 none, 1 ZLAC8015D, 2 generic), slave,
     /// baud (u32), speed register, scale (i32, µr/min per count), fault register, six fault

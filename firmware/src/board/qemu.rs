@@ -99,7 +99,7 @@ static STOP_SAFE_US: AtomicU32 = AtomicU32::new(0);
 
 /// Longest frame the virtual driver's gate record carries (a Modbus RTU
 /// reply of this link is at most 9 bytes; a corrupted one the same).
-pub const DRIVE_FRAME_MAX: usize = 16;
+pub const DRIVE_FRAME_MAX: usize = drive_link::rtu::MAX_FRAME;
 
 /// A reply frame from the host's virtual driver and the firmware time (µs,
 /// wrapping 32-bit) at which its last byte has arrived.
@@ -113,10 +113,11 @@ pub struct DriveFrame {
 /// Reply frames from the gate to [`DriveLine`] (three at a time at most).
 type DriveRxQueue = heapless::spsc::Queue<DriveFrame, 4>;
 /// When each request frame's last bit left (firmware µs), for the truth
-/// record (see [`Sensors::sample`]).
-type DriveTxQueue = heapless::spsc::Queue<u32, 8>;
+/// record (see [`Sensors::sample`]): at most two requests fit in a 10 ms
+/// period at 115 200 baud.
+type DriveTxQueue = heapless::spsc::Queue<u32, 4>;
 /// Most request end times one truth record carries.
-const TRUTH_MAX_FRAMES: usize = 7;
+const TRUTH_MAX_FRAMES: usize = 3;
 
 /// USART2, the RS-485 line to the drum driver (QEMU: DE on PA1 is a no-op).
 ///
@@ -187,8 +188,9 @@ pub struct Board {
     pub hmi_tx: HmiTx,
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
-    /// The drum driver's RS-485 line (USART2).
-    pub drive_line: DriveLine,
+    /// The drum driver's RS-485 line (USART2), in a static (the QEMU
+    /// board's boot stack has no room to move it through `init`).
+    pub drive_line: &'static mut DriveLine,
     /// Drum PWM stand-in.
     pub drum: DrumDrive,
     /// The simulated machine behind the sensor interface.
@@ -432,16 +434,29 @@ pub fn init(dp: pac::Peripherals) -> Board {
     if let Some(v) = scenario.speed_mm_s {
         machine.set_travel_speed_m_s(v as f32 / 1000.0);
     }
+    let Some(drive_line) = cortex_m::singleton!(: DriveLine = DriveLine {
+        tx: drive_tx,
+        baud: 9_600,
+        sending_until: None,
+        rx: drive_rx_out,
+        tx_ends: drive_tx_in,
+    }) else {
+        fatal()
+    };
+    let drive = match truth {
+        Some(truth) => cortex_m::singleton!(: DriveSim = DriveSim {
+            truth,
+            rx_in: drive_rx_in,
+            tx_ends: drive_tx_out,
+            flags: 0,
+            command_milli_rpm: 0,
+        }),
+        None => None,
+    };
     Board {
         hmi_tx,
         hmi_rx,
-        drive_line: DriveLine {
-            tx: drive_tx,
-            baud: 9_600,
-            sending_until: None,
-            rx: drive_rx_out,
-            tx_ends: drive_tx_in,
-        },
+        drive_line,
         drum: DrumDrive { enabled: false },
         sensors: Sensors {
             machine,
@@ -452,13 +467,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
             work_fired: 0,
             gate,
             gate_in,
-            drive: truth.map(|truth| DriveSim {
-                truth,
-                rx_in: drive_rx_in,
-                tx_ends: drive_tx_out,
-                flags: 0,
-                command_milli_rpm: 0,
-            }),
+            drive,
         },
         hall: HallCapture,
         led: StatusLed,
@@ -566,8 +575,8 @@ pub struct Sensors {
     gate: Option<usize>,
     /// Screen bytes from the gate, to [`HmiRx`].
     gate_in: heapless::spsc::Producer<'static, u8>,
-    /// The host's virtual drum driver (`drive_link=1`).
-    drive: Option<DriveSim>,
+    /// The host's virtual drum driver (`drive_link=1`), in a static.
+    drive: Option<&'static mut DriveSim>,
 }
 
 /// The QEMU board's side of the host's virtual drum driver.
@@ -687,7 +696,7 @@ impl Sensors {
     /// interrupt task (pended here) as if the emulated USART had received
     /// them. At end of file (the test closed its end) the board runs free.
     pub fn sample(&mut self, now_ms: u32) -> SensorSample {
-        if let (Some(_), Some(d)) = (self.gate, self.drive.as_mut()) {
+        if let (Some(_), Some(d)) = (self.gate, self.drive.as_deref_mut()) {
             write_truth(d, self.machine.drum_speed_rpm());
         }
         if let Some(h) = self.gate {
@@ -700,7 +709,7 @@ impl Sensors {
                         .get_mut(..n)
                         .is_some_and(|b| b.is_empty() || sh::read(h, b))
                 }
-                && self.drive.as_mut().is_none_or(|d| read_drive(h, d));
+                && self.drive.as_deref_mut().is_none_or(|d| read_drive(h, d));
             if ok {
                 let n = usize::from(count[0]).min(GATE_BYTES);
                 for &b in bytes.get(..n).unwrap_or(&[]) {
@@ -783,7 +792,7 @@ impl Sensors {
         let steppers_on = DRIVER_ENABLE.load(Relaxed);
         let mut drum_duty = f32::from(DRUM_CCR.load(Relaxed)) / f32::from(DRUM_PERIOD);
         let mut drum_on = steppers_on;
-        if let Some(d) = &self.drive {
+        if let Some(d) = self.drive.as_deref() {
             // The virtual driver's motor: enabled by PB12 and its control
             // word; on its bus command (its own speed loop, modelled as the
             // command over the drive's n_max) or the PWM duty.

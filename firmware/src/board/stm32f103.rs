@@ -69,8 +69,8 @@ pub struct Board {
     /// Hall capture timer (its interrupt is TIM2).
     pub hall: HallCapture,
     /// RS-485 link to the motor driver (docs/drive-link.md): USART2 with
-    /// driver-enable on PA1, receiving until a frame is sent.
-    pub drive_line: DriveLine,
+    /// driver-enable on PA1, receiving until a frame is sent; in a static.
+    pub drive_line: &'static mut DriveLine,
     /// Status LED.
     pub led: StatusLed,
     /// The stop input (its interrupt is EXTI15_10).
@@ -392,15 +392,8 @@ pub fn init(dp: pac::Peripherals) -> Board {
         pin: gpiob.pb11.into_pull_up_input(&mut gpiob.crh),
     };
 
-    Board {
-        hmi_tx,
-        hmi_rx,
-        drum,
-        sensors,
-        hall,
-        drive_line: DriveLine {
-            _tx: tx,
-            _rx: rx,
+    let Some(drive_line) = cortex_m::singleton!(: DriveLine = DriveLine {
+            _tx: tx,            _rx: rx,
             de,
             out: [0; DRIVE_FRAME_MAX],
             out_len: 0,
@@ -411,7 +404,16 @@ pub fn init(dp: pac::Peripherals) -> Board {
             rx_len: 0,
             rx_last_us: 0,
             silent_us: 4_011,
-        },
+    }) else {
+        fatal()
+    };
+    Board {
+        hmi_tx,
+        hmi_rx,
+        drum,
+        sensors,
+        hall,
+        drive_line,
         led,
         stop_input,
         work_switch,

@@ -63,7 +63,9 @@ mod app {
         board, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS, RX_QUEUE,
         STATUS_LOG_EVERY, STATUS_PERIOD_MS,
     };
-    use ::drive_link::link::{ControlAction, Event as LinkEvent, Link, LinkConfig};
+    #[cfg(feature = "profile-a")]
+    use ::drive_link::link::ControlAction;
+    use ::drive_link::link::{Event as LinkEvent, Link, LinkConfig};
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
@@ -149,6 +151,7 @@ mod app {
         /// The master, when the settings name a driver (profile A).
         link: Option<Link>,
         /// The driver's enable as last asked through its control word.
+        #[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
         enabled: Option<bool>,
     }
 
@@ -408,7 +411,7 @@ mod app {
         machine: &Machine,
     ) -> &'static mut DriveState {
         #[allow(unreachable_patterns)]
-        let profile = match machine {
+        let profile: Option<::drive_link::profile::DriverProfile> = match machine {
             #[cfg(feature = "profile-a")]
             Machine::DrumBelt(sup) => sup.settings().drive_link.build().ok().flatten(),
             _ => None,

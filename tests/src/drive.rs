@@ -12,11 +12,11 @@
 //! its requests are all on USART2.
 //!
 //! The driver is [`drive_link::virtual_driver::VirtualZlac`] (the
-//! ZLAC8015D's registers) behind paper A's 118:1 gearbox: its speed
-//! register reads the simulated drum's speed × 118 in 0.1 r/min, sampled
+//! ZLAC8015D's registers) behind a 59:1 gearbox ([`GEAR_RATIO`]): its speed
+//! register reads the simulated drum's speed × 59 in 0.1 r/min, sampled
 //! at the request's end plus its turnaround (interpolated between the
 //! truth records around it, never ahead of the newest); its speed command
-//! (motor r/min) ÷ 118 drives the simulated drum when it is enabled and in
+//! (motor r/min) ÷ 59 drives the simulated drum when it is enabled and in
 //! velocity mode; the board applies it as the drive's speed loop (the
 //! command over the drive's n_max, through the simulated motor's lag).
 
@@ -27,8 +27,11 @@ use std::net::TcpStream;
 use drive_link::timing::frame_time_us;
 use drive_link::virtual_driver::VirtualZlac;
 
-/// Paper A's drum gearbox: motor turns per drum turn.
-pub const GEAR_RATIO: f64 = 118.0;
+/// The virtual driver's motor turns per drum turn: 59:1, not paper A's
+/// 118:1, whose motor speed overflows the ZLAC8015D's 0.1 r/min register
+/// above 27.77 drum r/min (docs/drive-link.md, "Limits"). The settings'
+/// scale for it: 100 000 / 59 = 1695 µr/min per count.
+pub const GEAR_RATIO: f64 = 59.0;
 
 /// One control period's truth record from the QEMU board.
 #[derive(Clone, Debug, PartialEq)]
@@ -157,8 +160,14 @@ impl DriveBench {
                 self.command_seen = true;
             }
             let reply_end = reply.map(|(frame, delay)| {
+                // The master sees the frame end after 3.5 characters of
+                // silence (the real board's frame-end timer).
                 let on_line = frame_time_us(self.baud, frame.len() as u32).unwrap_or(0);
-                let due = end.wrapping_add(delay).wrapping_add(on_line);
+                let silence = drive_link::timing::silent_interval_us(self.baud).unwrap_or(0);
+                let due = end
+                    .wrapping_add(delay)
+                    .wrapping_add(on_line)
+                    .wrapping_add(silence);
                 self.pending.push_back((due, frame));
                 due
             });

@@ -215,7 +215,11 @@ pub fn parse_reply(slave: u8, request: Request, frame: &[u8]) -> Result<Reply, R
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
 mod tests {
     use super::*;
     use proptest::prelude::*;

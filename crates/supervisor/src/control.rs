@@ -1707,15 +1707,21 @@ impl Supervisor {
     }
 
     /// The drive model the controller is scheduled from: the drive's own,
-    /// with the driver read-back as the feedback its dead time lengthened
-    /// by the read-back's delay ([`crate::drive_link::DriveLinkSettings::readback_delay_us`]),
+    /// with the driver read-back as the feedback, or the bus command, its
+    /// dead time lengthened by one link transaction each ([`crate::drive_link::DriveLinkSettings::readback_delay_us`]),
     /// so that the gains shrink in the SIMC ratio (docs/drive-link.md).
     fn control_model(&self) -> DriveModel {
+        use crate::drive_link::{CommandPath, FeedbackSource};
         let m = self.settings.drive;
-        if self.settings.drive_link.feedback != crate::drive_link::FeedbackSource::Driver {
+        let link = &self.settings.drive_link;
+        // One transaction's delay for the read-back as the feedback, one
+        // more for the bus command (written every other transaction).
+        let transactions = u32::from(link.feedback == FeedbackSource::Driver)
+            .saturating_add(u32::from(link.command == CommandPath::Modbus));
+        if transactions == 0 {
             return m;
         }
-        let extra = u16::try_from(self.settings.drive_link.readback_delay_us() / 100)
+        let extra = u16::try_from(link.readback_delay_us().saturating_mul(transactions) / 100)
             .unwrap_or(u16::MAX);
         let dead = m
             .dead_time_x10_ms()
@@ -1731,10 +1737,12 @@ impl Supervisor {
             return 0;
         }
         let period = self.hw.control_period_us.max(1);
-        self.link
-            .sample
-            .speed
-            .map_or(0, |r| r.age_us.saturating_add(period / 2) / period) as usize
+        self.link.sample.speed.map_or(0, |r| {
+            r.age_us
+                .saturating_add(period / 2)
+                .checked_div(period)
+                .unwrap_or(0)
+        }) as usize
     }
 
     /// With both feedbacks: the driver's read-back says the drum turns (at

@@ -388,3 +388,81 @@ impl Feedback {
             .map(|r| r.drum_milli_rpm)
     }
 }
+
+#[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::arithmetic_side_effects,
+    clippy::cast_precision_loss
+)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_readback_integrates_to_exact_encoder_counts() {
+        // 20 r/min for 10 s in 10 ms periods, 47 200 counts per drum turn:
+        // 20 / 60 × 10 s × 47 200 = 157 333.3 counts; the remainder is
+        // carried, so the sum is the floor of the exact value.
+        let mut f = Feedback::default();
+        f.sample.speed = Some(ReadBack {
+            drum_milli_rpm: 20_000,
+            age_us: 20_000,
+        });
+        let total: u64 = (0..1000)
+            .map(|_| u64::from(f.readback_counts(10_000, 400 * 118)))
+            .sum();
+        let exact: f64 = 20.0 / 60.0 * 10.0 * 47_200.0;
+        assert_eq!(total as f64, exact.floor());
+        // Too old a read-back counts nothing (the link is failing).
+        f.sample.speed = Some(ReadBack {
+            drum_milli_rpm: 20_000,
+            age_us: READBACK_MAX_AGE_US + 1,
+        });
+        assert_eq!(f.readback_counts(10_000, 47_200), 0);
+        assert_eq!(f.readback_milli_rpm(), None);
+        // Backwards reads as standstill (the drum only runs forward).
+        f.sample.speed = Some(ReadBack {
+            drum_milli_rpm: -5_000,
+            age_us: 0,
+        });
+        assert_eq!(f.readback_counts(10_000, 47_200), 0);
+    }
+
+    #[test]
+    fn link_settings_are_validated_and_round_trip() {
+        let mut s = DriveLinkSettings::default();
+        assert_eq!(s.build(), Ok(None));
+        s.feedback = FeedbackSource::Driver;
+        assert_eq!(s.build(), Err(DriveLinkError::NoDriver));
+        s.kind = DriverKind::Zlac8015d;
+        let p = s.build().unwrap().unwrap();
+        // The ZLAC8015D's registers, paper A's gearbox in the scale, the
+        // command in whole r/min: ten times the feedback's scale.
+        assert_eq!(p.speed_feedback, 0x20AB);
+        assert_eq!(p.micro_rpm_per_count, 847);
+        assert_eq!(p.speed_command, Some((0x2088, 8470)));
+        assert_eq!(p.baud, 115_200);
+        s.command = CommandPath::Modbus;
+        s.kind = DriverKind::Generic;
+        assert_eq!(s.build(), Err(DriveLinkError::NoSpeedCommand));
+        s.generic.speed_command = Some(0x0300);
+        assert!(s.build().is_ok());
+        assert_eq!(DriveLinkSettings::from_bytes(&s.to_bytes()), Ok(s));
+        s.generic.baud = 4800;
+        assert_eq!(
+            s.build(),
+            Err(DriveLinkError::Profile(ProfileError::Baud(4800)))
+        );
+        assert_eq!(
+            std::format!("{}", s.build().unwrap_err()),
+            "driver profile: baud 4800 not 9600/19200/38400/57600/115200"
+        );
+        // The read-back's allowance: 15 characters + 2 ms + two gaps:
+        // 9600: 17 188 + 2 000 + 2 × 4 011 = 27 210 µs.
+        s.generic.baud = 9600;
+        assert_eq!(s.readback_delay_us(), 27_210);
+        s.generic.baud = 115_200;
+        // 1 433 + 2 000 + 2 × 1 750.
+        assert_eq!(s.readback_delay_us(), 6_933);
+    }
+}

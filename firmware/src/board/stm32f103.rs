@@ -10,7 +10,7 @@
 //! | PB13 | drum driver direction (low = forward) |
 //! | PA6 / PA7 | drum motor encoder A/B, TIM3 encoder mode |
 //! | PA9 / PA10 | USART1 TX/RX, touchscreen, 115200 8N1 |
-//! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable, RS-485 to the motor driver, 9600 8N1 |
+//! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable (high while sending, low after TC), RS-485 to the motor driver, Modbus RTU at the settings' baud rate, 8N1 |
 //! | PB10 | stop input: NC contact to ground, internal pull-up (FT pin), EXTI10 on both edges |
 //! | PB11 | work switch: contact to ground closed while the planting unit is down, internal pull-up (FT pin), polled every 10 ms |
 //! | PC13 | status LED (low = on) |

@@ -1453,8 +1453,7 @@ impl Supervisor {
         self.last_step_at = Some(now);
         let encoder_delta = delta;
         let delta = self.feedback_counts(encoder_delta, elapsed_us);
-        self.link.bus_command = None;
-        self.link.bus_ccr = None;
+        self.link.bus = false;
         let measured = self.drum_speed_of(delta, elapsed_us);
         self.reported = self.reported.saturating_add(
             measured
@@ -1632,10 +1631,10 @@ impl Supervisor {
         };
         self.snapshot.actual_drum_rpm_x1000 = milli(self.reported);
         self.snapshot.ccr = actuation.ccr;
-        if let Some(equivalent) = self.link.bus_ccr {
+        if self.link.bus {
             // The Modbus command path: the PWM is 0; the log and the
             // instability supervisor see the equivalent duty.
-            self.snapshot.ccr = equivalent;
+            self.snapshot.ccr = self.link.bus_ccr;
         }
         self.snapshot.hall_edges = self.edges;
         let partitions_x1e6 = self.partitions_x1e6();
@@ -1678,7 +1677,7 @@ impl Supervisor {
     /// The speed command for the driver's bus (drum milli-r/min) when the
     /// command path is Modbus and the drum runs; `None` otherwise.
     pub fn bus_speed_command(&self) -> Option<i32> {
-        self.link.bus_command
+        self.link.bus.then_some(self.link.bus_command)
     }
 
     /// Whether the operator's acknowledgement asked the driver to clear its
@@ -1697,7 +1696,6 @@ impl Supervisor {
     /// encoder's, or the read-back integrated over the period.
     fn feedback_counts(&mut self, encoder_delta: u16, elapsed_us: u32) -> u16 {
         use crate::drive_link::FeedbackSource;
-        self.link.clock_us = self.link.clock_us.saturating_add(u64::from(elapsed_us));
         match self.settings.drive_link.feedback {
             FeedbackSource::Encoder | FeedbackSource::Both => encoder_delta,
             FeedbackSource::Driver => self
@@ -1766,7 +1764,9 @@ impl Supervisor {
             self.latch(Alarm::LinkLost);
             return;
         }
-        if sample.fault_word != 0 && self.link.acked_fault_reads != Some(sample.fault_reads) {
+        if sample.fault_word != 0
+            && !(self.link.acked && self.link.acked_fault_reads == sample.fault_reads)
+        {
             let fault = self
                 .settings
                 .drive_link
@@ -1785,13 +1785,12 @@ impl Supervisor {
         {
             let encoder = milli(self.drum_speed_of(encoder_delta, elapsed_us));
             let driver = self.link.readback_milli_rpm();
-            let clock = self.link.clock_us;
             let wrong = match driver {
-                Some(d) => {
-                    self.link
-                        .cross
-                        .update(clock, i32::try_from(encoder).unwrap_or(i32::MAX), d)
-                }
+                Some(d) => self.link.cross.update(
+                    elapsed_us,
+                    i32::try_from(encoder).unwrap_or(i32::MAX),
+                    d,
+                ),
                 None => false,
             };
             if wrong {
@@ -1811,7 +1810,8 @@ impl Supervisor {
                 Some(Effect::Message("Drum driver still not answering"))
             }
             Some(Alarm::DriverFault(_)) => {
-                self.link.acked_fault_reads = Some(self.link.sample.fault_reads);
+                self.link.acked_fault_reads = self.link.sample.fault_reads;
+                self.link.acked = true;
                 self.link.clear_request = true;
                 self.alarm = None;
                 Some(Effect::AlarmCleared)
@@ -1826,8 +1826,9 @@ impl Supervisor {
     fn drum_output(&mut self, out: I16F16) -> Actuation {
         let ccr = self.ccr_of(out);
         if self.settings.drive_link.command == crate::drive_link::CommandPath::Modbus {
-            self.link.bus_command = Some(i32::try_from(milli(out)).unwrap_or(i32::MAX));
-            self.link.bus_ccr = Some(ccr);
+            self.link.bus_command = i32::try_from(milli(out)).unwrap_or(i32::MAX);
+            self.link.bus_ccr = ccr;
+            self.link.bus = true;
             Actuation {
                 ccr: 0,
                 driver_enabled: true,

@@ -210,7 +210,9 @@ impl DriveLinkSettings {
     }
 
     /// Reads [`Self::to_bytes`] and validates the result with
-    /// [`Self::build`].
+    /// [`Self::build`]. Out of line: its temporaries stay out of the store's
+    /// decode frame, on the QEMU board's boot path.
+    #[inline(never)]
     pub fn from_bytes(b: &[u8; DRIVE_LINK_BYTES]) -> Result<Self, DriveLinkError> {
         let mut r = Reader { buf: b, at: 0 };
         let [f, c, k, slave] = r.take::<4>();
@@ -329,26 +331,30 @@ pub struct LinkSample {
 pub const READBACK_MAX_AGE_US: u32 = 100_000;
 
 /// The supervisor's side of the link: the newest sample, the encoder
-/// equivalent of the read-back, the cross-check.
+/// equivalent of the read-back, the cross-check. Kept small: it lives in
+/// the supervisor, which the QEMU board's 8 KB of RAM hold.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Feedback {
     /// The newest sample from the link task.
     pub sample: LinkSample,
-    /// Fault reads seen when the operator last acknowledged a driver fault.
-    pub acked_fault_reads: Option<u32>,
-    /// Sub-count remainder of the read-back's integration (counts ×
-    /// 60 000 000 000, i.e. milli-r/min · µs · counts per rev).
+    /// Sub-count remainder of the read-back's integration (milli-r/min ·
+    /// µs · counts per rev; one count is 60 000 000 000 of them).
     remainder: i64,
     /// Encoder against read-back.
     pub cross: CrossCheck,
-    /// Time since boot summed over the control steps, µs (the
-    /// cross-check's clock).
-    pub clock_us: u64,
-    /// This step's bus speed command (drum milli-r/min), Modbus path only.
-    pub bus_command: Option<i32>,
+    /// Fault reads seen when the operator last acknowledged a driver fault
+    /// (valid when [`Feedback::acked`]).
+    pub acked_fault_reads: u32,
+    /// This step's bus speed command (drum milli-r/min), Modbus path only
+    /// (valid when [`Feedback::bus`]).
+    pub bus_command: i32,
     /// Its equivalent PWM compare value (for the log and the instability
     /// supervisor).
-    pub bus_ccr: Option<u16>,
+    pub bus_ccr: u16,
+    /// A driver fault was acknowledged.
+    pub acked: bool,
+    /// This step commands the driver over the bus.
+    pub bus: bool,
     /// The operator acknowledged a driver fault: clear the driver's alarm.
     pub clear_request: bool,
 }

@@ -462,6 +462,30 @@ impl<F: NorFlash> SettingsStore<F> {
     /// on the STM32F1), with a sequence one above the newest complete record.
     /// If a slot cannot be read, nothing is written.
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
+        // The two slots (two decoded records) only for the decision: out of
+        // scope before the record is written and verified, so that the
+        // three never add up in one frame (the QEMU board's 8 KB).
+        let (target, sequence) = match self.plan_save(settings)? {
+            Ok(unchanged) => return Ok(unchanged),
+            Err(plan) => plan,
+        };
+        self.write_record(target, sequence, settings)?;
+        match self.scan(target) {
+            Slot::Valid(seq, ref s) if seq == sequence && s == settings => Ok(sequence),
+            Slot::Unreadable(e) => Err(StoreError::Flash(e)),
+            _ => Err(StoreError::Verify),
+        }
+    }
+
+    /// Where and with which sequence `settings` go: `Ok(Ok(seq))` when
+    /// they are already the newest record, `Ok(Err((slot, sequence)))`
+    /// otherwise. Out of line, see [`SettingsStore::save`].
+    #[inline(never)]
+    #[allow(clippy::type_complexity)]
+    fn plan_save(
+        &mut self,
+        settings: &Settings,
+    ) -> Result<Result<u32, (SlotIndex, u32)>, StoreError<F::Error>> {
         let slots = [self.scan(0), self.scan(1)];
         if let Some(i) = slots.iter().position(|s| matches!(s, Slot::Unreadable(_))) {
             let [a, b] = slots;
@@ -473,7 +497,7 @@ impl<F: NorFlash> SettingsStore<F> {
         let newest = newest_valid(&slots);
         if let Some((_, seq, stored)) = newest {
             if stored == settings {
-                return Ok(seq);
+                return Ok(Ok(seq));
             }
         }
         let target = match newest {
@@ -481,14 +505,11 @@ impl<F: NorFlash> SettingsStore<F> {
             None => least_valuable(&slots),
         };
         let sequence = newest_intact(&slots).map_or(1, |s| s.wrapping_add(1));
-        self.write_record(target, sequence, settings)?;
-        match self.scan(target) {
-            Slot::Valid(seq, ref s) if seq == sequence && s == settings => Ok(sequence),
-            Slot::Unreadable(e) => Err(StoreError::Flash(e)),
-            _ => Err(StoreError::Verify),
-        }
+        Ok(Err((target, sequence)))
     }
 
+    /// Out of line, see [`SettingsStore::save`].
+    #[inline(never)]
     fn write_record(
         &mut self,
         slot: SlotIndex,

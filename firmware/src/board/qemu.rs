@@ -97,6 +97,9 @@ static WORK_SWITCH_CLOSED: AtomicBool = AtomicBool::new(false);
 static STOP_OPENED_US: AtomicU32 = AtomicU32::new(0);
 static STOP_SAFE_US: AtomicU32 = AtomicU32::new(0);
 
+// The drum driver's line (feature `drive-link`: the QEMU board's 8 KB of
+// RAM hold it only in the images that need it, docs/drive-link.md).
+
 /// Longest frame the virtual driver's gate record carries (a Modbus RTU
 /// reply of this link is at most 9 bytes; a corrupted one the same).
 pub const DRIVE_FRAME_MAX: usize = drive_link::rtu::MAX_FRAME;
@@ -110,16 +113,26 @@ pub struct DriveFrame {
     bytes: [u8; DRIVE_FRAME_MAX],
 }
 
+/// The drum driver's line as the application holds it.
+#[cfg(feature = "drive-link")]
+pub type DriveLineRef = &'static mut DriveLine;
+/// Without the feature `drive-link`: nothing.
+#[cfg(not(feature = "drive-link"))]
+pub type DriveLineRef = ();
+
 /// Reply frames from the gate to [`DriveLine`] (three at a time at most).
+#[cfg(feature = "drive-link")]
 type DriveRxQueue = heapless::spsc::Queue<DriveFrame, 4>;
 /// When each request frame's last bit left (firmware µs), for the truth
 /// record (see [`Sensors::sample`]): at most two requests fit in a 10 ms
 /// period at 115 200 baud.
+#[cfg(feature = "drive-link")]
 type DriveTxQueue = heapless::spsc::Queue<u32, 4>;
 /// Most request end times one truth record carries.
 const TRUTH_MAX_FRAMES: usize = 3;
 
 /// USART2, the RS-485 line to the drum driver (QEMU: DE on PA1 is a no-op).
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 ///
 /// QEMU's USART sends a byte the moment it is written, so the line's time
 /// is modelled here: a request of `n` bytes ends `n` character times
@@ -136,6 +149,7 @@ pub struct DriveLine {
     tx_ends: heapless::spsc::Producer<'static, u32>,
 }
 
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 impl DriveLine {
     /// The line's speed (QEMU's USART ignores it; the model uses it).
     pub fn set_baud(&mut self, baud: u32) {
@@ -189,8 +203,9 @@ pub struct Board {
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
     /// The drum driver's RS-485 line (USART2), in a static (the QEMU
-    /// board's boot stack has no room to move it through `init`).
-    pub drive_line: &'static mut DriveLine,
+    /// board's boot stack has no room to move it through `init`); `()`
+    /// without the feature `drive-link`.
+    pub drive_line: DriveLineRef,
     /// Drum PWM stand-in.
     pub drum: DrumDrive,
     /// The simulated machine behind the sensor interface.
@@ -337,7 +352,9 @@ pub fn init(dp: pac::Peripherals) -> Board {
     };
     // The drum driver's line: USART2 on PA2/PA3 (8N1; QEMU ignores the
     // rate, the model in `DriveLine` uses the profile's).
+    #[cfg(feature = "drive-link")]
     let tx2 = gpioa.pa2.into_alternate_push_pull(&mut gpioa.crl);
+    #[cfg(feature = "drive-link")]
     let drive_uart = dp.USART2.serial(
         (tx2, gpioa.pa3),
         serial::Config::default()
@@ -345,14 +362,18 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
+    #[cfg(feature = "drive-link")]
     let (drive_tx, _drive_rx) = drive_uart.split();
+    #[cfg(feature = "drive-link")]
     let (Some(drive_rx_queue), Some(drive_tx_queue)) = (
         cortex_m::singleton!(: DriveRxQueue = DriveRxQueue::new()),
         cortex_m::singleton!(: DriveTxQueue = DriveTxQueue::new()),
     ) else {
         fatal()
     };
+    #[cfg(feature = "drive-link")]
     let (drive_rx_in, drive_rx_out) = drive_rx_queue.split();
+    #[cfg(feature = "drive-link")]
     let (drive_tx_in, drive_tx_out) = drive_tx_queue.split();
     DRUM_CCR.store(0, Relaxed);
     DRIVER_ENABLE.store(false, Relaxed);
@@ -368,6 +389,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let gate_path = cmd.gate.get(..cmd.gate_len).filter(|p| !p.is_empty());
     let gate = gate_path.and_then(|p| sh::open(p, 1, None));
     // Mode 5 = "wb": the truth FIFO is the gate's path with a `t`.
+    #[cfg(feature = "drive-link")]
     let truth = gate_path
         .filter(|_| cmd.scenario.drive_link && gate.is_some())
         .and_then(|p| sh::open(p, 5, Some(b't')));
@@ -434,6 +456,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
     if let Some(v) = scenario.speed_mm_s {
         machine.set_travel_speed_m_s(v as f32 / 1000.0);
     }
+    #[cfg(feature = "drive-link")]
     let Some(drive_line) = cortex_m::singleton!(: DriveLine = DriveLine {
         tx: drive_tx,
         baud: 9_600,
@@ -443,6 +466,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }) else {
         fatal()
     };
+    #[cfg(feature = "drive-link")]
     let drive = match truth {
         Some(truth) => cortex_m::singleton!(: DriveSim = DriveSim {
             truth,
@@ -453,6 +477,8 @@ pub fn init(dp: pac::Peripherals) -> Board {
         }),
         None => None,
     };
+    #[cfg(not(feature = "drive-link"))]
+    let (drive, drive_line) = (None, ());
     Board {
         hmi_tx,
         hmi_rx,
@@ -580,6 +606,7 @@ pub struct Sensors {
 }
 
 /// The QEMU board's side of the host's virtual drum driver.
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 struct DriveSim {
     /// The truth FIFO (semihosting handle).
     truth: usize,
@@ -621,6 +648,7 @@ fn due(at: Option<u32>, from: u32, to: u32) -> bool {
 /// since the last record and each one's end (firmware µs, u32); all little
 /// endian. Written before the gate is read, so that the host, having read
 /// it, knows the period before has ended and its requests are on USART2.
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 fn write_truth(d: &mut DriveSim, drum_rpm: f32) {
     const HEAD: usize = 9;
     let mut rec = [0u8; HEAD + 4 * TRUTH_MAX_FRAMES];
@@ -651,6 +679,7 @@ fn write_truth(d: &mut DriveSim, drum_rpm: f32) {
 /// frames, each with the firmware time its last byte arrives (µs, u32),
 /// its length and bytes; then the driver's flags and bus speed command
 /// (drum milli-r/min, i32). False when the host's end is gone.
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 fn read_drive(h: usize, d: &mut DriveSim) -> bool {
     let mut count = [0u8; 1];
     if !sh::read(h, &mut count) {

@@ -70,7 +70,7 @@ pub struct Board {
     pub hall: HallCapture,
     /// RS-485 link to the motor driver (docs/drive-link.md): USART2 with
     /// driver-enable on PA1, receiving until a frame is sent; in a static.
-    pub drive_line: &'static mut DriveLine,
+    pub drive_line: DriveLineRef,
     /// Status LED.
     pub led: StatusLed,
     /// The stop input (its interrupt is EXTI15_10).
@@ -91,6 +91,11 @@ pub struct Board {
     pub sysclk_hz: u32,
 }
 
+/// The drum driver's line as the application holds it (the same with or
+/// without the feature `drive-link`: USART2 is set up either way, idle
+/// without it).
+pub type DriveLineRef = &'static mut DriveLine;
+
 /// Longest Modbus RTU frame this link sends or takes (its replies are at
 /// most 9 bytes; anything longer is garbage and fails its CRC).
 const DRIVE_FRAME_MAX: usize = 16;
@@ -110,6 +115,7 @@ const DRIVE_FRAME_MAX: usize = 16;
 ///   characters of silence ([`DriveLine::receive`], polled by the link task
 ///   every 1 ms: the F103's idle-line flag is one character, too short for
 ///   RTU). Bytes while DE is high (an echo) are dropped.
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 pub struct DriveLine {
     _tx: Tx<USART2>,
     _rx: Rx<USART2>,
@@ -126,14 +132,21 @@ pub struct DriveLine {
 }
 
 /// USART_SR / USART_CR1 bits (RM0008 §27.6.1, §27.6.4).
+#[cfg(feature = "drive-link")]
 const SR_RXNE: u16 = 1 << 5;
+#[cfg(feature = "drive-link")]
 const SR_TC: u16 = 1 << 6;
+#[cfg(feature = "drive-link")]
 const SR_TXE: u16 = 1 << 7;
+#[cfg(feature = "drive-link")]
 const CR1_TCIE: u16 = 1 << 6;
+#[cfg(feature = "drive-link")]
 const CR1_TXEIE: u16 = 1 << 7;
 /// USART2's clock: PCLK1 = 36 MHz.
+#[cfg(feature = "drive-link")]
 const PCLK1_HZ: u32 = 36_000_000;
 
+#[cfg(feature = "drive-link")]
 impl DriveLine {
     fn regs() -> &'static pac::usart1::RegisterBlock {
         // SAFETY: USART2's registers; only this type touches them after
@@ -233,6 +246,7 @@ impl DriveLine {
 
 /// Firmware time in µs: the monotonic's milliseconds and SysTick's count
 /// within the current one (a pending SysTick means a millisecond more).
+#[cfg(feature = "drive-link")]
 pub fn now_us64() -> u64 {
     use cortex_m::peripheral::{SCB, SYST};
     loop {

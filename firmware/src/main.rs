@@ -271,33 +271,48 @@ mod app {
     // 8 KB of RAM).
 
     /// Settings: the newest valid record, or the defaults, said out loud;
-    /// then the machine built from them. In one frame of its own: the
-    /// settings (≈ 0.3 KB) never sit in `init`'s frame, under which RTIC
-    /// runs the first tasks (it enables the interrupts inside it; the first
-    /// control step builds the fuzzy controller on top: the QEMU board's
-    /// deepest moment).
+    /// then the machine built from them. Two frames of their own: the
+    /// loaded record (≈ 0.3 KB) never sits in `init`'s frame, under which
+    /// RTIC runs the first tasks (it enables the interrupts inside it; the
+    /// first control step builds the fuzzy controller on top: the QEMU
+    /// board's deepest moment), and the load's deep decode path carries
+    /// one record, not two.
     #[inline(never)]
     fn load_settings(
         flash: Option<board::SettingsFlash>,
         slot: &'static mut MaybeUninit<Machine>,
     ) -> (Option<Store>, &'static mut Machine, Option<&'static str>) {
         let mut store = flash.and_then(|flash| SettingsStore::new(flash, 0).ok());
-        let (settings, notice) = match store.as_mut().map(|s| s.load()) {
-            Some(Loaded::Saved { settings, sequence }) => {
+        let loaded = store.as_mut().map(|s| s.load());
+        let notice = match &loaded {
+            Some(Loaded::Saved { sequence, .. }) => {
                 defmt::info!("settings: loaded record {=u32}", sequence);
-                (settings, None)
+                None
             }
-            Some(Loaded::Defaults { settings, reason }) => {
+            Some(Loaded::Defaults { reason, .. }) => {
                 defmt::warn!("settings: defaults in use ({})", reason);
-                (settings, Some(reason.message()))
+                Some(reason.message())
             }
             None => {
                 defmt::warn!("settings: no settings store, defaults in use");
-                (Settings::default(), Some("No settings store: defaults"))
+                Some("No settings store: defaults")
             }
         };
-        let (machine, machine_notice) = build_machine(slot, settings);
+        let (machine, machine_notice) = build_loaded(slot, loaded);
         (store, machine, machine_notice.or(notice))
+    }
+
+    /// [`build_machine`] from what the store loaded (the defaults without a
+    /// store), in its own frame (see [`load_settings`]).
+    #[inline(never)]
+    fn build_loaded(
+        slot: &'static mut MaybeUninit<Machine>,
+        loaded: Option<Loaded>,
+    ) -> (&'static mut Machine, Option<&'static str>) {
+        build_machine(
+            slot,
+            loaded.map_or_else(Settings::default, Loaded::into_settings),
+        )
     }
 
     /// Whether this image carries the machine of `profile` (the real board

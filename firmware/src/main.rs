@@ -14,8 +14,8 @@
 //! | [`app::stop_input`] | 5 | each edge of the stop input (PB10, EXTI10) | 1 µs |
 //! | [`app::usart1_rx`] | 4 | each touchscreen byte (≤ 11.5 kHz) | 2 µs |
 //! | [`app::hall_capture`] | 3 | each Hall edge (≤ 1 kHz) and TIM2 overflow | 2 µs |
-//! | [`app::usart2`] | 3 | each RS-485 byte in or out (≤ 11.5 kHz), TC | 2 µs |
-//! | [`app::drive_link`] | 3 | every 1 ms while a driver profile is set | 20 µs |
+//! | `app::usart2` | 3 | each RS-485 byte in or out (≤ 11.5 kHz), TC (feature `drive-link`) | 2 µs |
+//! | `app::drive_link` | 3 | every 1 ms while a driver profile is set (feature `drive-link`) | 20 µs |
 //! | [`app::control`] | 2 | every 10 ms | 1 ms |
 //! | [`app::hmi`] | 1 | each touchscreen byte, at least every 20 ms | 3 ms |
 //! | [`app::status`] | 1 | every 200 ms (5 Hz) | 2 ms |

@@ -176,7 +176,7 @@ mod app {
         edges_out: Consumer<'static, board::HallEdge>,
         saves_in: Sender<'static, (), 1>,
         saves_out: Receiver<'static, (), 1>,
-        sensors: board::Sensors,
+        sensors: board::SensorsRef,
         #[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
         work_switch: board::WorkSwitchInput,
         actuators: Actuators,

@@ -62,6 +62,9 @@ pub enum Image {
     ProfileAOnly,
     /// Profile B only, like the real board's profile B image.
     ProfileBOnly,
+    /// Profile A with the drum driver's link (feature `drive-link`), for
+    /// the virtual driver on USART2 ([`drive`]).
+    DriveLink,
 }
 
 impl Image {
@@ -71,6 +74,7 @@ impl Image {
             Image::BothMachines => QEMU_FEATURES,
             Image::ProfileAOnly => "board-qemu,profile-a",
             Image::ProfileBOnly => "board-qemu,profile-b",
+            Image::DriveLink => "board-qemu,profile-a,drive-link",
         }
     }
 
@@ -80,6 +84,7 @@ impl Image {
             Image::BothMachines => "qemu",
             Image::ProfileAOnly => "qemu-a",
             Image::ProfileBOnly => "qemu-b",
+            Image::DriveLink => "qemu-dl",
         };
         workspace_root().join("target").join(name)
     }
@@ -89,12 +94,17 @@ impl Image {
     /// [`Image::BothMachines`] (used by `cargo xtask test`, which has just
     /// built it).
     pub fn elf(self) -> io::Result<PathBuf> {
-        static BUILT: [OnceLock<Result<PathBuf, String>>; 3] =
-            [OnceLock::new(), OnceLock::new(), OnceLock::new()];
+        static BUILT: [OnceLock<Result<PathBuf, String>>; 4] = [
+            OnceLock::new(),
+            OnceLock::new(),
+            OnceLock::new(),
+            OnceLock::new(),
+        ];
         let (slot, override_var) = match self {
             Image::BothMachines => (&BUILT[0], std::env::var_os("FIRMWARE_QEMU_ELF")),
             Image::ProfileAOnly => (&BUILT[1], None),
             Image::ProfileBOnly => (&BUILT[2], None),
+            Image::DriveLink => (&BUILT[3], None),
         };
         if let Some(elf) = override_var {
             return Ok(PathBuf::from(elf));

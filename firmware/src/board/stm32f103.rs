@@ -65,7 +65,7 @@ pub struct Board {
     /// Drum motor PWM and driver pins.
     pub drum: DrumDrive,
     /// Encoder and other polled sensors.
-    pub sensors: Sensors,
+    pub sensors: SensorsRef,
     /// Hall capture timer (its interrupt is TIM2).
     pub hall: HallCapture,
     /// RS-485 link to the motor driver (docs/drive-link.md): USART2 with
@@ -90,6 +90,10 @@ pub struct Board {
     /// SysTick input frequency for the monotonic.
     pub sysclk_hz: u32,
 }
+
+/// The sensors as the application holds them (small on this board: by
+/// value).
+pub type SensorsRef = Sensors;
 
 /// The drum driver's line as the application holds it (the same with or
 /// without the feature `drive-link`: USART2 is set up either way, idle

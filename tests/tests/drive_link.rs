@@ -19,7 +19,7 @@ use std::time::Duration;
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
 use machine_sim::reference::eq7_drum_speed;
-use qemu_tests::{log_time_ms, sim_samples, Bench, BootOptions, SimSample};
+use qemu_tests::{log_time_ms, sim_samples, Bench, BootOptions, Image, SimSample};
 use supervisor::drive_link::{CommandPath, DriveLinkSettings, DriverKind, FeedbackSource};
 use supervisor::settings::Settings;
 use supervisor::store::SettingsStore;
@@ -98,7 +98,7 @@ fn boot(name: &str, s: &Settings, baud: u32, scenario: &[&str], run_ms: u32) -> 
         echo_logs: std::env::var_os("ECHO").is_some(),
         ..BootOptions::default()
     };
-    let mut bench = Bench::boot(&options).expect("boot QEMU");
+    let mut bench = Bench::boot_image(Image::DriveLink, &options).expect("boot QEMU");
     assert!(
         bench
             .pump_until(Duration::from_secs(10), |s| s.page() == 1)

@@ -90,6 +90,9 @@ pub struct DriveBench {
     /// Requests whose end time was missing from the truth records (would
     /// mean the harness lost sync; a test can assert it stays 0).
     pub unmatched: u32,
+    /// Firmware time of the newest truth record, µs (the start of the
+    /// period the firmware runs next).
+    pub now_us: u32,
     command_seen: bool,
 }
 
@@ -109,6 +112,7 @@ impl DriveBench {
             pending: VecDeque::new(),
             log: Vec::new(),
             unmatched: 0,
+            now_us: 0,
             command_seen: false,
         })
     }
@@ -180,6 +184,7 @@ impl DriveBench {
         }
         self.unmatched += ends.count() as u32;
         self.prev = Some((truth.now_us, truth.drum_milli_rpm));
+        self.now_us = truth.now_us;
         // The gate record's driver part: frames, then flags and command.
         let n = self.pending.len().min(FRAMES_PER_RECORD);
         let mut out = vec![n as u8];

@@ -127,7 +127,9 @@ fn pump_to(bench: &mut Bench, t_ms: u32) {
     }
 }
 
-fn run_to_end(mut bench: Bench) -> Vec<String> {
+/// Pumps to the end of the run; the log and the virtual driver's
+/// transactions.
+fn run_to_end(mut bench: Bench) -> (Vec<String>, Vec<qemu_tests::drive::Transaction>) {
     let deadline = std::time::Instant::now() + Duration::from_secs(600);
     while std::time::Instant::now() < deadline {
         bench.pump(Duration::from_millis(500)).unwrap();
@@ -135,9 +137,10 @@ fn run_to_end(mut bench: Bench) -> Vec<String> {
             break;
         }
     }
+    let log = bench.fw.drive().map(|d| d.log.clone()).unwrap_or_default();
     let (status, logs) = bench.fw.wait_exit(Duration::from_secs(60)).unwrap();
     assert!(status.success(), "QEMU: {status}");
-    logs
+    (logs, log)
 }
 
 fn time_of(logs: &[String], needle: &str) -> u32 {
@@ -162,8 +165,9 @@ fn worst_tracking(samples: &[SimSample], from: u32, to: u32) -> (f64, u32) {
 }
 
 /// Read-back only (no encoder), PWM or Modbus command: the drum tracks
-/// eq. 7 within 1 % once settled.
-fn tracks_eq7(name: &str, command: CommandPath, baud: u32) {
+/// eq. 7 within 1 % once settled (2 s after Start; 3 s for the Modbus
+/// command at 9600 baud, whose Start overshoots: docs/drive-link.md).
+fn tracks_eq7(name: &str, command: CommandPath, baud: u32) -> f64 {
     let s = settings(FeedbackSource::Driver, command, baud);
     // Noiseless machine at Low 2 whose chassis pulls away with a 2.5 s
     // time constant (as the encoder's test in profile_a.rs); the encoder
@@ -173,34 +177,155 @@ fn tracks_eq7(name: &str, command: CommandPath, baud: u32) {
         &s,
         baud,
         &["gear=2", "noise=0", "tau=2500", "enc_loss=1"],
-        16_000,
+        17_000,
     );
     pump_to(&mut bench, 8_000);
     bench.tap("badapt").unwrap();
     bench.tap("bstart").unwrap();
-    let logs = run_to_end(bench);
+    let (logs, _) = run_to_end(bench);
     let _ = std::fs::remove_file(&flash);
+    assert!(logs
+        .iter()
+        .any(|l| l.contains("sim: encoder loss injected")));
     let start = time_of(&logs, "drum: Running");
     assert!(
         !logs.iter().any(|l| l.contains("alarm: ")),
         "an alarm: {:?}",
         logs.iter().find(|l| l.contains("alarm: "))
     );
+    let settle = if command == CommandPath::Modbus && baud == 9600 {
+        3_000
+    } else {
+        2_000
+    };
     let samples = sim_samples(&logs);
-    let (worst, at) = worst_tracking(&samples, start + 2_000, start + 7_500);
+    let (worst, at) = worst_tracking(&samples, start + settle, start + settle + 5_500);
     let log_path = std::env::temp_dir().join(format!("{name}-{}.log", std::process::id()));
     if worst > 0.01 {
         let _ = std::fs::write(&log_path, logs.join("\n"));
     }
+    eprintln!("{name}: worst {:.3} %", worst * 100.0);
     assert!(
         worst <= 0.01,
         "worst {:.2} % at {at} ms (start {start} ms), log {}",
         worst * 100.0,
         log_path.display()
     );
+    worst
 }
 
 #[test]
-fn readback_only_pwm_at_115200_tracks_eq7_within_1_percent() {
-    tracks_eq7("rb-pwm-115200", CommandPath::Pwm, 115_200);
+fn readback_only_tracks_eq7_within_1_percent_at_9600_and_115200_and_with_the_modbus_command() {
+    // Not here: the Modbus command at 9600 baud, which in QEMU (the gate
+    // adds up to a control period to each reply) oscillates after Start,
+    // trips the instability warning at 2.5 s and then holds ±2.2 %; on the
+    // host's line model it tracks within 0.34 %
+    // (crates/supervisor/tests/drive_link.rs). docs/drive-link.md, "Limits".
+    for (baud, command) in [
+        (9600, CommandPath::Pwm),
+        (115_200, CommandPath::Pwm),
+        (115_200, CommandPath::Modbus),
+    ] {
+        tracks_eq7(&format!("rb-{command:?}-{baud}"), command, baud);
+    }
+}
+
+/// Runs read-back only at `baud` to 11 s (Start at 2 s), does `act` on the
+/// virtual driver, runs to 14 s; the log, and the firmware time of the act.
+fn fault_run(
+    name: &str,
+    baud: u32,
+    scenario: &[&str],
+    act: impl FnOnce(&mut qemu_tests::drive::DriveBench),
+) -> (Vec<String>, u32) {
+    let s = settings(FeedbackSource::Driver, CommandPath::Pwm, baud);
+    let mut words = vec!["gear=2", "noise=0", "enc_loss=1"];
+    words.extend_from_slice(scenario);
+    let (mut bench, flash) = boot(name, &s, baud, &words, 14_000);
+    pump_to(&mut bench, 2_000);
+    bench.tap("badapt").unwrap();
+    bench.tap("bstart").unwrap();
+    pump_to(&mut bench, 11_000);
+    let at_ms = {
+        let mut d = bench.fw.drive().unwrap();
+        act(&mut d);
+        d.now_us / 1000
+    };
+    let (logs, _) = run_to_end(bench);
+    let _ = std::fs::remove_file(&flash);
+    (logs, at_ms)
+}
+
+/// The first `sim:` sample at or after `t_ms` and its compare value.
+fn ccr_after(logs: &[String], t_ms: u32) -> (u32, u32) {
+    sim_samples(logs)
+        .iter()
+        .find(|s| s.t_ms >= t_ms)
+        .map(|s| (s.t_ms, s.ccr))
+        .expect("a sim sample")
+}
+
+#[test]
+fn an_injected_driver_fault_gives_its_named_alarm_and_safe_outputs() {
+    // Over-current (0x0004) from 11 s.
+    let (logs, at) = fault_run("fault", 115_200, &[], |d| d.driver.fault_bits = 0x0004);
+    let alarm = time_of(&logs, "alarm: DriverFault(OverCurrent)");
+    eprintln!("fault at {at} ms, alarm at {alarm} ms");
+    // The fault word is read every 4th poll (4 × 9.3 ms at 115 200 baud),
+    // plus the gate's period and a control period.
+    assert!(
+        alarm >= at && alarm - at <= 4 * 10 + 20 + 10,
+        "{at} -> {alarm}"
+    );
+    let (t, ccr) = ccr_after(&logs, alarm + 1);
+    assert_eq!(ccr, 0, "PWM at {t} ms");
+}
+
+#[test]
+fn a_cut_link_is_lost_within_the_retry_budget_with_safe_outputs() {
+    let (logs, at) = fault_run("cut", 115_200, &[], |d| d.driver.inject.silent = true);
+    let lost = time_of(&logs, "drive link: lost");
+    let alarm = time_of(&logs, "alarm: LinkLost");
+    eprintln!("cut at {at} ms, lost at {lost} ms, alarm at {alarm} ms");
+    // Hand formula at 115 200 baud: 3 × (request 0.77 ms + timeout 20.86 ms
+    // + gap 1.75 ms) + one poll cycle 9.3 ms = 79.4 ms, + 10 ms of the gate.
+    assert!(lost >= at && lost - at <= 90, "cut {at} -> lost {lost}");
+    // Outputs safe at the next control step (≤ 100 ms required).
+    assert!(alarm - lost <= 10, "lost {lost} -> alarm {alarm}");
+    let (t, ccr) = ccr_after(&logs, alarm + 1);
+    assert_eq!(ccr, 0, "PWM at {t} ms");
+}
+
+#[test]
+fn a_stalled_drum_gives_the_stall_alarm_from_the_readback() {
+    let (logs, _) = fault_run("stall", 9600, &["stall=11000"], |_| {});
+    let alarm = time_of(&logs, "alarm: DrumStall");
+    eprintln!("stall at 11000 ms, alarm at {alarm} ms");
+    // The stall is seen when the read-back (≤ 100 ms old) has shown 0 for
+    // 200 ms (the stall time).
+    assert!(
+        alarm > 11_000 && alarm <= 11_000 + 200 + 100 + 30,
+        "{alarm}"
+    );
+    let (t, ccr) = ccr_after(&logs, alarm + 1);
+    assert_eq!(ccr, 0, "PWM at {t} ms");
+}
+
+#[test]
+fn crc_errors_and_late_replies_are_survived() {
+    let (logs, _) = fault_run("crc", 115_200, &[], |d| {
+        d.driver.inject.corrupt_replies = 2;
+        d.driver.inject.late_replies = 1;
+        d.driver.inject.extra_delay_us = 25_000;
+    });
+    assert!(
+        !logs
+            .iter()
+            .any(|l| l.contains("alarm: ") || l.contains("drive link: lost")),
+        "{:?}",
+        logs.iter()
+            .find(|l| l.contains("alarm: ") || l.contains("lost"))
+    );
+    let last = sim_samples(&logs).last().copied().unwrap();
+    assert!(last.ccr > 0 && last.drum_rpm > 20.0, "{last:?}");
 }

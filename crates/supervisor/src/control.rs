@@ -1728,19 +1728,31 @@ impl Supervisor {
         DriveModel::new(m.n_max_x100(), m.tau_x10_ms(), dead).unwrap_or(m)
     }
 
-    /// Control periods the feedback lags by: the read-back's age when it is
-    /// the feedback (rounded), else 0.
+    /// Control periods the measurement lags the command by, beyond the
+    /// drive's own: the read-back's age when it is the feedback, and one
+    /// link transaction for the bus command (rounded).
     fn readback_delay_periods(&self) -> usize {
-        if self.settings.drive_link.feedback != crate::drive_link::FeedbackSource::Driver {
-            return 0;
-        }
+        use crate::drive_link::{CommandPath, FeedbackSource};
+        let link = &self.settings.drive_link;
         let period = self.hw.control_period_us.max(1);
-        self.link.sample.speed.map_or(0, |r| {
-            r.age_us
-                .saturating_add(period / 2)
+        let periods = |us: u32| {
+            us.saturating_add(period / 2)
                 .checked_div(period)
                 .unwrap_or(0)
-        }) as usize
+        };
+        let feedback = if link.feedback == FeedbackSource::Driver {
+            self.link.sample.speed.map_or(0, |r| periods(r.age_us))
+        } else {
+            0
+        };
+        // The bus command reaches the driver one transaction later (on
+        // average; written every other transaction).
+        let command = if link.command == CommandPath::Modbus {
+            periods(link.readback_delay_us())
+        } else {
+            0
+        };
+        feedback.saturating_add(command) as usize
     }
 
     /// With both feedbacks: the driver's read-back says the drum turns (at

@@ -14,6 +14,8 @@
 //! | [`app::stop_input`] | 5 | each edge of the stop input (PB10, EXTI10) | 1 µs |
 //! | [`app::usart1_rx`] | 4 | each touchscreen byte (≤ 11.5 kHz) | 2 µs |
 //! | [`app::hall_capture`] | 3 | each Hall edge (≤ 1 kHz) and TIM2 overflow | 2 µs |
+//! | `app::usart2` | 3 | each RS-485 byte in or out (≤ 11.5 kHz), TC (feature `drive-link`) | 2 µs |
+//! | `app::drive_link` | 3 | every 1 ms while a driver profile is set (feature `drive-link`) | 20 µs |
 //! | [`app::control`] | 2 | every 10 ms | 1 ms |
 //! | [`app::hmi`] | 1 | each touchscreen byte, at least every 20 ms | 3 ms |
 //! | [`app::status`] | 1 | every 200 ms (5 Hz) | 2 ms |
@@ -70,6 +72,10 @@ mod app {
         board, mono_now, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS,
         RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS,
     };
+    #[cfg(all(feature = "profile-a", feature = "drive-link"))]
+    use ::drive_link::link::ControlAction;
+    #[cfg(feature = "drive-link")]
+    use ::drive_link::link::{Event as LinkEvent, Link, LinkConfig};
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
@@ -114,7 +120,12 @@ mod app {
     /// What a control step decided, per profile.
     enum Step {
         #[cfg(feature = "profile-a")]
-        Drum(supervisor::control::Actuation, Option<Alarm>, RunState),
+        Drum(
+            supervisor::control::Actuation,
+            Option<Alarm>,
+            RunState,
+            (Option<i32>, bool),
+        ),
         #[cfg(feature = "profile-b")]
         Belt(
             supervisor::profile_b::StepperCommand,
@@ -137,6 +148,25 @@ mod app {
         /// The stop input: its interrupt (5), the control task (2, which
         /// writes the outputs under this lock) and Start (hmi, 1).
         stop: StopCircuit,
+        /// The drum driver's Modbus master: its task (3) and the control
+        /// task (2, the read-back in, the command and enable out).
+        drive: &'static mut DriveState,
+        /// USART2 and DE (PA1): its interrupt (3) and the link task (3);
+        /// `()` without the feature `drive-link`.
+        #[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
+        drive_line: board::DriveLineRef,
+    }
+
+    /// The drum driver's link as the control task and the link task share
+    /// it (docs/drive-link.md).
+    pub struct DriveState {
+        /// The master, when the settings name a driver (profile A).
+        #[cfg(feature = "drive-link")]
+        link: Option<Link>,
+        /// The driver's enable as last asked through its control word.
+        #[cfg(feature = "drive-link")]
+        #[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
+        enabled: Option<bool>,
     }
 
     /// The stop input's pin and latch.
@@ -155,7 +185,7 @@ mod app {
         edges_out: Consumer<'static, board::HallEdge>,
         saves_in: Sender<'static, (), 1>,
         saves_out: Receiver<'static, (), 1>,
-        sensors: board::Sensors,
+        sensors: board::SensorsRef,
         #[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
         work_switch: board::WorkSwitchInput,
         actuators: Actuators,
@@ -167,6 +197,7 @@ mod app {
     }
 
     #[init(local = [
+        drive_slot: MaybeUninit<DriveState> = MaybeUninit::uninit(),
         edge_queue: Queue<board::HallEdge, EDGE_QUEUE> = Queue::new(),
         machine_slot: MaybeUninit<Machine> = MaybeUninit::uninit(),
         hmi_slot: MaybeUninit<Hmi> = MaybeUninit::uninit(),
@@ -184,10 +215,10 @@ mod app {
             board.run_limit_ms
         );
 
-        let (store, settings, load_notice) = load_settings(board.settings_flash);
-        let (machine, machine_notice) = build_machine(cx.local.machine_slot, settings);
-        let boot_notice = machine_notice.or(load_notice);
+        let (store, machine, boot_notice) =
+            load_settings(board.settings_flash, cx.local.machine_slot);
         let hmi = build_hmi(cx.local.hmi_slot, machine);
+        let drive = build_drive(cx.local.drive_slot, machine);
         let mut drum = board.drum;
         drum.set_enabled(false);
         let actuators = match machine {
@@ -207,10 +238,16 @@ mod app {
         status::spawn().ok();
         hmi::spawn().ok();
         settings::spawn().ok();
+        #[cfg(feature = "drive-link")]
+        if drive.link.is_some() {
+            drive_link::spawn().ok();
+        }
         (
             Shared {
                 machine,
                 hmi,
+                drive,
+                drive_line: board.drive_line,
                 hall: board.hall,
                 stop: StopCircuit {
                     pin: board.stop_input,
@@ -242,27 +279,49 @@ mod app {
     // temporaries would all be live at once (3.4 KB of stack on a board with
     // 8 KB of RAM).
 
-    /// Settings: the newest valid record, or the defaults, said out loud.
+    /// Settings: the newest valid record, or the defaults, said out loud;
+    /// then the machine built from them. Two frames of their own: the
+    /// loaded record (≈ 0.3 KB) never sits in `init`'s frame, under which
+    /// RTIC runs the first tasks (it enables the interrupts inside it; the
+    /// first control step builds the fuzzy controller on top: the QEMU
+    /// board's deepest moment), and the load's deep decode path carries
+    /// one record, not two.
     #[inline(never)]
     fn load_settings(
         flash: Option<board::SettingsFlash>,
-    ) -> (Option<Store>, Settings, Option<&'static str>) {
+        slot: &'static mut MaybeUninit<Machine>,
+    ) -> (Option<Store>, &'static mut Machine, Option<&'static str>) {
         let mut store = flash.and_then(|flash| SettingsStore::new(flash, 0).ok());
-        let (settings, notice) = match store.as_mut().map(|s| s.load()) {
-            Some(Loaded::Saved { settings, sequence }) => {
+        let loaded = store.as_mut().map(|s| s.load());
+        let notice = match &loaded {
+            Some(Loaded::Saved { sequence, .. }) => {
                 defmt::info!("settings: loaded record {=u32}", sequence);
-                (settings, None)
+                None
             }
-            Some(Loaded::Defaults { settings, reason }) => {
+            Some(Loaded::Defaults { reason, .. }) => {
                 defmt::warn!("settings: defaults in use ({})", reason);
-                (settings, Some(reason.message()))
+                Some(reason.message())
             }
             None => {
                 defmt::warn!("settings: no settings store, defaults in use");
-                (Settings::default(), Some("No settings store: defaults"))
+                Some("No settings store: defaults")
             }
         };
-        (store, settings, notice)
+        let (machine, machine_notice) = build_loaded(slot, loaded);
+        (store, machine, machine_notice.or(notice))
+    }
+
+    /// [`build_machine`] from what the store loaded (the defaults without a
+    /// store), in its own frame (see [`load_settings`]).
+    #[inline(never)]
+    fn build_loaded(
+        slot: &'static mut MaybeUninit<Machine>,
+        loaded: Option<Loaded>,
+    ) -> (&'static mut Machine, Option<&'static str>) {
+        build_machine(
+            slot,
+            loaded.map_or_else(Settings::default, Loaded::into_settings),
+        )
     }
 
     /// Whether this image carries the machine of `profile` (the real board
@@ -380,6 +439,45 @@ mod app {
         }
     }
 
+    /// The drum driver's link in its static slot: a Modbus master when the
+    /// settings name a driver (profile A only), else none.
+    #[cfg(feature = "drive-link")]
+    #[inline(never)]
+    fn build_drive(
+        slot: &'static mut MaybeUninit<DriveState>,
+        machine: &Machine,
+    ) -> &'static mut DriveState {
+        #[allow(unreachable_patterns)]
+        let profile: Option<::drive_link::profile::DriverProfile> = match machine {
+            #[cfg(feature = "profile-a")]
+            Machine::DrumBelt(sup) => sup.settings().drive_link.build().ok().flatten(),
+            _ => None,
+        };
+        let link = profile.and_then(|p| {
+            let config = LinkConfig::for_baud(p.baud)?;
+            defmt::info!(
+                "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us",
+                p.slave,
+                p.baud,
+                config.reply_timeout_us
+            );
+            Some(Link::new(p, config))
+        });
+        slot.write(DriveState {
+            link,
+            enabled: None,
+        })
+    }
+
+    /// Without the link (feature `drive-link` off): an empty state.
+    #[cfg(not(feature = "drive-link"))]
+    fn build_drive(
+        slot: &'static mut MaybeUninit<DriveState>,
+        _machine: &Machine,
+    ) -> &'static mut DriveState {
+        slot.write(DriveState {})
+    }
+
     /// Builds the screen link in its static slot.
     #[inline(never)]
     fn build_hmi(slot: &'static mut MaybeUninit<Hmi>, machine: &Machine) -> &'static mut Hmi {
@@ -440,6 +538,140 @@ mod app {
         }
     }
 
+    /// USART2, the RS-485 line to the drum driver: the next byte out (TXE),
+    /// driver-enable low once the last stop bit has left (TC), each byte
+    /// in (RXNE) with its time.
+    ///
+    /// - Priority 3: a byte must be taken within one character (87 µs at
+    ///   115 200 baud); DE must drop before the driver answers (≥ 3.5
+    ///   characters).
+    /// - Released by each byte in or out and by TC: ≤ 11.5 k times a second.
+    /// - Budget: 2 µs.
+    #[cfg(feature = "drive-link")]
+    #[task(binds = USART2, priority = 3, shared = [drive_line])]
+    fn usart2(mut cx: usart2::Context) {
+        let now = board::now_us64();
+        cx.shared.drive_line.lock(|line| line.on_interrupt(now));
+    }
+
+    /// The drum driver's Modbus master (`drive_link::link`, sans-IO): hands
+    /// it the line's events and sends what it asks, never waiting on the
+    /// line (the bytes go out in [`usart2`]).
+    ///
+    /// - Priority 3 (below the stop input and the screen's bytes, above
+    ///   the control task, which it never blocks).
+    /// - Period 1 ms while the settings name a driver; not started
+    ///   otherwise.
+    /// - Budget: 20 µs (a frame's encoding or a reply's parse).
+    #[cfg(feature = "drive-link")]
+    #[task(priority = 3, shared = [drive, drive_line])]
+    async fn drive_link(mut cx: drive_link::Context) {
+        let baud = cx
+            .shared
+            .drive
+            .lock(|d| d.link.as_ref().map(|l| l.profile().baud));
+        let Some(baud) = baud else {
+            return;
+        };
+        cx.shared.drive_line.lock(|line| line.set_baud(baud));
+        loop {
+            let now = board::now_us64();
+            let event = (&mut cx.shared.drive, &mut cx.shared.drive_line).lock(|d, line| {
+                let link = d.link.as_mut()?;
+                let mut buf = [0u8; ::drive_link::rtu::MAX_FRAME + 1];
+                let mut event = None;
+                if let Some(t) = line.sent(now) {
+                    link.sent(t);
+                }
+                if let Some(n) = line.receive(now, &mut buf) {
+                    event = link.received(now, buf.get(..n).unwrap_or(&[]));
+                }
+                event = event.or(link.tick(now));
+                if let Some(n) = link.next_frame(now, &mut buf) {
+                    line.send(buf.get(..n).unwrap_or(&[]), now);
+                }
+                if event == Some(LinkEvent::Restored) {
+                    // The operator-facing latch is the supervisor's alarm;
+                    // the link's own clears so that a next loss reports.
+                    link.acknowledge();
+                }
+                event
+            });
+            match event {
+                Some(LinkEvent::Lost) => {
+                    defmt::warn!("drive link: lost (no reply after the retries)")
+                }
+                Some(LinkEvent::Restored) => defmt::info!("drive link: the driver answers again"),
+                Some(LinkEvent::Faults(word)) => {
+                    defmt::warn!("drive link: driver fault word {=u16:#06x}", word)
+                }
+                None => {}
+            }
+            Mono::delay(1.millis()).await;
+        }
+    }
+
+    /// The link's sample for a control step (profile A).
+    #[cfg(all(feature = "profile-a", feature = "drive-link"))]
+    fn link_sample(d: &DriveState, now_us: u64) -> supervisor::drive_link::LinkSample {
+        let Some(link) = d.link.as_ref() else {
+            return supervisor::drive_link::LinkSample::default();
+        };
+        supervisor::drive_link::LinkSample {
+            speed: link.speed().map(|s| supervisor::drive_link::ReadBack {
+                drum_milli_rpm: s.drum_milli_rpm,
+                age_us: u32::try_from(now_us.saturating_sub(s.sampled_at_us)).unwrap_or(u32::MAX),
+            }),
+            lost: link.is_lost(),
+            answering: link.is_answering(),
+            fault_word: link.fault_word(),
+            fault_reads: link.counters().fault_reads,
+        }
+    }
+
+    /// The link's clock (µs), for the read-back's age.
+    #[cfg(all(feature = "profile-a", feature = "drive-link"))]
+    fn link_now() -> u64 {
+        board::now_us64()
+    }
+
+    /// Without the link: no clock needed.
+    #[cfg(all(feature = "profile-a", not(feature = "drive-link")))]
+    fn link_now() -> u64 {
+        0
+    }
+
+    /// Without the link: no sample.
+    #[cfg(all(feature = "profile-a", not(feature = "drive-link")))]
+    fn link_sample(_: &DriveState, _: u64) -> supervisor::drive_link::LinkSample {
+        supervisor::drive_link::LinkSample::default()
+    }
+
+    /// Without the link: nothing to tell the driver.
+    #[cfg(all(feature = "profile-a", not(feature = "drive-link")))]
+    fn link_apply(_: &mut DriveState, _: bool, _: Option<i32>, _: bool) {}
+
+    /// The control step's decisions for the driver: its enable through the
+    /// control word (on a change), the bus speed command, a clear request.
+    #[cfg(all(feature = "profile-a", feature = "drive-link"))]
+    fn link_apply(d: &mut DriveState, enabled: bool, command: Option<i32>, clear: bool) {
+        let Some(link) = d.link.as_mut() else {
+            return;
+        };
+        if clear {
+            link.control(ControlAction::ClearAlarm);
+            d.enabled = None;
+        } else if d.enabled != Some(enabled) {
+            link.control(if enabled {
+                ControlAction::Enable
+            } else {
+                ControlAction::Disable
+            });
+            d.enabled = Some(enabled);
+        }
+        link.set_speed_command(command);
+    }
+
     /// Hall edges: timestamps each tooth of the 25-tooth gear.
     ///
     /// - Priority 3: the capture register latches the edge time in hardware,
@@ -467,7 +699,7 @@ mod app {
     ///   ends after its next release is counted as an overrun and does not
     ///   feed the watchdog.
     /// - Budget: 1 ms (measured cost: docs/PERFORMANCE.md).
-    #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop])]
+    #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop, drive])]
     async fn control(mut cx: control::Context) {
         let mut next = mono_now();
         #[cfg(feature = "profile-a")]
@@ -495,124 +727,140 @@ mod app {
                 work.sample(cx.local.work_switch.is_closed(), CONTROL_PERIOD_MS * 1000);
             #[cfg(feature = "profile-a")]
             let work_down = work.is_down();
-            let edges_out = &mut cx.local.edges_out;
-            let step = cx.shared.machine.lock(|m| {
-                if stop_latched {
-                    // Idempotent: the machine stays stopped while latched.
-                    let _ = m.command(hmi_proto::screen::Command::Stop);
-                }
-                match m {
-                    #[cfg(feature = "profile-a")]
-                    Machine::DrumBelt(sup) => {
-                        while let Some(edge) = edges_out.dequeue() {
-                            if edge.after_lost {
-                                sup.hall_edges_lost();
-                            }
-                            sup.hall_edge(Ticks(edge.stamp));
-                        }
-                        for &edge in &sample.hall_edges {
-                            sup.hall_edge(Ticks(edge));
-                        }
-                        // Idempotent; a change begins or ends a pass.
-                        sup.set_work_switch(work_down);
-                        let a = sup.control_step(now, sample.drum_encoder);
-                        Step::Drum(a, sup.alarm(), sup.run_state())
-                    }
-                    #[cfg(feature = "profile-b")]
-                    Machine::SeedlingBelt(belt) => {
-                        // Profile B wiring: TIM3 counts the ground-wheel encoder,
-                        // TIM2 captures one index pulse per feeding-roller turn.
-                        let mut pulses = sample.hall_edges.len() as u32;
-                        while let Some(edge) = edges_out.dequeue() {
-                            // A pulse after an overcapture hides at least one more.
-                            pulses = pulses.saturating_add(1 + u32::from(edge.after_lost));
-                        }
-                        let c = belt.control_step(sample.drum_encoder, pulses);
-                        let snap = belt.planter().snapshot();
-                        Step::Belt(c, snap.alarm, snap.state)
-                    }
-                }
-            });
-            // (Only the QEMU board's edges come this way: on the real board
-            // the capture interrupt is the counter's one writer.)
-            if !sample.hall_edges.is_empty() {
-                stats::HALL_EDGES.add(sample.hall_edges.len() as u32);
-            }
-
-            // The outputs are written under the stop input's lock: an
-            // opening between the step and here cannot be overwritten.
-            let actuators = &mut *cx.local.actuators;
-            cx.shared.stop.lock(|stop| {
-                if stop.latch.is_latched() {
-                    board::stop_outputs();
-                    return;
-                }
-                #[allow(unreachable_patterns)]
-                match (&step, actuators) {
-                    #[cfg(feature = "profile-a")]
-                    (Step::Drum(a, ..), Actuators::Drum(drum)) => {
-                        drum.set_enabled(a.driver_enabled);
-                        drum.set_compare(a.ccr);
-                    }
-                    #[cfg(feature = "profile-b")]
-                    (Step::Belt(c, ..), Actuators::Steppers(steppers)) => {
-                        steppers.set(c.feed_step_hz, c.plant_step_hz, c.enabled);
-                    }
-                    // The outputs were built for the machine: never mixed.
-                    _ => board::safe_state(),
-                }
-            });
-            match stop_change {
-                Some(StopChange::Opened) => {
-                    defmt::warn!("stop input: open, outputs off (latched until closed and Start)");
-                    cx.shared.hmi.lock(|hmi| {
-                        if hmi.show_alarm(STOP_INPUT_ALARM).is_err() {
-                            stats::HMI_TX_DROPPED.inc();
-                        }
-                    });
-                }
-                Some(StopChange::Closed) => defmt::info!("stop input: closed, Start allowed"),
-                None => {}
-            }
-
-            match step {
+            // In a block: the step's values are not kept across the await
+            // below (the task's future is a static on the QEMU board's 8 KB).
+            {
                 #[cfg(feature = "profile-a")]
-                Step::Drum(actuation, alarm, run) => {
-                    if alarm != last_alarm {
-                        match alarm {
-                            Some(a) => {
-                                defmt::warn!("alarm: {}", a);
-                                cx.shared.hmi.lock(|hmi| show_alarm(hmi, a));
+                let drive = &mut cx.shared.drive;
+                let edges_out = &mut cx.local.edges_out;
+                let step = cx.shared.machine.lock(|m| {
+                    if stop_latched {
+                        // Idempotent: the machine stays stopped while latched.
+                        let _ = m.command(hmi_proto::screen::Command::Stop);
+                    }
+                    match m {
+                        #[cfg(feature = "profile-a")]
+                        Machine::DrumBelt(sup) => {
+                            while let Some(edge) = edges_out.dequeue() {
+                                if edge.after_lost {
+                                    sup.hall_edges_lost();
+                                }
+                                sup.hall_edge(Ticks(edge.stamp));
                             }
-                            None => defmt::info!("alarm cleared"),
+                            for &edge in &sample.hall_edges {
+                                sup.hall_edge(Ticks(edge));
+                            }
+                            // Idempotent; a change begins or ends a pass.
+                            sup.set_work_switch(work_down);
+                            sup.set_link_sample(drive.lock(|d| link_sample(d, link_now())));
+                            let a = sup.control_step(now, sample.drum_encoder);
+                            let bus = (sup.bus_speed_command(), sup.take_driver_clear());
+                            Step::Drum(a, sup.alarm(), sup.run_state(), bus)
                         }
-                        last_alarm = alarm;
-                    }
-                    if let Some(change) = work_change {
-                        cx.shared
-                            .machine
-                            .lock(|m| log_work_change(m, change, last_run));
-                    }
-                    if run != last_run {
-                        defmt::info!("drum: {}", run);
-                        if last_run == RunState::Running {
-                            // Stop (or an alarm) ends the pass in progress.
-                            cx.shared.machine.lock(|m| log_quality(m, "stop"));
+                        #[cfg(feature = "profile-b")]
+                        Machine::SeedlingBelt(belt) => {
+                            // Profile B wiring: TIM3 counts the ground-wheel encoder,
+                            // TIM2 captures one index pulse per feeding-roller turn.
+                            let mut pulses = sample.hall_edges.len() as u32;
+                            while let Some(edge) = edges_out.dequeue() {
+                                // A pulse after an overcapture hides at least one more.
+                                pulses = pulses.saturating_add(1 + u32::from(edge.after_lost));
+                            }
+                            let c = belt.control_step(sample.drum_encoder, pulses);
+                            let snap = belt.planter().snapshot();
+                            Step::Belt(c, snap.alarm, snap.state)
                         }
-                        last_run = run;
                     }
-                    // The simulated machine's own view next to the firmware's,
-                    // ten times a second, for the QEMU tests and the main job's
-                    // log (the real board has no such truth).
-                    #[cfg(feature = "board-qemu")]
-                    if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
-                        let (v, n, plants, pos, edges) = cx.local.sensors.truth();
-                        #[allow(unreachable_patterns)]
-                        let target = cx.shared.machine.lock(|m| match m {
-                            Machine::DrumBelt(sup) => sup.snapshot().target_drum_rpm_x1000,
-                            _ => 0,
+                });
+                // (Only the QEMU board's edges come this way: on the real board
+                // the capture interrupt is the counter's one writer.)
+                if !sample.hall_edges.is_empty() {
+                    stats::HALL_EDGES.add(sample.hall_edges.len() as u32);
+                }
+
+                // The outputs are written under the stop input's lock: an
+                // opening between the step and here cannot be overwritten.
+                let actuators = &mut *cx.local.actuators;
+                cx.shared.stop.lock(|stop| {
+                    if stop.latch.is_latched() {
+                        board::stop_outputs();
+                        return;
+                    }
+                    #[allow(unreachable_patterns)]
+                    match (&step, actuators) {
+                        #[cfg(feature = "profile-a")]
+                        (Step::Drum(a, ..), Actuators::Drum(drum)) => {
+                            drum.set_enabled(a.driver_enabled);
+                            drum.set_compare(a.ccr);
+                        }
+                        #[cfg(feature = "profile-b")]
+                        (Step::Belt(c, ..), Actuators::Steppers(steppers)) => {
+                            steppers.set(c.feed_step_hz, c.plant_step_hz, c.enabled);
+                        }
+                        // The outputs were built for the machine: never mixed.
+                        _ => board::safe_state(),
+                    }
+                });
+                #[cfg(feature = "profile-a")]
+                #[allow(irrefutable_let_patterns)]
+                if let Step::Drum(a, _, _, (command, clear)) = &step {
+                    let on = a.driver_enabled && !stop_latched;
+                    let command = if on { *command } else { None };
+                    cx.shared.drive.lock(|d| link_apply(d, on, command, *clear));
+                }
+                match stop_change {
+                    Some(StopChange::Opened) => {
+                        defmt::warn!(
+                            "stop input: open, outputs off (latched until closed and Start)"
+                        );
+                        cx.shared.hmi.lock(|hmi| {
+                            if hmi.show_alarm(STOP_INPUT_ALARM).is_err() {
+                                stats::HMI_TX_DROPPED.inc();
+                            }
                         });
-                        defmt::info!(
+                    }
+                    Some(StopChange::Closed) => defmt::info!("stop input: closed, Start allowed"),
+                    None => {}
+                }
+
+                match step {
+                    #[cfg(feature = "profile-a")]
+                    Step::Drum(actuation, alarm, run, _) => {
+                        if alarm != last_alarm {
+                            match alarm {
+                                Some(a) => {
+                                    defmt::warn!("alarm: {}", a);
+                                    cx.shared.hmi.lock(|hmi| show_alarm(hmi, a));
+                                }
+                                None => defmt::info!("alarm cleared"),
+                            }
+                            last_alarm = alarm;
+                        }
+                        if let Some(change) = work_change {
+                            cx.shared
+                                .machine
+                                .lock(|m| log_work_change(m, change, last_run));
+                        }
+                        if run != last_run {
+                            defmt::info!("drum: {}", run);
+                            if last_run == RunState::Running {
+                                // Stop (or an alarm) ends the pass in progress.
+                                cx.shared.machine.lock(|m| log_quality(m, "stop"));
+                            }
+                            last_run = run;
+                        }
+                        // The simulated machine's own view next to the firmware's,
+                        // ten times a second, for the QEMU tests and the main job's
+                        // log (the real board has no such truth).
+                        #[cfg(feature = "board-qemu")]
+                        if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
+                            let (v, n, plants, pos, edges) = cx.local.sensors.truth();
+                            #[allow(unreachable_patterns)]
+                            let target = cx.shared.machine.lock(|m| match m {
+                                Machine::DrumBelt(sup) => sup.snapshot().target_drum_rpm_x1000,
+                                _ => 0,
+                            });
+                            defmt::info!(
                             "sim: ground {=u32} um/s, drum {=u32} mr/min, target {=u32} mr/min, ccr {=u16}, plants {=u32}, ground position {=u32} mm, hall edges {=u32}",
                             v,
                             n,
@@ -622,33 +870,33 @@ mod app {
                             pos,
                             edges
                         );
-                    }
-                    #[cfg(not(feature = "board-qemu"))]
-                    let _ = actuation;
-                }
-                #[cfg(feature = "profile-b")]
-                Step::Belt(command, alarm, state) => {
-                    if alarm != last_belt_alarm {
-                        if let Some(a) = alarm {
-                            defmt::warn!("planter: {}", a);
-                            let text = match a {
-                                PlanterAlarm::TooFast => "Too fast for the stepper motors",
-                                PlanterAlarm::OutOfRange => "Travel speed out of range",
-                            };
-                            cx.shared.hmi.lock(|hmi| {
-                                let _ = hmi.show_message(text);
-                            });
                         }
-                        last_belt_alarm = alarm;
+                        #[cfg(not(feature = "board-qemu"))]
+                        let _ = actuation;
                     }
-                    if state != last_belt_state {
-                        defmt::info!("planter: {}", state);
-                        last_belt_state = state;
-                    }
-                    #[cfg(feature = "board-qemu")]
-                    if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
-                        let (plants, mean_um, cv_x100, pos) = cx.local.sensors.truth_b();
-                        defmt::info!(
+                    #[cfg(feature = "profile-b")]
+                    Step::Belt(command, alarm, state) => {
+                        if alarm != last_belt_alarm {
+                            if let Some(a) = alarm {
+                                defmt::warn!("planter: {}", a);
+                                let text = match a {
+                                    PlanterAlarm::TooFast => "Too fast for the stepper motors",
+                                    PlanterAlarm::OutOfRange => "Travel speed out of range",
+                                };
+                                cx.shared.hmi.lock(|hmi| {
+                                    let _ = hmi.show_message(text);
+                                });
+                            }
+                            last_belt_alarm = alarm;
+                        }
+                        if state != last_belt_state {
+                            defmt::info!("planter: {}", state);
+                            last_belt_state = state;
+                        }
+                        #[cfg(feature = "board-qemu")]
+                        if stats::CONTROL_LOOPS.get().is_multiple_of(10) {
+                            let (plants, mean_um, cv_x100, pos) = cx.local.sensors.truth_b();
+                            defmt::info!(
                             "sim-b: plants {=u32}, mean spacing {=u32} um, cv {=u32} x0.01%, ground position {=u32} mm, feed {=u32} mHz, plant {=u32} mHz",
                             plants,
                             mean_um,
@@ -657,12 +905,12 @@ mod app {
                             command.feed_step_hz.to_milli(),
                             command.plant_step_hz.to_milli()
                         );
+                        }
+                        #[cfg(not(feature = "board-qemu"))]
+                        let _ = command;
                     }
-                    #[cfg(not(feature = "board-qemu"))]
-                    let _ = command;
                 }
             }
-
             stats::CONTROL_LOOPS.inc();
             next += CONTROL_PERIOD_MS.millis();
             if mono_now() > next {
@@ -1023,18 +1271,8 @@ mod app {
                 }
                 if !board::drivers_enabled() {
                     // From here to the end of the save: no await.
-                    let settings = cx.shared.machine.lock(|m| m.settings().clone());
-                    break match cx.local.store.as_mut().map(|s| s.save(&settings)) {
-                        Some(Ok(sequence)) => {
-                            defmt::info!("settings: saved as record {=u32}", sequence);
-                            "Settings saved"
-                        }
-                        Some(Err(e)) => {
-                            defmt::error!("settings: save failed: {}", e);
-                            "Save failed: settings not stored"
-                        }
-                        None => "No settings store on this board",
-                    };
+                    let store = &mut *cx.local.store;
+                    break cx.shared.machine.lock(|m| save_settings(store, m));
                 }
                 if waited >= SAVE_WAIT_PERIODS {
                     defmt::warn!("settings: save refused, the motor drivers are still enabled");
@@ -1046,6 +1284,25 @@ mod app {
             cx.shared.hmi.lock(|hmi| {
                 let _ = hmi.show_message(text);
             });
+        }
+    }
+
+    /// The save itself, in its own stack frame: inlined into the priority-1
+    /// tasks' dispatcher, its record buffers (≈ 0.7 KB) sat under every
+    /// priority-1 task and under the control task preempting them, on the
+    /// QEMU board's 8 KB.
+    #[inline(never)]
+    fn save_settings(store: &mut Option<Store>, machine: &Machine) -> &'static str {
+        match store.as_mut().map(|s| s.save(machine.settings())) {
+            Some(Ok(sequence)) => {
+                defmt::info!("settings: saved as record {=u32}", sequence);
+                "Settings saved"
+            }
+            Some(Err(e)) => {
+                defmt::error!("settings: save failed: {}", e);
+                "Save failed: settings not stored"
+            }
+            None => "No settings store on this board",
         }
     }
 }

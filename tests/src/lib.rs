@@ -7,6 +7,8 @@
 //!
 //! Used by the integration tests in `tests/tests/` and by `cargo xtask qemu`.
 
+pub mod drive;
+
 use std::io::{self, BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -60,6 +62,9 @@ pub enum Image {
     ProfileAOnly,
     /// Profile B only, like the real board's profile B image.
     ProfileBOnly,
+    /// Profile A with the drum driver's link (feature `drive-link`), for
+    /// the virtual driver on USART2 ([`drive`]).
+    DriveLink,
 }
 
 impl Image {
@@ -69,6 +74,7 @@ impl Image {
             Image::BothMachines => QEMU_FEATURES,
             Image::ProfileAOnly => "board-qemu,profile-a",
             Image::ProfileBOnly => "board-qemu,profile-b",
+            Image::DriveLink => "board-qemu,profile-a,drive-link",
         }
     }
 
@@ -78,6 +84,7 @@ impl Image {
             Image::BothMachines => "qemu",
             Image::ProfileAOnly => "qemu-a",
             Image::ProfileBOnly => "qemu-b",
+            Image::DriveLink => "qemu-dl",
         };
         workspace_root().join("target").join(name)
     }
@@ -87,12 +94,17 @@ impl Image {
     /// [`Image::BothMachines`] (used by `cargo xtask test`, which has just
     /// built it).
     pub fn elf(self) -> io::Result<PathBuf> {
-        static BUILT: [OnceLock<Result<PathBuf, String>>; 3] =
-            [OnceLock::new(), OnceLock::new(), OnceLock::new()];
+        static BUILT: [OnceLock<Result<PathBuf, String>>; 4] = [
+            OnceLock::new(),
+            OnceLock::new(),
+            OnceLock::new(),
+            OnceLock::new(),
+        ];
         let (slot, override_var) = match self {
             Image::BothMachines => (&BUILT[0], std::env::var_os("FIRMWARE_QEMU_ELF")),
             Image::ProfileAOnly => (&BUILT[1], None),
             Image::ProfileBOnly => (&BUILT[2], None),
+            Image::DriveLink => (&BUILT[3], None),
         };
         if let Some(elf) = override_var {
             return Ok(PathBuf::from(elf));
@@ -166,6 +178,9 @@ pub struct BootOptions {
     /// time the test has pumped: the screen answers in firmware time, and
     /// no host load can make a control period late. The default.
     pub lockstep: bool,
+    /// A virtual drum driver on USART2 at this baud rate ([`drive`];
+    /// lock-step only; the firmware's settings must name the driver).
+    pub drive_baud: Option<u32>,
 }
 
 impl Default for BootOptions {
@@ -177,6 +192,7 @@ impl Default for BootOptions {
             scenario: Vec::new(),
             accelerated: false,
             lockstep: true,
+            drive_baud: None,
         }
     }
 }
@@ -206,8 +222,31 @@ impl Gate {
         let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         // Short: the QEMU board keeps at most 32 bytes of the path.
         let path = PathBuf::from(format!("/tmp/tpg-{}-{n}", std::process::id()));
-        let _ = std::fs::remove_file(&path);
-        let status = Command::new("mkfifo").arg(&path).status()?;
+        let fifo = make_fifo(&path)?;
+        Ok(Self { fifo, path })
+    }
+
+    /// Allows one control period carrying the screen's bytes and the
+    /// virtual driver's part of the record.
+    fn allow_one(
+        &self,
+        to_firmware: &mut std::collections::VecDeque<u8>,
+        drive: &[u8],
+    ) -> io::Result<()> {
+        let n = to_firmware.len().min(GATE_BYTES);
+        let mut msg = vec![u8::try_from(n).unwrap_or(0)];
+        msg.extend(to_firmware.drain(..n));
+        msg.extend_from_slice(drive);
+        (&self.fifo).write_all(&msg)
+    }
+}
+
+/// Creates a FIFO at `path` and opens it for reading and writing (Linux:
+/// never blocks, and QEMU's own open finds a peer).
+fn make_fifo(path: &Path) -> io::Result<std::fs::File> {
+    {
+        let _ = std::fs::remove_file(path);
+        let status = Command::new("mkfifo").arg(path).status()?;
         if !status.success() {
             return Err(io::Error::other(format!(
                 "mkfifo {}: {status}",
@@ -216,13 +255,14 @@ impl Gate {
         }
         // Read and write: opening a FIFO so never blocks (Linux), and QEMU's
         // own open for reading finds a writer.
-        let fifo = std::fs::OpenOptions::new()
+        std::fs::OpenOptions::new()
             .read(true)
             .write(true)
-            .open(&path)?;
-        Ok(Self { fifo, path })
+            .open(path)
     }
+}
 
+impl Gate {
     /// Tokens written and not yet taken by the firmware.
     fn pending(&self) -> usize {
         rustix::io::ioctl_fionread(&self.fifo)
@@ -271,6 +311,10 @@ pub struct Firmware {
     ended: std::sync::atomic::AtomicBool,
     /// Lock-step: control periods allowed since boot.
     allowed: std::sync::atomic::AtomicUsize,
+    /// The virtual drum driver on USART2, and its truth records.
+    drive: Option<(Mutex<drive::DriveBench>, Receiver<drive::Truth>, PathBuf)>,
+    /// QEMU's stdout has closed (it exited).
+    exited: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 fn tool_missing(tool: &str, hint: &str) -> io::Error {
@@ -300,6 +344,17 @@ impl Firmware {
         } else {
             None
         };
+        // The virtual driver: USART2 to a second socket, the truth FIFO.
+        let drive_listener = match (options.drive_baud, &gate) {
+            (Some(_), Some(g)) => {
+                semihosting.push_str(",arg=drive_link=1");
+                let truth_path = PathBuf::from(format!("{}t", g.path.display()));
+                let truth = make_fifo(&truth_path)?;
+                let l = TcpListener::bind("127.0.0.1:0")?;
+                Some((l, truth, truth_path))
+            }
+            _ => None,
+        };
         for word in &options.scenario {
             semihosting.push_str(&format!(",arg={word}"));
         }
@@ -307,7 +362,7 @@ impl Firmware {
         if options.accelerated || options.lockstep {
             qemu.args(["-icount", "shift=0,sleep=off"]);
         }
-        let mut qemu = qemu
+        let qemu = qemu
             .args(["-machine", "stm32vldiscovery", "-cpu", "cortex-m3"])
             .args(["-display", "none", "-monitor", "none"])
             .args(["-semihosting-config", &semihosting])
@@ -315,7 +370,16 @@ impl Firmware {
             .arg(format!(
                 "socket,id=hmi,host=127.0.0.1,port={port},server=off"
             ))
-            .args(["-serial", "chardev:hmi"])
+            .args(["-serial", "chardev:hmi"]);
+        if let Some((l, _, _)) = &drive_listener {
+            qemu.arg("-chardev")
+                .arg(format!(
+                    "socket,id=drive,host=127.0.0.1,port={},server=off",
+                    l.local_addr()?.port()
+                ))
+                .args(["-serial", "chardev:drive"]);
+        }
+        let mut qemu = qemu
             .arg("-kernel")
             .arg(elf)
             .stdin(Stdio::null())
@@ -351,9 +415,12 @@ impl Firmware {
             .stdin
             .take()
             .ok_or_else(|| io::Error::other("no defmt-print stdin"))?;
+        let exited = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let exited_flag = exited.clone();
         thread::spawn(move || {
             let mut qemu_out = qemu_out;
             let _ = io::copy(&mut qemu_out, &mut printer_in);
+            exited_flag.store(true, std::sync::atomic::Ordering::Relaxed);
         });
         let printer_out = printer
             .stdout
@@ -394,6 +461,40 @@ impl Firmware {
         };
         serial.set_nonblocking(false)?;
         serial.set_nodelay(true)?;
+        let drive = match (drive_listener, options.drive_baud) {
+            (Some((listener, truth, truth_path)), Some(baud)) => {
+                listener.set_nonblocking(true)?;
+                let deadline = Instant::now() + Duration::from_secs(10);
+                let usart2 = loop {
+                    match listener.accept() {
+                        Ok((stream, _)) => break stream,
+                        Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                            if Instant::now() > deadline {
+                                let _ = qemu.kill();
+                                return Err(io::Error::other("QEMU did not connect its USART2"));
+                            }
+                            thread::sleep(Duration::from_millis(10));
+                        }
+                        Err(e) => return Err(e),
+                    }
+                };
+                let (tx, rx) = mpsc::channel();
+                thread::spawn(move || {
+                    let mut truth = truth;
+                    while let Ok(t) = drive::read_truth(&mut truth) {
+                        if tx.send(t).is_err() {
+                            break;
+                        }
+                    }
+                });
+                Some((
+                    Mutex::new(drive::DriveBench::new(usart2, baud)?),
+                    rx,
+                    truth_path,
+                ))
+            }
+            _ => None,
+        };
         Ok(Self {
             qemu,
             printer,
@@ -406,7 +507,57 @@ impl Firmware {
             to_firmware: Mutex::new(std::collections::VecDeque::new()),
             ended: std::sync::atomic::AtomicBool::new(false),
             allowed: std::sync::atomic::AtomicUsize::new(0),
+            drive,
+            exited,
         })
+    }
+
+    /// The virtual drum driver (none without [`BootOptions::drive_baud`]).
+    pub fn drive(&self) -> Option<std::sync::MutexGuard<'_, drive::DriveBench>> {
+        self.drive.as_ref().and_then(|(d, _, _)| d.lock().ok())
+    }
+
+    /// Lock-step with the virtual driver: one period at a time — wait for
+    /// the truth record of the period that ended (the firmware now waits
+    /// at the gate), answer its requests, allow the next period.
+    fn allow_driven(&self, gate: &Gate, periods: usize) -> io::Result<()> {
+        let Some((drive, truth_rx, _)) = &self.drive else {
+            return Ok(());
+        };
+        for _ in 0..periods {
+            let deadline = Instant::now() + Duration::from_secs(60);
+            let truth = loop {
+                match truth_rx.recv_timeout(Duration::from_millis(20)) {
+                    Ok(t) => break t,
+                    Err(RecvTimeoutError::Timeout) => {
+                        if self.exited.load(std::sync::atomic::Ordering::Relaxed) {
+                            self.ended.store(true, std::sync::atomic::Ordering::Relaxed);
+                            return Ok(());
+                        }
+                        if Instant::now() > deadline {
+                            return Err(io::Error::other(
+                                "the firmware sent no truth record for 60 s",
+                            ));
+                        }
+                    }
+                    Err(RecvTimeoutError::Disconnected) => {
+                        return Err(io::Error::other("the truth FIFO closed"))
+                    }
+                }
+            };
+            let part = drive
+                .lock()
+                .map_err(|_| io::Error::other("poisoned"))?
+                .period(&truth)?;
+            let mut queue = self
+                .to_firmware
+                .lock()
+                .map_err(|_| io::Error::other("poisoned"))?;
+            self.allowed
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            gate.allow_one(&mut queue, &part)?;
+        }
+        Ok(())
     }
 
     /// Lock-step: allows the firmware `periods` more control periods.
@@ -417,6 +568,7 @@ impl Firmware {
             return Ok(());
         }
         match &self.gate {
+            Some(g) if self.drive.is_some() => self.allow_driven(g, periods),
             Some(g) => {
                 let mut queue = self
                     .to_firmware
@@ -714,6 +866,9 @@ pub fn check_stack(logs: &[String]) -> io::Result<()> {
 
 impl Drop for Firmware {
     fn drop(&mut self) {
+        if let Some((_, _, path)) = &self.drive {
+            let _ = std::fs::remove_file(path);
+        }
         let _ = self.qemu.kill();
         let _ = self.qemu.wait();
         let _ = self.printer.kill();
@@ -802,7 +957,7 @@ impl Bench {
             // While the screen has nothing to say, a few periods at a time
             // (its answers to what the firmware sends then come up to 50 ms
             // later; the firmware's shortest reply timeout is 200 ms).
-            let n = if out.is_empty() {
+            let n = if out.is_empty() && self.fw.drive.is_none() {
                 left.min(LOCKSTEP_BATCH)
             } else {
                 1

@@ -11,13 +11,15 @@
 //! ```
 //! use drive_link::cross_check::CrossCheck;
 //! let mut c = CrossCheck::new();
-//! // Encoder 0 (wire cut), driver 20 r/min: alarm after 500 ms.
-//! assert!(!c.update(0, 0, 20_000));
-//! assert!(!c.update(490_000, 0, 20_000));
-//! assert!(c.update(500_000, 0, 20_000));
+//! // Encoder 0 (wire cut), driver 20 r/min, checked every 10 ms: the
+//! // alarm once the disagreement has lasted 500 ms (the 50th check).
+//! for _ in 0..49 {
+//!     assert!(!c.update(10_000, 0, 20_000));
+//! }
+//! assert!(c.update(10_000, 0, 20_000));
 //! // 20.0 against 19.0 r/min (5 %) agrees.
 //! let mut ok = CrossCheck::new();
-//! assert!(!ok.update(0, 20_000, 19_000) && !ok.update(1_000_000, 20_000, 19_000));
+//! assert!(!ok.update(10_000, 20_000, 19_000) && !ok.update(1_000_000, 20_000, 19_000));
 //! ```
 
 /// Relative margin, ‰ of the larger speed.
@@ -31,28 +33,35 @@ pub const HOLD_US: u64 = 500_000;
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CrossCheck {
-    since: Option<u64>,
+    /// How long the two have disagreed, µs (saturating).
+    disagree_us: u32,
 }
 
 impl CrossCheck {
     /// No disagreement seen.
     #[must_use]
     pub const fn new() -> Self {
-        Self { since: None }
+        Self { disagree_us: 0 }
     }
 
-    /// One comparison at `now_us`; true when the disagreement has lasted
-    /// [`HOLD_US`].
-    pub fn update(&mut self, now_us: u64, encoder_milli_rpm: i32, driver_milli_rpm: i32) -> bool {
+    /// One comparison, `elapsed_us` after the last; true when the
+    /// disagreement has lasted [`HOLD_US`] (counted from the first
+    /// comparison that disagreed, which counts its own period).
+    pub fn update(
+        &mut self,
+        elapsed_us: u32,
+        encoder_milli_rpm: i32,
+        driver_milli_rpm: i32,
+    ) -> bool {
         let e = i64::from(encoder_milli_rpm);
         let d = i64::from(driver_milli_rpm);
         let larger = e.abs().max(d.abs());
         let margin = (larger.saturating_mul(MARGIN_PERMILLE) / 1000).max(MARGIN_FLOOR_MILLI_RPM);
         if e.abs_diff(d) <= margin.unsigned_abs() {
-            self.since = None;
+            self.disagree_us = 0;
             return false;
         }
-        let since = *self.since.get_or_insert(now_us);
-        now_us.saturating_sub(since) >= HOLD_US
+        self.disagree_us = self.disagree_us.saturating_add(elapsed_us);
+        u64::from(self.disagree_us) >= HOLD_US
     }
 }

@@ -100,6 +100,9 @@ pub struct Counters {
     pub exceptions: u32,
     /// Times the link was lost.
     pub losses: u32,
+    /// Fault words read (a new reading re-raises a fault the operator
+    /// acknowledged while it was still there).
+    pub fault_reads: u32,
 }
 
 /// A speed read back from the driver.
@@ -160,6 +163,8 @@ pub struct Link {
     command: Option<u16>,
     command_sent: Option<u16>,
     mode_due: bool,
+    /// The last poll wrote the speed command.
+    commanded: bool,
     polls: u8,
     lost: bool,
     answering: bool,
@@ -181,6 +186,7 @@ impl Link {
             command: None,
             command_sent: None,
             mode_due: profile.velocity_mode.is_some(),
+            commanded: false,
             polls: 0,
             lost: false,
             answering: false,
@@ -250,11 +256,16 @@ impl Link {
         self.polls = self.polls.wrapping_add(1);
         let fault_turn = self.config.fault_poll_every != 0
             && self.polls.is_multiple_of(self.config.fault_poll_every);
+        // A changed command is written, but never twice in a row: the
+        // speed read that follows keeps the read-back fresh while the
+        // command changes every control period.
         if let (Some(value), Some((address, _))) = (self.command, self.profile.speed_command) {
-            if self.command_sent != Some(value) || fault_turn {
+            if (self.command_sent != Some(value) && !self.commanded) || fault_turn {
+                self.commanded = true;
                 return (Job::Command, Request::Write { address, value });
             }
         }
+        self.commanded = false;
         if fault_turn {
             return (
                 Job::Faults,
@@ -347,6 +358,7 @@ impl Link {
                 });
             }
             (Job::Faults, Reply::Registers { first, .. }) => {
+                self.counters.fault_reads = self.counters.fault_reads.wrapping_add(1);
                 if first != self.faults {
                     event = Some(Event::Faults(first));
                 }

@@ -7,7 +7,10 @@
 //! [`GenericSettings::build`] like every other setting.
 //!
 //! Units: speeds in milli-r/min of the **drum** (the driver reports its
-//! motor; `milli_rpm_per_count` folds the gearbox in), signed.
+//! motor; `micro_rpm_per_count` folds the gearbox in), signed. The scale is
+//! in micro-r/min of the drum per count so that a gearbox is represented:
+//! paper A's 118:1 gearbox behind a driver counting 0.1 r/min of its motor
+//! is 100 000 / 118 = 847 µr/min per count (0.05 % rounding).
 //!
 //! ```
 //! use drive_link::profile::{DriverFault, ZLAC8015D};
@@ -92,9 +95,9 @@ pub struct DriverProfile {
     pub baud: u32,
     /// Holding register with the actual speed (signed 16 bit).
     pub speed_feedback: u16,
-    /// Drum milli-r/min per count of the speed registers (signed: a negative
-    /// scale reverses the direction).
-    pub milli_rpm_per_count: i32,
+    /// Drum micro-r/min per count of the speed feedback register (signed:
+    /// a negative scale reverses the direction).
+    pub micro_rpm_per_count: i32,
     /// Holding register with the fault bits.
     pub fault_register: u16,
     /// Masks of [`NAMED_FAULTS`] in the fault register (0: not reported).
@@ -104,7 +107,7 @@ pub struct DriverProfile {
     /// Register and value that select velocity mode, written at start-up.
     pub velocity_mode: Option<(u16, u16)>,
     /// Holding register of the speed command and its scale (drum
-    /// milli-r/min per count), when the driver takes speed commands.
+    /// micro-r/min per count), when the driver takes speed commands.
     pub speed_command: Option<(u16, i32)>,
 }
 
@@ -123,7 +126,7 @@ pub const ZLAC8015D: DriverProfile = DriverProfile {
     slave: 1,
     baud: 115_200,
     speed_feedback: 0x20AB,
-    milli_rpm_per_count: 100,
+    micro_rpm_per_count: 100_000,
     fault_register: 0x20A5,
     fault_masks: [0x0004, 0x0001, 0x0002, 0x0008, 0x0220, 0x0400],
     control: Some(ControlWord {
@@ -133,16 +136,19 @@ pub const ZLAC8015D: DriverProfile = DriverProfile {
         clear_alarm: 0x06,
     }),
     velocity_mode: Some((0x200D, 3)),
-    speed_command: Some((0x2088, 1000)),
+    speed_command: Some((0x2088, 1_000_000)),
 };
 
 impl DriverProfile {
     /// Drum speed in milli-r/min from a speed register's raw value.
     #[must_use]
     pub fn speed_from_register(&self, raw: u16) -> i32 {
-        let counts = i32::from(i16::from_ne_bytes(raw.to_ne_bytes()));
-        // |counts| ≤ 32 768 and |scale| ≤ MAX_SCALE: no overflow.
-        counts.saturating_mul(self.milli_rpm_per_count)
+        let counts = i64::from(i16::from_ne_bytes(raw.to_ne_bytes()));
+        // |counts| ≤ 32 768 and |scale| ≤ MAX_SCALE: no overflow in i64;
+        // µ → milli rounded half away from zero.
+        let micro = counts.saturating_mul(i64::from(self.micro_rpm_per_count));
+        let half = if micro < 0 { -500 } else { 500 };
+        i32::try_from(micro.saturating_add(half) / 1000).unwrap_or(0)
     }
 
     /// The speed command register's value for a drum speed, rounded to the
@@ -155,7 +161,7 @@ impl DriverProfile {
         if scale == 0 {
             return Some(0);
         }
-        let num = i64::from(drum_milli_rpm);
+        let num = i64::from(drum_milli_rpm).saturating_mul(1000);
         // Round half away from zero, on magnitudes (|num| < 2^31, |scale| ≤ 2^31).
         let magnitude = num
             .unsigned_abs()
@@ -187,8 +193,9 @@ impl DriverProfile {
     }
 }
 
-/// The largest |scale| a generic profile may name: 100 r/min per count.
-pub const MAX_SCALE: i32 = 100_000;
+/// The largest |scale| a generic profile may name: 100 r/min per count
+/// (in micro-r/min).
+pub const MAX_SCALE: i32 = 100_000_000;
 
 /// A generic driver, as the operator enters it on the screen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -200,8 +207,8 @@ pub struct GenericSettings {
     pub baud: u32,
     /// Speed feedback register.
     pub speed_feedback: u16,
-    /// Drum milli-r/min per count, nonzero, |scale| ≤ [`MAX_SCALE`].
-    pub milli_rpm_per_count: i32,
+    /// Drum micro-r/min per count, nonzero, |scale| ≤ [`MAX_SCALE`].
+    pub micro_rpm_per_count: i32,
     /// Fault register.
     pub fault_register: u16,
     /// Masks of the named faults (pairwise disjoint).
@@ -234,7 +241,7 @@ impl fmt::Display for ProfileError {
             Self::Baud(b) => write!(f, "baud {b} not 9600/19200/38400/57600/115200"),
             Self::Scale(s) => write!(
                 f,
-                "speed scale {s} milli-r/min per count (0 or beyond 100 r/min)"
+                "speed scale {s} micro-r/min per count (0 or beyond 100 r/min)"
             ),
             Self::FaultMasksOverlap => f.write_str("two fault names share a bit"),
             Self::RegisterClash => f.write_str("speed, fault and command registers must differ"),
@@ -251,7 +258,7 @@ impl GenericSettings {
         if !BAUD_RATES.contains(&self.baud) {
             return Err(ProfileError::Baud(self.baud));
         }
-        let s = self.milli_rpm_per_count;
+        let s = self.micro_rpm_per_count;
         if s == 0 || s.unsigned_abs() > MAX_SCALE.unsigned_abs() {
             return Err(ProfileError::Scale(s));
         }
@@ -273,7 +280,7 @@ impl GenericSettings {
             slave: self.slave,
             baud: self.baud,
             speed_feedback: self.speed_feedback,
-            milli_rpm_per_count: s,
+            micro_rpm_per_count: s,
             fault_register: self.fault_register,
             fault_masks: self.fault_masks,
             control: None,
@@ -293,7 +300,7 @@ mod tests {
             slave: 3,
             baud: 9600,
             speed_feedback: 0x0010,
-            milli_rpm_per_count: -250,
+            micro_rpm_per_count: -250_000,
             fault_register: 0x0011,
             fault_masks: [1, 2, 4, 8, 16, 32],
             speed_command: Some(0x0020),
@@ -331,7 +338,7 @@ mod tests {
         );
         assert_eq!(
             GenericSettings {
-                milli_rpm_per_count: 0,
+                micro_rpm_per_count: 0,
                 ..generic()
             }
             .build(),
@@ -339,11 +346,11 @@ mod tests {
         );
         assert_eq!(
             GenericSettings {
-                milli_rpm_per_count: -100_001,
+                micro_rpm_per_count: -100_000_001,
                 ..generic()
             }
             .build(),
-            Err(ProfileError::Scale(-100_001))
+            Err(ProfileError::Scale(-100_000_001))
         );
         assert_eq!(
             GenericSettings {
@@ -401,5 +408,23 @@ mod tests {
         .build()
         .unwrap();
         assert_eq!(no_command.command_counts(10_000), None);
+    }
+
+    #[test]
+    fn a_gearbox_in_the_scale() {
+        // Paper A's 118:1 gearbox behind a driver counting 0.1 r/min of its
+        // motor: 100 000 / 118 = 847.46 → 847 µr/min of the drum per count.
+        let p = GenericSettings {
+            micro_rpm_per_count: 847,
+            ..generic()
+        }
+        .build()
+        .unwrap();
+        // Drum 20 r/min = motor 2360 r/min = 23 600 counts; 23 600 × 847 µ
+        // = 19 989.2 milli-r/min → 19 989.
+        assert_eq!(p.speed_from_register(23_600), 19_989);
+        // The command in the same scale: 20 r/min / 0.847 milli = 23 612.75
+        // → 23 613 counts.
+        assert_eq!(p.command_counts(20_000), Some(23_613));
     }
 }

@@ -113,12 +113,29 @@ pub enum Alarm {
     DrumUnstable,
     /// The drive identification ended without a model (a warning).
     IdentifyFailed(IdentifyError),
+    /// The drum driver reports a fault over its link (the first named
+    /// one). Latched.
+    DriverFault(drive_link::profile::DriverFault),
+    /// No valid reply from the drum driver within the link's retry budget.
+    /// Latched; acknowledged only once the driver answers again.
+    LinkLost,
+    /// Encoder and driver read-back disagree beyond the cross-check's
+    /// margin for its hold time ([`drive_link::cross_check`]): a lost
+    /// encoder, or a driver reporting wrong. Latched.
+    SpeedMismatch,
 }
 
 impl Alarm {
     /// Latched alarms stop the drum and need an acknowledgement.
     pub const fn is_latched(&self) -> bool {
-        matches!(self, Self::DrumStall | Self::HallLost)
+        matches!(
+            self,
+            Self::DrumStall
+                | Self::HallLost
+                | Self::DriverFault(_)
+                | Self::LinkLost
+                | Self::SpeedMismatch
+        )
     }
 
     /// The text for the screen (ASCII, at most 40 characters).
@@ -128,6 +145,20 @@ impl Alarm {
             Self::HallLost => w.write_str("Hall speed signal lost"),
             Self::DrumUnstable => w.write_str(DRUM_UNSTABLE_TEXT),
             Self::IdentifyFailed(e) => w.write_str(e.text()),
+            Self::DriverFault(f) => {
+                use drive_link::profile::DriverFault as F;
+                w.write_str(match f {
+                    F::OverCurrent => "Driver fault: over-current",
+                    F::OverVoltage => "Driver fault: over-voltage",
+                    F::UnderVoltage => "Driver fault: under-voltage",
+                    F::Overload => "Driver fault: overload",
+                    F::HallOrEncoder => "Driver fault: Hall/encoder",
+                    F::OverTemperature => "Driver fault: over-temperature",
+                    F::Other(_) => "Driver fault (unnamed)",
+                })
+            }
+            Self::LinkLost => w.write_str("Drum driver link lost"),
+            Self::SpeedMismatch => w.write_str("Encoder or driver speed wrong"),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
                 // `core::fmt`'s number formatting (~2 KB of flash), and
@@ -377,6 +408,9 @@ pub struct Supervisor {
     pub(crate) work: crate::planting::Work,
     /// Live planting quality ([`crate::quality`]).
     pub(crate) quality: crate::quality::Quality,
+    /// The drum driver's link: its newest sample, the read-back's
+    /// integration, the cross-check ([`crate::drive_link`]).
+    pub(crate) link: crate::drive_link::Feedback,
 }
 
 /// Bridges the Hall sensor's sparse updates (one edge every 170 ms at Low 2)
@@ -808,6 +842,7 @@ impl Supervisor {
             phase,
             work: crate::planting::Work::new(),
             quality: crate::quality::Quality::new(),
+            link: crate::drive_link::Feedback::default(),
         })
     }
 
@@ -1083,6 +1118,9 @@ impl Supervisor {
                 }
             }
             Command::AcknowledgeAlarm => {
+                if let Some(effect) = self.acknowledge_link_alarm() {
+                    return effect;
+                }
                 if self.alarm.is_some() {
                     self.alarm = None;
                     Effect::AlarmCleared
@@ -1453,6 +1491,9 @@ impl Supervisor {
         self.phase.clear_events();
         let elapsed_us = self.elapsed_us(now);
         self.last_step_at = Some(now);
+        let encoder_delta = delta;
+        let delta = self.feedback_counts(encoder_delta, elapsed_us);
+        self.link.bus = false;
         let measured = self.drum_speed_of(delta, elapsed_us);
         self.reported = self.reported.saturating_add(
             measured
@@ -1559,9 +1600,11 @@ impl Supervisor {
         if self.run == RunState::Identifying {
             actuation = self.identify_step(measured, delta, elapsed_us);
         }
+        self.link_alarms(encoder_delta, elapsed_us);
         if self.run == RunState::Running {
-            // Fault: drum commanded but not turning.
-            if target >= STALL_MIN_COMMAND && delta == 0 {
+            // Fault: drum commanded but not turning (with both feedbacks:
+            // neither turning; the encoder alone still is the cross-check's).
+            if target >= STALL_MIN_COMMAND && delta == 0 && !self.driver_turning() {
                 self.stall_us = self.stall_us.saturating_add(elapsed_us);
             } else {
                 self.stall_us = 0;
@@ -1583,7 +1626,14 @@ impl Supervisor {
                 // alone; then advance the model with the target of
                 // `ref_delay − 1` periods ago (the drive's dead time).
                 let expected = self.reference;
-                let back = self.law.ref_delay.saturating_sub(2);
+                // The read-back as feedback is older by its age: the model's
+                // input is delayed by as many periods more.
+                let back = self
+                    .law
+                    .ref_delay
+                    .saturating_sub(2)
+                    .saturating_add(self.readback_delay_periods())
+                    .min(REF_HISTORY - 1);
                 let delayed = self
                     .ref_history
                     .get(
@@ -1613,10 +1663,7 @@ impl Supervisor {
                     Drum::Control(c) => c.step(expected, measured, target),
                     Drum::Unbuilt | Drum::Identify(_) => I16F16::ZERO,
                 };
-                actuation = Actuation {
-                    ccr: self.ccr_of(out),
-                    driver_enabled: true,
-                };
+                actuation = self.drum_output(out);
             }
         }
         if self.run != RunState::Running {
@@ -1638,6 +1685,11 @@ impl Supervisor {
         };
         self.snapshot.actual_drum_rpm_x1000 = milli(self.reported);
         self.snapshot.ccr = actuation.ccr;
+        if self.link.bus {
+            // The Modbus command path: the PWM is 0; the log and the
+            // instability supervisor see the equivalent duty.
+            self.snapshot.ccr = self.link.bus_ccr;
+        }
         self.snapshot.hall_edges = self.edges;
         let partitions_x1e6 = self.partitions_x1e6();
         self.snapshot.plants = u32::try_from(partitions_x1e6 / 1_000_000).unwrap_or(u32::MAX);
@@ -1655,6 +1707,204 @@ impl Supervisor {
             elapsed_us,
         );
         actuation
+    }
+
+    /// The drum link's newest sample (one more sensor sample, with the
+    /// read-back's age): call before [`Supervisor::control_step`].
+    pub fn set_link_sample(&mut self, sample: crate::drive_link::LinkSample) {
+        // Field by field: a whole-struct assignment here compiled to a
+        // `memmove` call, which linked 1.6 KB of compiler-builtins.
+        let s = &mut self.link.sample;
+        let (milli, age) = sample
+            .speed
+            .map_or((None, 0), |r| (Some(r.drum_milli_rpm), r.age_us));
+        s.speed = milli.map(|drum_milli_rpm| crate::drive_link::ReadBack {
+            drum_milli_rpm,
+            age_us: age,
+        });
+        s.lost = sample.lost;
+        s.answering = sample.answering;
+        s.fault_word = sample.fault_word;
+        s.fault_reads = sample.fault_reads;
+    }
+
+    /// The speed command for the driver's bus (drum milli-r/min) when the
+    /// command path is Modbus and the drum runs; `None` otherwise.
+    pub fn bus_speed_command(&self) -> Option<i32> {
+        self.link.bus.then_some(self.link.bus_command)
+    }
+
+    /// Whether the operator's acknowledgement asked the driver to clear its
+    /// latched alarm (taken once).
+    pub fn take_driver_clear(&mut self) -> bool {
+        core::mem::take(&mut self.link.clear_request)
+    }
+
+    /// Whether the link is in use (a driver profile and a feedback or
+    /// command that needs it, or a profile at all: its faults are read).
+    fn link_in_use(&self) -> bool {
+        self.settings.drive_link.kind != crate::drive_link::DriverKind::None
+    }
+
+    /// This period's drum counts from the feedback source in force: the
+    /// encoder's, or the read-back integrated over the period.
+    fn feedback_counts(&mut self, encoder_delta: u16, elapsed_us: u32) -> u16 {
+        use crate::drive_link::FeedbackSource;
+        match self.settings.drive_link.feedback {
+            FeedbackSource::Encoder | FeedbackSource::Both => encoder_delta,
+            FeedbackSource::Driver => self
+                .link
+                .readback_counts(elapsed_us, self.hw.encoder_counts_per_drum_rev),
+        }
+    }
+
+    /// The drive model the controller is scheduled from: the drive's own,
+    /// with the driver read-back as the feedback, or the bus command, its
+    /// dead time lengthened by one link transaction each ([`crate::drive_link::DriveLinkSettings::readback_delay_us`]),
+    /// so that the gains shrink in the SIMC ratio (docs/drive-link.md).
+    fn control_model(&self) -> DriveModel {
+        use crate::drive_link::{CommandPath, FeedbackSource};
+        let m = self.settings.drive;
+        let link = &self.settings.drive_link;
+        // One transaction's delay for the read-back as the feedback, one
+        // more for the bus command (written every other transaction).
+        let transactions = u32::from(link.feedback == FeedbackSource::Driver)
+            .saturating_add(u32::from(link.command == CommandPath::Modbus));
+        if transactions == 0 {
+            return m;
+        }
+        let extra = u16::try_from(link.readback_delay_us().saturating_mul(transactions) / 100)
+            .unwrap_or(u16::MAX);
+        let dead = m
+            .dead_time_x10_ms()
+            .saturating_add(extra)
+            .min(DriveModel::DEAD_TIME_MAX);
+        DriveModel::new(m.n_max_x100(), m.tau_x10_ms(), dead).unwrap_or(m)
+    }
+
+    /// Control periods the measurement lags the command by, beyond the
+    /// drive's own: the read-back's age when it is the feedback, and one
+    /// link transaction for the bus command (rounded).
+    fn readback_delay_periods(&self) -> usize {
+        use crate::drive_link::{CommandPath, FeedbackSource};
+        let link = &self.settings.drive_link;
+        let period = self.hw.control_period_us.max(1);
+        let periods = |us: u32| {
+            us.saturating_add(period / 2)
+                .checked_div(period)
+                .unwrap_or(0)
+        };
+        let feedback = if link.feedback == FeedbackSource::Driver {
+            self.link.sample.speed.map_or(0, |r| periods(r.age_us))
+        } else {
+            0
+        };
+        // The bus command reaches the driver one transaction later (on
+        // average; written every other transaction).
+        let command = if link.command == CommandPath::Modbus {
+            periods(link.readback_delay_us())
+        } else {
+            0
+        };
+        feedback.saturating_add(command) as usize
+    }
+
+    /// With both feedbacks: the driver's read-back says the drum turns (at
+    /// least the cross-check's floor, 1 r/min), so a still encoder is the
+    /// cross-check's alarm, not a stall.
+    fn driver_turning(&self) -> bool {
+        self.settings.drive_link.feedback == crate::drive_link::FeedbackSource::Both
+            && self
+                .link
+                .readback_milli_rpm()
+                .is_some_and(|n| i64::from(n) > drive_link::cross_check::MARGIN_FLOOR_MILLI_RPM)
+    }
+
+    /// The link's alarms: lost, a driver fault, the cross-check.
+    fn link_alarms(&mut self, encoder_delta: u16, elapsed_us: u32) {
+        if !self.link_in_use() {
+            return;
+        }
+        let sample = self.link.sample;
+        if sample.lost {
+            self.latch(Alarm::LinkLost);
+            return;
+        }
+        if sample.fault_word != 0
+            && !(self.link.acked && self.link.acked_fault_reads == sample.fault_reads)
+        {
+            let fault = self
+                .settings
+                .drive_link
+                .build()
+                .ok()
+                .flatten()
+                .and_then(|p| p.faults(sample.fault_word).next())
+                .unwrap_or(drive_link::profile::DriverFault::Other(sample.fault_word));
+            if self.alarm != Some(Alarm::DriverFault(fault)) {
+                self.latch(Alarm::DriverFault(fault));
+            }
+            return;
+        }
+        if self.settings.drive_link.feedback == crate::drive_link::FeedbackSource::Both
+            && self.run == RunState::Running
+        {
+            let encoder = milli(self.drum_speed_of(encoder_delta, elapsed_us));
+            let driver = self.link.readback_milli_rpm();
+            let wrong = match driver {
+                Some(d) => self.link.cross.update(
+                    elapsed_us,
+                    i32::try_from(encoder).unwrap_or(i32::MAX),
+                    d,
+                ),
+                None => false,
+            };
+            if wrong {
+                self.latch(Alarm::SpeedMismatch);
+            }
+        } else {
+            self.link.cross = drive_link::cross_check::CrossCheck::new();
+        }
+    }
+
+    /// The operator acknowledges a link alarm: a lost link only once the
+    /// driver answers again; a driver fault asks the driver to clear its
+    /// alarm (a fault still there comes back with the next fault read).
+    fn acknowledge_link_alarm(&mut self) -> Option<Effect> {
+        match self.alarm {
+            Some(Alarm::LinkLost) if !self.link.sample.answering || self.link.sample.lost => {
+                Some(Effect::Message("Drum driver still not answering"))
+            }
+            Some(Alarm::DriverFault(_)) => {
+                self.link.acked_fault_reads = self.link.sample.fault_reads;
+                self.link.acked = true;
+                self.link.clear_request = true;
+                self.alarm = None;
+                Some(Effect::AlarmCleared)
+            }
+            _ => None,
+        }
+    }
+
+    /// The drum's output for the controller's `out` (r/min): the PWM
+    /// compare value, or with the Modbus command path the driver's speed
+    /// command (PWM 0).
+    fn drum_output(&mut self, out: I16F16) -> Actuation {
+        let ccr = self.ccr_of(out);
+        if self.settings.drive_link.command == crate::drive_link::CommandPath::Modbus {
+            self.link.bus_command = i32::try_from(milli(out)).unwrap_or(i32::MAX);
+            self.link.bus_ccr = ccr;
+            self.link.bus = true;
+            Actuation {
+                ccr: 0,
+                driver_enabled: true,
+            }
+        } else {
+            Actuation {
+                ccr,
+                driver_enabled: true,
+            }
+        }
     }
 
     fn push_reference_input(&mut self, target: I16F16) {
@@ -1690,7 +1940,7 @@ impl Supervisor {
     #[inline(never)]
     fn fall_back(&mut self) {
         self.fallback = true;
-        if let Ok(mut c) = fallback_config(&self.settings.drive).build() {
+        if let Ok(mut c) = fallback_config(&self.control_model()).build() {
             c.start();
             self.drum = Drum::Control(c);
         }
@@ -1742,10 +1992,11 @@ impl Supervisor {
     /// identification).
     #[inline(never)]
     fn restore_controller(&mut self) {
+        let model = self.control_model();
         let config = if self.fallback {
-            fallback_config(&self.settings.drive)
+            fallback_config(&model)
         } else {
-            scheduled_config(&self.settings.drive, self.hw.control_period_us)
+            scheduled_config(&model, self.hw.control_period_us)
         };
         if let Ok(c) = config.build() {
             self.drum = Drum::Control(c);

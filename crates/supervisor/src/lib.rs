@@ -13,6 +13,7 @@ compile_error!("enable at least one machine: feature `profile-a` or `profile-b`"
 pub mod control;
 pub mod crc;
 pub mod drive;
+pub mod drive_link;
 pub mod machine;
 pub mod phase;
 pub mod planting;

@@ -1,8 +1,10 @@
 //! The persisted settings and their versioned byte format.
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
-//! multi-byte number is little endian. Format version 4. [`decode`] still
-//! reads the older formats: version 3 is version 4 without its last 2 bytes
+//! multi-byte number is little endian. Format version 5. [`decode`] still
+//! reads the older formats: version 4 is version 5 without its last 31
+//! bytes (written before the drum driver's link; read with encoder
+//! feedback, PWM command and no driver, the behaviour then), version 3 is version 4 without its last 2 bytes
 //! and knows flag bit 0 only (written before the placement setting and the
 //! work switch; read as [`Placement::DistanceLocked`], with no work switch
 //! fitted and [`FirstPlantDistance::DEFAULT`]), version 2 is version 3 without its last 7 bytes
@@ -13,7 +15,7 @@
 //!
 //! | offset | size | field | encoding |
 //! |---|---|---|---|
-//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 4 |
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 5 |
 //! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
 //! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
 //! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
@@ -26,8 +28,9 @@
 //! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1 (format 4): [`Settings::placement`] is [`Placement::SpeedFollowing`]; bit 2 (format 4): [`Settings::work_switch_fitted`]; bits 3–7 zero |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
 //! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`], default 100) |
+//! | 252 | 31 | [`Settings::drive_link`] (format 5) | [`DriveLinkSettings::to_bytes`]: feedback, command path, driver kind, slave id, baud (u32), speed register, scale (i32, micro-r/min per count), fault register, six fault masks, speed command register (presence byte + u16) |
 //!
-//! Total 252 bytes (version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! Total 283 bytes (version 4: 252, version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -43,12 +46,12 @@
 //! s.spacing = Spacing::new(120).unwrap();
 //! let bytes = s.encode();
 //! assert_eq!(bytes.len(), SETTINGS_BYTES);
-//! // version 4, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // version 5, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
 //! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
 //! // brightness 100 (0x64).
 //! assert_eq!(
 //!     bytes[..10],
-//!     [4, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//!     [5, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
 //! );
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
@@ -63,10 +66,11 @@ use kinematics::table::TableError;
 use kinematics::travel::{Calibration, CALIBRATION_BYTES};
 
 use crate::drive::{DriveModel, DriveModelError, DRIVE_MODEL_BYTES};
+use crate::drive_link::{DriveLinkError, DriveLinkSettings, DRIVE_LINK_BYTES};
 use crate::profile_b::{ProfileBConfig, CONFIG_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
-pub const SETTINGS_FORMAT_VERSION: u8 = 4;
+pub const SETTINGS_FORMAT_VERSION: u8 = 5;
 
 /// Bytes before the calibration block: version, mode, spacing, drum speed,
 /// motor coefficient, gear, brightness.
@@ -81,8 +85,11 @@ pub const SETTINGS_V2_BYTES: usize = SETTINGS_V1_BYTES + 1 + CONFIG_BYTES;
 /// Size of a format-3 record: 243 + 1 + 6 = 250.
 pub const SETTINGS_V3_BYTES: usize = SETTINGS_V2_BYTES + 1 + DRIVE_MODEL_BYTES;
 
-/// Size of an encoded [`Settings`] (format version 4): 250 + 2 = 252.
-pub const SETTINGS_BYTES: usize = SETTINGS_V3_BYTES + 2;
+/// Size of a format-4 record: 250 + 2 = 252.
+pub const SETTINGS_V4_BYTES: usize = SETTINGS_V3_BYTES + 2;
+
+/// Size of an encoded [`Settings`] (format version 5): 252 + 31 = 283.
+pub const SETTINGS_BYTES: usize = SETTINGS_V4_BYTES + DRIVE_LINK_BYTES;
 
 /// Flags byte (offset 243), bit 0: the drum encoder counts backwards.
 const FLAG_ENCODER_REVERSED: u8 = 1;
@@ -183,6 +190,10 @@ pub struct Settings {
     /// Where the first plant of a pass lands after the work switch closes.
     /// Default: [`FirstPlantDistance::DEFAULT`].
     pub first_plant_distance: FirstPlantDistance,
+    /// The drum driver's RS-485 link (format 5): feedback source, command
+    /// path, driver profile. Default: encoder, PWM, no driver (the
+    /// behaviour before the link).
+    pub drive_link: DriveLinkSettings,
 }
 
 impl Default for Settings {
@@ -202,6 +213,7 @@ impl Default for Settings {
             placement: Placement::DistanceLocked,
             work_switch_fitted: false,
             first_plant_distance: FirstPlantDistance::DEFAULT,
+            drive_link: DriveLinkSettings::default(),
         }
     }
 }
@@ -235,6 +247,8 @@ pub enum SettingsError {
     Flags(u8),
     /// The drive model (offset 244) failed validation.
     Drive(DriveModelError),
+    /// The drive link block (offset 252, format 5) failed validation.
+    DriveLink(DriveLinkError),
 }
 
 impl fmt::Display for SettingsError {
@@ -252,6 +266,7 @@ impl fmt::Display for SettingsError {
             Self::Belt => f.write_str("invalid profile B parameters"),
             Self::Flags(b) => write!(f, "invalid flags byte {b}"),
             Self::Drive(e) => write!(f, "{e}"),
+            Self::DriveLink(e) => write!(f, "{e}"),
         }
     }
 }
@@ -304,11 +319,13 @@ const fn mode_from_byte(b: u8) -> Option<Mode> {
 }
 
 impl Settings {
-    /// Serialises in format version 4 (layout in the [module docs](self)).
+    /// Serialises in format version 5 (layout in the [module docs](self)).
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
-        let (v3, v4) = out.split_at_mut(SETTINGS_V3_BYTES);
+        let (v4, v5) = out.split_at_mut(SETTINGS_V4_BYTES);
+        v5.copy_from_slice(&self.drive_link.to_bytes());
+        let (v3, v4) = v4.split_at_mut(SETTINGS_V3_BYTES);
         v4.copy_from_slice(&self.first_plant_distance.raw().to_le_bytes());
         let (v2, v3) = v3.split_at_mut(SETTINGS_V2_BYTES);
         if let Some((flags, drive)) = v3.split_first_mut() {
@@ -385,6 +402,7 @@ pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError
         placement: _,
         work_switch_fitted: _,
         first_plant_distance: _,
+        drive_link: _,
     } = out;
     let length = SettingsError::Length {
         expected: SETTINGS_BYTES,
@@ -395,6 +413,7 @@ pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError
         1 => SETTINGS_V1_BYTES,
         2 => SETTINGS_V2_BYTES,
         3 => SETTINGS_V3_BYTES,
+        4 => SETTINGS_V4_BYTES,
         SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
         other => return Err(SettingsError::UnsupportedVersion(other)),
     };
@@ -404,7 +423,13 @@ pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError
             found: bytes.len(),
         });
     }
-    let (v3, v4) = bytes.split_at(bytes.len().min(SETTINGS_V3_BYTES));
+    let (v4, v5) = bytes.split_at(bytes.len().min(SETTINGS_V4_BYTES));
+    let drive_link = match v5.try_into() {
+        Ok(block) => DriveLinkSettings::from_bytes(block).map_err(SettingsError::DriveLink)?,
+        Err(_) if v5.is_empty() => DriveLinkSettings::default(),
+        Err(_) => return Err(length),
+    };
+    let (v3, v4) = v4.split_at(v4.len().min(SETTINGS_V3_BYTES));
     let first_plant_distance = match v4 {
         [] => FirstPlantDistance::DEFAULT,
         [a, b] => FirstPlantDistance::new(i32::from(u16::from_le_bytes([*a, *b])))?,
@@ -484,6 +509,7 @@ pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError
         .first()
         .is_some_and(|&flags| flags & FLAG_WORK_SWITCH != 0);
     out.first_plant_distance = first_plant_distance;
+    out.drive_link = drive_link;
     Ok(())
 }
 
@@ -491,6 +517,8 @@ pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError
 #[allow(clippy::arithmetic_side_effects, clippy::cast_possible_truncation)]
 mod tests {
     use super::*;
+    use crate::drive_link::{CommandPath, DriverKind, FeedbackSource};
+    use drive_link::profile::GenericSettings;
     use hmi_proto::screen::Field;
     use kinematics::profile_b::ProfileBSettings;
     use kinematics::table::{CoeffTable, K_MAX, K_MIN, MAX_POINTS};
@@ -508,7 +536,11 @@ mod tests {
         // + flags byte + DriveModel::to_bytes (3 × u16).
         assert_eq!(SETTINGS_V3_BYTES, 250);
         // + the first-plant distance (u16).
-        assert_eq!(SETTINGS_BYTES, 252);
+        assert_eq!(SETTINGS_V4_BYTES, 252);
+        // + the drive link block: 4 bytes, baud u32, register u16, scale
+        // i32, register u16, 6 masks u16, presence byte, register u16.
+        assert_eq!(DRIVE_LINK_BYTES, 4 + 4 + 2 + 4 + 2 + 12 + 1 + 2);
+        assert_eq!(SETTINGS_BYTES, 283);
     }
 
     #[test]
@@ -542,10 +574,24 @@ mod tests {
             placement: Placement::SpeedFollowing,
             work_switch_fitted: true,
             first_plant_distance: FirstPlantDistance::new(1000).unwrap(),
+            drive_link: DriveLinkSettings {
+                feedback: FeedbackSource::Both,
+                command: CommandPath::Modbus,
+                kind: DriverKind::Generic,
+                generic: GenericSettings {
+                    slave: 17,
+                    baud: 9600,
+                    speed_feedback: 0x1234,
+                    micro_rpm_per_count: -250,
+                    fault_register: 0x0100,
+                    fault_masks: [1, 2, 4, 8, 0x10, 0x8000],
+                    speed_command: Some(0x0200),
+                },
+            },
         };
         let b = s.encode();
         // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
-        assert_eq!(b[..10], [4, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
+        assert_eq!(b[..10], [5, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
         assert_eq!(b[10..209], Calibration::identity().to_bytes());
         // Profile B (2) and its parameters.
         assert_eq!(b[209], 2);
@@ -555,8 +601,18 @@ mod tests {
         // = 0x036B, dead time 60 ms = 600 = 0x0258; first plant 1000 mm =
         // 0x03E8.
         assert_eq!(
-            b[243..],
+            b[243..252],
             [7, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02, 0xE8, 0x03]
+        );
+        // Format 5's drive link block: both (2), Modbus (1), generic (2),
+        // slave 17; 9600 = 0x2580 (u32); 0x1234; −250 = 0xFFFFFF06 (i32);
+        // 0x0100; the masks; command present (1), 0x0200.
+        assert_eq!(
+            b[252..],
+            [
+                2, 1, 2, 17, 0x80, 0x25, 0, 0, 0x34, 0x12, 0x06, 0xFF, 0xFF, 0xFF, 0x00, 0x01, 1,
+                0, 2, 0, 4, 0, 8, 0, 0x10, 0, 0x00, 0x80, 1, 0x00, 0x02
+            ]
         );
         assert_eq!(decode(&b).unwrap(), s);
     }
@@ -642,6 +698,80 @@ mod tests {
                 expected: 252,
                 found: 250
             })
+        );
+    }
+
+    #[test]
+    fn a_version_4_record_reads_without_a_drive_link() {
+        // A record written before the drive link: version 4, the first 252
+        // bytes; read with today's behaviour (encoder, PWM, no driver).
+        let s = Settings {
+            drive_link: DriveLinkSettings {
+                feedback: FeedbackSource::Driver,
+                kind: DriverKind::Zlac8015d,
+                ..DriveLinkSettings::default()
+            },
+            ..Settings::default()
+        };
+        let mut v4 = [0u8; SETTINGS_V4_BYTES];
+        v4.copy_from_slice(&s.encode()[..SETTINGS_V4_BYTES]);
+        v4[0] = 4;
+        assert_eq!(
+            decode(&v4),
+            Ok(Settings {
+                drive_link: DriveLinkSettings::default(),
+                ..s.clone()
+            })
+        );
+        // A version-5 record is 283 bytes long.
+        let mut v5_short = v4;
+        v5_short[0] = 5;
+        assert_eq!(
+            decode(&v5_short),
+            Err(SettingsError::Length {
+                expected: 283,
+                found: 252
+            })
+        );
+    }
+
+    #[test]
+    fn rejects_a_drive_link_that_cannot_work() {
+        // Driver feedback without a driver (byte 252 = 1, kind byte 254 = 0).
+        let mut b = Settings::default().encode();
+        b[252] = 1;
+        let e = decode(&b).unwrap_err();
+        assert_eq!(
+            e,
+            SettingsError::DriveLink(crate::drive_link::DriveLinkError::NoDriver)
+        );
+        assert_eq!(
+            std::format!("{e}"),
+            "driver feedback or command needs a driver profile"
+        );
+        // With the ZLAC8015D it loads; slave id 0 (byte 255) is refused.
+        b[254] = 1;
+        assert_eq!(
+            decode(&b).map(|s| s.drive_link.feedback),
+            Ok(FeedbackSource::Driver)
+        );
+        b[255] = 0;
+        assert_eq!(
+            decode(&b),
+            Err(SettingsError::DriveLink(
+                crate::drive_link::DriveLinkError::Profile(
+                    drive_link::profile::ProfileError::SlaveId(0)
+                )
+            ))
+        );
+        // An unknown feedback byte.
+        let mut c = Settings::default().encode();
+        c[252] = 3;
+        assert_eq!(
+            decode(&c),
+            Err(SettingsError::DriveLink(
+                crate::drive_link::DriveLinkError::Byte(3)
+            ))
         );
     }
 
@@ -735,7 +865,7 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(0, 5), Err(SettingsError::UnsupportedVersion(5)));
+        assert_eq!(with(0, 6), Err(SettingsError::UnsupportedVersion(6)));
         assert_eq!(with(0, 0xFF), Err(SettingsError::UnsupportedVersion(0xFF)));
         assert_eq!(with(1, 0), Err(SettingsError::Mode(0)));
         assert_eq!(with(1, 3), Err(SettingsError::Mode(3)));
@@ -777,19 +907,19 @@ mod tests {
         assert_eq!(
             decode(&[]),
             Err(SettingsError::Length {
-                expected: 252,
+                expected: 283,
                 found: 0
             })
         );
         assert_eq!(
-            decode(&good[..251]),
+            decode(&good[..282]),
             Err(SettingsError::Length {
-                expected: 252,
-                found: 251
+                expected: 283,
+                found: 282
             })
         );
-        let mut long = [0u8; 253];
-        long[..252].copy_from_slice(&good);
+        let mut long = [0u8; 284];
+        long[..283].copy_from_slice(&good);
         assert!(matches!(decode(&long), Err(SettingsError::Length { .. })));
         // A version-1 record must be 209 bytes long.
         let mut v1_short = good;
@@ -798,7 +928,7 @@ mod tests {
             decode(&v1_short),
             Err(SettingsError::Length {
                 expected: 209,
-                found: 252
+                found: 283
             })
         );
         assert_eq!(
@@ -913,6 +1043,15 @@ mod tests {
                         },
                         work_switch_fitted: work,
                         first_plant_distance: FirstPlantDistance::new(i32::from(first)).unwrap(),
+                        drive_link: if work {
+                            DriveLinkSettings {
+                                feedback: FeedbackSource::Driver,
+                                kind: DriverKind::Zlac8015d,
+                                ..DriveLinkSettings::default()
+                            }
+                        } else {
+                            DriveLinkSettings::default()
+                        },
                     }
                 },
             )

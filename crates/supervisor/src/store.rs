@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | 0 | 4 | magic [`MAGIC`] = `"TPS1"` |
 //! | 4 | 4 | sequence, u32; the newer record has the higher sequence, compared with wrap-around |
-//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 252 for settings format 4; 250, 243 and 209 for formats 3, 2 and 1) |
+//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 283 for settings format 5; 252, 250, 243 and 209 for formats 4, 3, 2 and 1) |
 //! | 10 | 2 | `!n` (guards the length before the CRC is known) |
 //! | 12 | `n` | payload: [`Settings::encode`] |
 //! | 12 + n | 0–3 | zero padding to a multiple of 4 |
@@ -77,10 +77,10 @@
 //!
 //! // The bytes in flash follow the documented layout.
 //! let flash = store.into_inner();
-//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\xFC\x00\x03\xFF"); // magic, seq 1, n = 252, !n
-//! assert_eq!(flash.0[12], 4); // settings format version
-//! assert_eq!(&flash.0[268..272], b"DONE");
-//! assert_eq!(flash.0[272], 0xFF); // the record ends there
+//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\x1B\x01\xE4\xFE"); // magic, seq 1, n = 283, !n
+//! assert_eq!(flash.0[12], 5); // settings format version
+//! assert_eq!(&flash.0[300..304], b"DONE");
+//! assert_eq!(flash.0[304], 0xFF); // the record ends there
 //! # Ok::<(), supervisor::store::StoreError<NorFlashErrorKind>>(())
 //! ```
 
@@ -91,7 +91,7 @@ use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 use crate::crc::Crc32;
 use crate::settings::{
     decode_into, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION,
-    SETTINGS_V1_BYTES, SETTINGS_V2_BYTES, SETTINGS_V3_BYTES,
+    SETTINGS_V1_BYTES, SETTINGS_V2_BYTES, SETTINGS_V3_BYTES, SETTINGS_V4_BYTES,
 };
 
 /// Record magic at offset 0: `"TPS1"` (transplanter settings, record format 1).
@@ -105,8 +105,9 @@ pub const HEADER_BYTES: usize = 12;
 pub const MAX_ACCESS_SIZE: usize = 32;
 
 const CRC_BYTES: usize = 4;
-/// Write buffer: header + padded payload + CRC, rounded up for any supported `WRITE_SIZE`.
-const BODY_BUF: usize = 288;
+/// Write buffer: header + padded payload + CRC, rounded up for any supported
+/// `WRITE_SIZE` (12 + 284 + 4 = 300 → 320 for format 5's 283 bytes).
+const BODY_BUF: usize = 320;
 
 /// Where the parts of a record with an `len`-byte payload lie for a flash
 /// with `WRITE_SIZE` = `write`.
@@ -468,6 +469,30 @@ impl<F: NorFlash> SettingsStore<F> {
     /// on the STM32F1), with a sequence one above the newest complete record.
     /// If a slot cannot be read, nothing is written.
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
+        // The two slots (two decoded records) only for the decision: out of
+        // scope before the record is written and verified, so that the
+        // three never add up in one frame (the QEMU board's 8 KB).
+        let (target, sequence) = match self.plan_save(settings)? {
+            Ok(unchanged) => return Ok(unchanged),
+            Err(plan) => plan,
+        };
+        self.write_record(target, sequence, settings)?;
+        match self.scan(target) {
+            Slot::Valid(seq, ref s) if seq == sequence && s == settings => Ok(sequence),
+            Slot::Unreadable(e) => Err(StoreError::Flash(e)),
+            _ => Err(StoreError::Verify),
+        }
+    }
+
+    /// Where and with which sequence `settings` go: `Ok(Ok(seq))` when
+    /// they are already the newest record, `Ok(Err((slot, sequence)))`
+    /// otherwise. Out of line, see [`SettingsStore::save`].
+    #[inline(never)]
+    #[allow(clippy::type_complexity)]
+    fn plan_save(
+        &mut self,
+        settings: &Settings,
+    ) -> Result<Result<u32, (SlotIndex, u32)>, StoreError<F::Error>> {
         let slots = [self.scan(0), self.scan(1)];
         if let Some(i) = slots.iter().position(|s| matches!(s, Slot::Unreadable(_))) {
             let [a, b] = slots;
@@ -479,7 +504,7 @@ impl<F: NorFlash> SettingsStore<F> {
         let newest = newest_valid(&slots);
         if let Some((_, seq, stored)) = newest {
             if stored == settings {
-                return Ok(seq);
+                return Ok(Ok(seq));
             }
         }
         let target = match newest {
@@ -487,14 +512,11 @@ impl<F: NorFlash> SettingsStore<F> {
             None => least_valuable(&slots),
         };
         let sequence = newest_intact(&slots).map_or(1, |s| s.wrapping_add(1));
-        self.write_record(target, sequence, settings)?;
-        match self.scan(target) {
-            Slot::Valid(seq, ref s) if seq == sequence && s == settings => Ok(sequence),
-            Slot::Unreadable(e) => Err(StoreError::Flash(e)),
-            _ => Err(StoreError::Verify),
-        }
+        Ok(Err((target, sequence)))
     }
 
+    /// Out of line, see [`SettingsStore::save`].
+    #[inline(never)]
     fn write_record(
         &mut self,
         slot: SlotIndex,
@@ -699,6 +721,7 @@ impl<F: NorFlash> SettingsStore<F> {
         // (before the drive model) or format 1 (before profile B): the
         // decoder reads all four.
         if lay.len == SETTINGS_BYTES
+            || lay.len == SETTINGS_V4_BYTES
             || lay.len == SETTINGS_V3_BYTES
             || lay.len == SETTINGS_V2_BYTES
             || lay.len == SETTINGS_V1_BYTES
@@ -793,16 +816,17 @@ mod tests {
 
     #[test]
     fn f1_layout() {
-        // 252-byte payload, WRITE_SIZE 2: CRC at 12 + 252 = 264, commit at
-        // 268, end 272 = 136 half-words.
+        // 283-byte payload (format 5), WRITE_SIZE 2: CRC at 12 + 284 (the
+        // payload padded to a word) = 296, commit at 300, end 304 = 152
+        // half-words.
         let l = layout(SETTINGS_BYTES, 2).unwrap();
         assert_eq!(
             (l.crc_off, l.commit_off, l.commit_len, l.end),
-            (264, 268, 4, 272)
+            (296, 300, 4, 304)
         );
-        // WRITE_SIZE 8: the commit gets its own double word at 272.
+        // WRITE_SIZE 8: the commit gets its own double word at 304.
         let l = layout(SETTINGS_BYTES, 8).unwrap();
-        assert_eq!((l.commit_off, l.commit_len, l.end), (272, 8, 280));
+        assert_eq!((l.commit_off, l.commit_len, l.end), (304, 8, 312));
     }
 
     #[test]

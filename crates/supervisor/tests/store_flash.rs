@@ -285,6 +285,12 @@ fn settings_b() -> Settings {
         placement: supervisor::settings::Placement::SpeedFollowing,
         work_switch_fitted: true,
         first_plant_distance: hmi_proto::screen::FirstPlantDistance::new(250).unwrap(),
+        drive_link: supervisor::drive_link::DriveLinkSettings {
+            feedback: supervisor::drive_link::FeedbackSource::Driver,
+            command: supervisor::drive_link::CommandPath::Modbus,
+            kind: supervisor::drive_link::DriverKind::Zlac8015d,
+            ..Default::default()
+        },
     }
 }
 
@@ -428,9 +434,9 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&a).unwrap();
     let only_a = st.into_inner();
     let total = sweep(&only_a, &a, &b);
-    // One erase + 272 bytes / 2 = 136 half-word programs (252-byte payload:
-    // header 12, payload 252, CRC 4, commit 4).
-    assert_eq!(total, 137);
+    // One erase + 304 bytes / 2 = 152 half-word programs (283-byte payload,
+    // format 5: header 12, payload 283 + 1 padding, CRC 4, commit 4).
+    assert_eq!(total, 153);
 
     // 2. X (seq 1) in slot 0, A (seq 2) in slot 1; B overwrites X's slot.
     //    X must never come back, whatever the torn erase leaves of it.
@@ -438,30 +444,30 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&x).unwrap();
     st.save(&a).unwrap();
     let x_then_a = st.into_inner();
-    assert_eq!(sweep(&x_then_a, &a, &b), 137);
+    assert_eq!(sweep(&x_then_a, &a, &b), 153);
 
     // 3. Sequence wrap: X at u32::MAX − 1 in slot 0, A at u32::MAX in slot 1;
     //    B gets sequence 0 in slot 0.
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(u32::MAX - 1, &x.encode()));
     put_raw(&mut f, 1, &raw_record(u32::MAX, &a.encode()));
-    assert_eq!(sweep(&f, &a, &b), 137);
+    assert_eq!(sweep(&f, &a, &b), 153);
 }
 
 #[test]
 fn power_cut_with_wider_program_units() {
     // A flash with 8-byte program units (and 8-byte reads): the commit word
-    // takes its own unit at 272, the record ends at 280 = 35 units.
+    // takes its own unit at 304, the record ends at 312 = 39 units.
     let (a, b) = (settings_a(), settings_b());
     let mut st = store(SimFlash::<8>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 35);
-    // And 1-byte units: 272 programs.
+    assert_eq!(sweep(&f, &a, &b), 1 + 39);
+    // And 1-byte units: 304 programs.
     let mut st = store(SimFlash::<1>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 272);
+    assert_eq!(sweep(&f, &a, &b), 1 + 304);
 }
 
 #[test]
@@ -513,26 +519,26 @@ fn record_bytes_follow_the_documented_layout() {
     assert_eq!(st.save(&settings_b()), Ok(1));
     let f = st.into_inner();
     let rec = raw_record(1, &settings_b().encode());
-    assert_eq!(rec.len(), 272);
+    assert_eq!(rec.len(), 304);
     let slot0 = slot_bytes(&f, 0);
-    assert_eq!(&slot0[..272], &rec[..]);
-    assert!(slot0[272..].iter().all(|&b| b == 0xFF));
+    assert_eq!(&slot0[..304], &rec[..]);
+    assert!(slot0[304..].iter().all(|&b| b == 0xFF));
     assert!(slot_bytes(&f, 1).iter().all(|&b| b == 0xFF));
-    // Header bytes spelled out: "TPS1", seq 1, n = 252 = 0x00FC, !n = 0xFF03.
+    // Header bytes spelled out: "TPS1", seq 1, n = 283 = 0x011B, !n = 0xFEE4.
     assert_eq!(
         &slot0[..12],
-        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0xFC, 0x00, 0x03, 0xFF]
+        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0x1B, 0x01, 0xE4, 0xFE]
     );
-    assert_eq!(SETTINGS_BYTES, 252);
+    assert_eq!(SETTINGS_BYTES, 283);
 }
 
 #[test]
-fn one_save_costs_one_erase_and_136_programs() {
+fn one_save_costs_one_erase_and_152_programs() {
     let mut st = store(SimFlash::<2>::new());
     st.save(&settings_a()).unwrap();
     let f = st.into_inner();
-    // 1 erase + 272 / 2 half-words (record layout: end of commit word at 272).
-    assert_eq!(f.ops, 137);
+    // 1 erase + 304 / 2 half-words (record layout: end of commit word at 304).
+    assert_eq!(f.ops, 153);
     assert_eq!(f.erases, [0, 1, 0, 0]);
 }
 
@@ -542,15 +548,15 @@ fn erase_first_then_body_in_order_then_commit_word_last() {
     st.save(&settings_a()).unwrap();
     st.save(&settings_b()).unwrap(); // into slot 1 at offset 2048
     let log = st.into_inner().log;
-    let second = &log[137..];
+    let second = &log[153..];
     assert_eq!(second[0], (true, 2 * PAGE));
-    // Half-words 0, 2, …, 266 of the page: header, payload, padding, CRC.
-    let body: Vec<_> = (0..134).map(|i| (false, 2 * PAGE + 2 * i)).collect();
-    assert_eq!(&second[1..135], &body[..]);
-    // Then, and only then, the commit word "DONE" at 268 and 270.
+    // Half-words 0, 2, …, 298 of the page: header, payload, padding, CRC.
+    let body: Vec<_> = (0..150).map(|i| (false, 2 * PAGE + 2 * i)).collect();
+    assert_eq!(&second[1..151], &body[..]);
+    // Then, and only then, the commit word "DONE" at 300 and 302.
     assert_eq!(
-        &second[135..],
-        &[(false, 2 * PAGE + 268), (false, 2 * PAGE + 270)]
+        &second[151..],
+        &[(false, 2 * PAGE + 300), (false, 2 * PAGE + 302)]
     );
 }
 
@@ -698,6 +704,7 @@ fn a_record_written_before_profile_b_still_loads() {
         placement: supervisor::settings::Placement::DistanceLocked,
         work_switch_fitted: false,
         first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
+        drive_link: Default::default(),
         ..b.clone()
     };
     assert_eq!(
@@ -734,6 +741,7 @@ fn a_record_written_before_the_work_switch_still_loads() {
         placement: supervisor::settings::Placement::DistanceLocked,
         work_switch_fitted: false,
         first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
+        drive_link: Default::default(),
         ..b.clone()
     };
     assert_eq!(
@@ -755,6 +763,39 @@ fn a_record_written_before_the_work_switch_still_loads() {
 }
 
 #[test]
+fn a_record_written_before_the_drive_link_still_loads() {
+    // Format 4: the first 252 bytes of today's payload, version byte 4. It
+    // loads with today's behaviour (encoder feedback, PWM, no driver); the
+    // next save writes format 5.
+    let b = settings_b();
+    let mut v4 = b.encode()[..252].to_vec();
+    v4[0] = 4;
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 0, &raw_record(3, &v4));
+    let expected = Settings {
+        drive_link: Default::default(),
+        ..b.clone()
+    };
+    assert_ne!(expected, b);
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: expected,
+            sequence: 3
+        }
+    );
+    let mut st = store(f);
+    assert_eq!(st.save(&b), Ok(4));
+    assert_eq!(
+        boot(&st.into_inner()),
+        Loaded::Saved {
+            settings: b,
+            sequence: 4
+        }
+    );
+}
+
+#[test]
 fn a_record_written_before_the_drive_model_still_loads() {
     // Format 2: the first 243 bytes of today's payload, version byte 2
     // (docs of supervisor::settings). It loads with the encoder forward and
@@ -771,6 +812,7 @@ fn a_record_written_before_the_drive_model_still_loads() {
         placement: supervisor::settings::Placement::DistanceLocked,
         work_switch_fitted: false,
         first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
+        drive_link: Default::default(),
         ..b.clone()
     };
     assert_eq!(
@@ -794,8 +836,8 @@ fn a_record_written_before_the_drive_model_still_loads() {
 #[test]
 fn unsupported_version_falls_back_or_is_reported() {
     let a = settings_a();
-    // A record of a future format 5 (payload version byte 5, longer payload).
-    let mut v2 = vec![5u8; 300];
+    // A record of a future format 6 (payload version byte 6, longer payload).
+    let mut v2 = vec![6u8; 300];
     v2[1] = 7;
     // Alone: defaults, reason UnsupportedVersion.
     let mut f = SimFlash::new();
@@ -825,7 +867,7 @@ fn unsupported_version_falls_back_or_is_reported() {
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(5, &a.encode()));
     let mut same_len = settings_b().encode();
-    same_len[0] = 5;
+    same_len[0] = 6;
     put_raw(&mut f, 1, &raw_record(6, &same_len));
     assert_eq!(
         boot(&f),
@@ -834,7 +876,7 @@ fn unsupported_version_falls_back_or_is_reported() {
             sequence: 5
         }
     );
-    // The next save overwrites the v5 record (slot 1) with sequence 7.
+    // The next save overwrites the v6 record (slot 1) with sequence 7.
     let mut st = store(f);
     assert_eq!(st.save(&settings_b()), Ok(7));
     assert_eq!(
@@ -995,6 +1037,7 @@ fn settings() -> impl Strategy<Value = Settings> {
                 work_switch_fitted: work,
                 first_plant_distance: hmi_proto::screen::FirstPlantDistance::new(i32::from(first))
                     .unwrap(),
+                drive_link: Default::default(),
             },
         )
 }

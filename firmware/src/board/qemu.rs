@@ -28,7 +28,7 @@ use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering::Relaxed};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use machine_sim::{Event, Fault, Inputs, Machine};
 use stm32f1xx_hal::{
-    pac::{self, USART1},
+    pac::{self, USART1, USART2},
     prelude::*,
     rcc,
     serial::{self, Rx, Tx},
@@ -97,16 +97,122 @@ static WORK_SWITCH_CLOSED: AtomicBool = AtomicBool::new(false);
 static STOP_OPENED_US: AtomicU32 = AtomicU32::new(0);
 static STOP_SAFE_US: AtomicU32 = AtomicU32::new(0);
 
+// The drum driver's line (feature `drive-link`: the QEMU board's 8 KB of
+// RAM hold it only in the images that need it, docs/drive-link.md).
+
+/// Longest frame the virtual driver's gate record carries (a Modbus RTU
+/// reply of this link is at most 9 bytes; a corrupted one the same).
+pub const DRIVE_FRAME_MAX: usize = drive_link::rtu::MAX_FRAME;
+
+/// A reply frame from the host's virtual driver and the firmware time (µs,
+/// wrapping 32-bit) at which its last byte has arrived.
+#[derive(Clone, Copy)]
+pub struct DriveFrame {
+    end_us: u32,
+    len: u8,
+    bytes: [u8; DRIVE_FRAME_MAX],
+}
+
+/// The sensors as the application holds them (a static on this board).
+pub type SensorsRef = &'static mut Sensors;
+
+/// The drum driver's line as the application holds it.
+#[cfg(feature = "drive-link")]
+pub type DriveLineRef = &'static mut DriveLine;
+/// Without the feature `drive-link`: nothing.
+#[cfg(not(feature = "drive-link"))]
+pub type DriveLineRef = ();
+
+/// Reply frames from the gate to [`DriveLine`] (three at a time at most).
+#[cfg(feature = "drive-link")]
+type DriveRxQueue = heapless::spsc::Queue<DriveFrame, 4>;
+/// When each request frame's last bit left (firmware µs), for the truth
+/// record (see [`Sensors::sample`]): at most two requests fit in a 10 ms
+/// period at 115 200 baud.
+#[cfg(feature = "drive-link")]
+type DriveTxQueue = heapless::spsc::Queue<u32, 4>;
+/// Most request end times one truth record carries.
+const TRUTH_MAX_FRAMES: usize = 3;
+
+/// USART2, the RS-485 line to the drum driver (QEMU: DE on PA1 is a no-op).
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
+///
+/// QEMU's USART sends a byte the moment it is written, so the line's time
+/// is modelled here: a request of `n` bytes ends `n` character times
+/// (11 bits each, `drive_link::timing`) after it was started; the replies
+/// come from the host's virtual driver through the lock-step gate, each
+/// with the firmware time its last byte arrives (the host computes it from
+/// the request's end, the driver's turnaround and the reply's own time on
+/// the line), and are handed over from that time on.
+pub struct DriveLine {
+    tx: Tx<USART2>,
+    baud: u32,
+    sending_until: Option<u64>,
+    rx: heapless::spsc::Consumer<'static, DriveFrame>,
+    tx_ends: heapless::spsc::Producer<'static, u32>,
+}
+
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
+impl DriveLine {
+    /// The line's speed (QEMU's USART ignores it; the model uses it).
+    pub fn set_baud(&mut self, baud: u32) {
+        self.baud = baud;
+    }
+
+    /// Sends a request frame (DE high first: no-op here).
+    pub fn send(&mut self, frame: &[u8], now_us: u64) {
+        for &b in frame {
+            let _ = nb::block!(self.tx.write_u8(b));
+        }
+        let chars = u32::try_from(frame.len()).unwrap_or(u32::MAX);
+        let on_line = drive_link::timing::frame_time_us(self.baud, chars).unwrap_or(0);
+        let end = now_us.saturating_add(u64::from(on_line));
+        self.sending_until = Some(end);
+        let _ = self.tx_ends.enqueue(end as u32);
+    }
+
+    /// The request's last stop bit has left (TC; DE low): its time, once.
+    pub fn sent(&mut self, now_us: u64) -> Option<u64> {
+        match self.sending_until {
+            Some(end) if now_us >= end => {
+                self.sending_until = None;
+                Some(end)
+            }
+            _ => None,
+        }
+    }
+
+    /// A reply frame whose last byte has arrived by `now_us`, into `buf`.
+    pub fn receive(&mut self, now_us: u64, buf: &mut [u8]) -> Option<usize> {
+        let f = self.rx.peek()?;
+        // Due when `end_us` is not after now (wrapping 32-bit µs).
+        if (now_us as u32).wrapping_sub(f.end_us) >= 1 << 31 {
+            return None;
+        }
+        let f = self.rx.dequeue()?;
+        let n = usize::from(f.len).min(DRIVE_FRAME_MAX).min(buf.len());
+        buf.get_mut(..n)?.copy_from_slice(f.bytes.get(..n)?);
+        Some(n)
+    }
+
+    /// USART2's interrupt: never enabled on this board.
+    pub fn on_interrupt(&mut self, _now_us: u64) {}
+}
+
 /// Everything the application owns after [`init`].
 pub struct Board {
     /// Touchscreen transmitter.
     pub hmi_tx: HmiTx,
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
+    /// The drum driver's RS-485 line (USART2), in a static (the QEMU
+    /// board's boot stack has no room to move it through `init`); `()`
+    /// without the feature `drive-link`.
+    pub drive_line: DriveLineRef,
     /// Drum PWM stand-in.
     pub drum: DrumDrive,
-    /// The simulated machine behind the sensor interface.
-    pub sensors: Sensors,
+    /// The simulated machine behind the sensor interface, in a static.
+    pub sensors: SensorsRef,
     /// Hall capture (never interrupts on this board).
     pub hall: HallCapture,
     /// Status LED stand-in.
@@ -178,6 +284,9 @@ struct Scenario {
     stop_input_close: Option<u32>,
     /// Stop-and-go period, ms (`stopgo=MS`).
     stop_go_ms: Option<u32>,
+    /// The host runs a virtual drum driver on USART2 (`drive_link=1`,
+    /// lock-step only): see [`Sensors::sample`].
+    drive_link: bool,
     stall: Option<u32>,
     hall_loss: Option<u32>,
     enc_loss: Option<u32>,
@@ -244,6 +353,31 @@ pub fn init(dp: pac::Peripherals) -> Board {
         uart: uart_rx,
         gate: gate_out,
     };
+    // The drum driver's line: USART2 on PA2/PA3 (8N1; QEMU ignores the
+    // rate, the model in `DriveLine` uses the profile's).
+    #[cfg(feature = "drive-link")]
+    let tx2 = gpioa.pa2.into_alternate_push_pull(&mut gpioa.crl);
+    #[cfg(feature = "drive-link")]
+    let drive_uart = dp.USART2.serial(
+        (tx2, gpioa.pa3),
+        serial::Config::default()
+            .baudrate(9_600.bps())
+            .parity_none(),
+        &mut rcc,
+    );
+    #[cfg(feature = "drive-link")]
+    let (drive_tx, _drive_rx) = drive_uart.split();
+    #[cfg(feature = "drive-link")]
+    let (Some(drive_rx_queue), Some(drive_tx_queue)) = (
+        cortex_m::singleton!(: DriveRxQueue = DriveRxQueue::new()),
+        cortex_m::singleton!(: DriveTxQueue = DriveTxQueue::new()),
+    ) else {
+        fatal()
+    };
+    #[cfg(feature = "drive-link")]
+    let (drive_rx_in, drive_rx_out) = drive_rx_queue.split();
+    #[cfg(feature = "drive-link")]
+    let (drive_tx_in, drive_tx_out) = drive_tx_queue.split();
     DRUM_CCR.store(0, Relaxed);
     DRIVER_ENABLE.store(false, Relaxed);
 
@@ -255,11 +389,13 @@ pub fn init(dp: pac::Peripherals) -> Board {
         .filter(|p| !p.is_empty())
         .and_then(SettingsFlash::open);
     // Mode 1 = "rb".
-    let gate = cmd
-        .gate
-        .get(..cmd.gate_len)
-        .filter(|p| !p.is_empty())
-        .and_then(|p| sh::open(p, 1));
+    let gate_path = cmd.gate.get(..cmd.gate_len).filter(|p| !p.is_empty());
+    let gate = gate_path.and_then(|p| sh::open(p, 1, None));
+    // Mode 5 = "wb": the truth FIFO is the gate's path with a `t`.
+    #[cfg(feature = "drive-link")]
+    let truth = gate_path
+        .filter(|_| cmd.scenario.drive_link && gate.is_some())
+        .and_then(|p| sh::open(p, 5, Some(b't')));
 
     let scenario = cmd.scenario;
     let mut config = if scenario.noiseless {
@@ -323,20 +459,50 @@ pub fn init(dp: pac::Peripherals) -> Board {
     if let Some(v) = scenario.speed_mm_s {
         machine.set_travel_speed_m_s(v as f32 / 1000.0);
     }
+    #[cfg(feature = "drive-link")]
+    let Some(drive_line) = cortex_m::singleton!(: DriveLine = DriveLine {
+        tx: drive_tx,
+        baud: 9_600,
+        sending_until: None,
+        rx: drive_rx_out,
+        tx_ends: drive_tx_in,
+    }) else {
+        fatal()
+    };
+    #[cfg(feature = "drive-link")]
+    let drive = match truth {
+        Some(truth) => cortex_m::singleton!(: DriveSim = DriveSim {
+            truth,
+            rx_in: drive_rx_in,
+            tx_ends: drive_tx_out,
+            flags: 0,
+            command_milli_rpm: 0,
+        }),
+        None => None,
+    };
+    #[cfg(not(feature = "drive-link"))]
+    let (drive, drive_line) = (None, ());
+    // In a static: moved through `init` by value, its ≈ 0.25 KB sat twice
+    // in the frame under which RTIC runs the first tasks.
+    let Some(sensors) = cortex_m::singleton!(: Sensors = Sensors {
+        machine,
+        scenario,
+        now_ms: 0,
+        roller_turns_seen: 0,
+        stop_watch: StopWatch::default(),
+        work_fired: 0,
+        gate,
+        gate_in,
+        drive,
+    }) else {
+        fatal()
+    };
     Board {
         hmi_tx,
         hmi_rx,
+        drive_line,
         drum: DrumDrive { enabled: false },
-        sensors: Sensors {
-            machine,
-            scenario,
-            now_ms: 0,
-            roller_turns_seen: 0,
-            stop_watch: StopWatch::default(),
-            work_fired: 0,
-            gate,
-            gate_in,
-        },
+        sensors,
         hall: HallCapture,
         led: StatusLed,
         stop_input: StopInput,
@@ -443,7 +609,31 @@ pub struct Sensors {
     gate: Option<usize>,
     /// Screen bytes from the gate, to [`HmiRx`].
     gate_in: heapless::spsc::Producer<'static, u8>,
+    /// The host's virtual drum driver (`drive_link=1`), in a static.
+    drive: Option<&'static mut DriveSim>,
 }
+
+/// The QEMU board's side of the host's virtual drum driver.
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
+struct DriveSim {
+    /// The truth FIFO (semihosting handle).
+    truth: usize,
+    /// Replies from the gate, to [`DriveLine`].
+    rx_in: heapless::spsc::Producer<'static, DriveFrame>,
+    /// Request end times from [`DriveLine`].
+    tx_ends: heapless::spsc::Consumer<'static, u32>,
+    /// The driver's state from the last gate record: bit 0 its motor is
+    /// enabled (control word, no fault), bit 1 it runs on its bus speed
+    /// command (velocity mode, a command received) rather than the PWM.
+    flags: u8,
+    /// Its bus speed command, drum milli-r/min.
+    command_milli_rpm: i32,
+}
+
+/// [`DriveSim::flags`]: the driver's motor is enabled.
+const DRIVE_ENABLED: u8 = 1;
+/// [`DriveSim::flags`]: the driver follows its bus speed command.
+const DRIVE_BUS_COMMAND: u8 = 2;
 
 /// Profile B's stop check, on the simulator's side: after the scenario's
 /// `stop`, the sample time of the last ground-encoder count and the first
@@ -460,6 +650,76 @@ fn due(at: Option<u32>, from: u32, to: u32) -> bool {
     at.is_some_and(|t| t > from && t <= to)
 }
 
+/// The truth record of a control period, to the host's virtual driver:
+/// the firmware time (µs, u32), the true drum speed (milli-r/min, i32),
+/// then how many requests ended
+/// since the last record and each one's end (firmware µs, u32); all little
+/// endian. Written before the gate is read, so that the host, having read
+/// it, knows the period before has ended and its requests are on USART2.
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
+fn write_truth(d: &mut DriveSim, drum_rpm: f32) {
+    const HEAD: usize = 9;
+    let mut rec = [0u8; HEAD + 4 * TRUTH_MAX_FRAMES];
+    let milli = (drum_rpm * 1000.0) as i32;
+    let mut n = 0usize;
+    if let Some(dst) = rec.get_mut(..4) {
+        dst.copy_from_slice(&now_us().to_le_bytes());
+    }
+    if let Some(dst) = rec.get_mut(4..8) {
+        dst.copy_from_slice(&milli.to_le_bytes());
+    }
+    while n < TRUTH_MAX_FRAMES {
+        let Some(end) = d.tx_ends.dequeue() else {
+            break;
+        };
+        if let Some(dst) = rec.get_mut(HEAD + 4 * n..HEAD + 4 + 4 * n) {
+            dst.copy_from_slice(&end.to_le_bytes());
+        }
+        n += 1;
+    }
+    if let Some(c) = rec.get_mut(8) {
+        *c = n as u8;
+    }
+    let _ = sh::write(d.truth, rec.get(..HEAD + 4 * n).unwrap_or(&[]));
+}
+
+/// The virtual driver's part of a gate record: a count (≤ 3) of reply
+/// frames, each with the firmware time its last byte arrives (µs, u32),
+/// its length and bytes; then the driver's flags and bus speed command
+/// (drum milli-r/min, i32). False when the host's end is gone.
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
+fn read_drive(h: usize, d: &mut DriveSim) -> bool {
+    let mut count = [0u8; 1];
+    if !sh::read(h, &mut count) {
+        return false;
+    }
+    for _ in 0..count[0].min(3) {
+        let mut head = [0u8; 5];
+        if !sh::read(h, &mut head) {
+            return false;
+        }
+        let [e0, e1, e2, e3, len] = head;
+        let mut f = DriveFrame {
+            end_us: u32::from_le_bytes([e0, e1, e2, e3]),
+            len: len.min(DRIVE_FRAME_MAX as u8),
+            bytes: [0; DRIVE_FRAME_MAX],
+        };
+        let n = usize::from(f.len);
+        if n > 0 && !f.bytes.get_mut(..n).is_some_and(|b| sh::read(h, b)) {
+            return false;
+        }
+        let _ = d.rx_in.enqueue(f);
+    }
+    let mut tail = [0u8; 5];
+    if !sh::read(h, &mut tail) {
+        return false;
+    }
+    let [flags, c0, c1, c2, c3] = tail;
+    d.flags = flags;
+    d.command_milli_rpm = i32::from_le_bytes([c0, c1, c2, c3]);
+    true
+}
+
 impl Sensors {
     /// Advances the machine to `now_ms` under the current PWM output and
     /// reads the encoder and the Hall edges that happened meanwhile.
@@ -473,15 +733,20 @@ impl Sensors {
     /// interrupt task (pended here) as if the emulated USART had received
     /// them. At end of file (the test closed its end) the board runs free.
     pub fn sample(&mut self, now_ms: u32) -> SensorSample {
+        if let (Some(_), Some(d)) = (self.gate, self.drive.as_deref_mut()) {
+            write_truth(d, self.machine.drum_speed_rpm());
+        }
         if let Some(h) = self.gate {
             let mut count = [0u8; 1];
             let mut bytes = [0u8; GATE_BYTES];
-            let ok = sh::read(h, &mut count) && {
-                let n = usize::from(count[0]).min(GATE_BYTES);
-                bytes
-                    .get_mut(..n)
-                    .is_some_and(|b| b.is_empty() || sh::read(h, b))
-            };
+            let ok = sh::read(h, &mut count)
+                && {
+                    let n = usize::from(count[0]).min(GATE_BYTES);
+                    bytes
+                        .get_mut(..n)
+                        .is_some_and(|b| b.is_empty() || sh::read(h, b))
+                }
+                && self.drive.as_deref_mut().is_none_or(|d| read_drive(h, d));
             if ok {
                 let n = usize::from(count[0]).min(GATE_BYTES);
                 for &b in bytes.get(..n).unwrap_or(&[]) {
@@ -562,9 +827,21 @@ impl Sensors {
         }
         let hz = |bits: u32| bits as f32 / 65_536.0;
         let steppers_on = DRIVER_ENABLE.load(Relaxed);
+        let mut drum_duty = f32::from(DRUM_CCR.load(Relaxed)) / f32::from(DRUM_PERIOD);
+        let mut drum_on = steppers_on;
+        if let Some(d) = self.drive.as_deref() {
+            // The virtual driver's motor: enabled by PB12 and its control
+            // word; on its bus command (its own speed loop, modelled as the
+            // command over the drive's n_max) or the PWM duty.
+            drum_on = drum_on && d.flags & DRIVE_ENABLED != 0;
+            if d.flags & DRIVE_BUS_COMMAND != 0 {
+                let n_max = self.machine.config().n_max_rpm;
+                drum_duty = (d.command_milli_rpm as f32 / 1000.0 / n_max).clamp(0.0, 1.0);
+            }
+        }
         let inputs = Inputs {
-            drum_duty: f32::from(DRUM_CCR.load(Relaxed)) / f32::from(DRUM_PERIOD),
-            driver_enabled: steppers_on,
+            drum_duty,
+            driver_enabled: drum_on,
             feed_step_rate_hz: if steppers_on {
                 hz(FEED_STEP_BITS.load(Relaxed))
             } else {
@@ -721,9 +998,14 @@ impl WorkSwitchInput {
     }
 }
 
+/// Firmware time in µs (32 bits, wrapping after 71 minutes).
+fn now_us() -> u32 {
+    now_us64() as u32
+}
+
 /// Firmware time in µs: the monotonic's milliseconds and SysTick's count
 /// within the current one (a pending SysTick means a millisecond more).
-fn now_us() -> u32 {
+pub fn now_us64() -> u64 {
     use cortex_m::peripheral::{SCB, SYST};
     loop {
         let ms = crate::uptime_ms();
@@ -734,8 +1016,8 @@ fn now_us() -> u32 {
             continue;
         }
         let into = reload.saturating_sub(current).saturating_mul(1000) / reload.saturating_add(1);
-        let ms = if pending { ms.wrapping_add(1) } else { ms };
-        return ms.wrapping_mul(1000).wrapping_add(into);
+        let ms = u64::from(ms) + u64::from(pending);
+        return ms * 1000 + u64::from(into);
     }
 }
 
@@ -879,6 +1161,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"stop_input" => s.stop_input = parse_u32(value),
             b"stop_input_close" => s.stop_input_close = parse_u32(value),
             b"stopgo" => s.stop_go_ms = parse_u32(value),
+            b"drive_link" => s.drive_link = value == b"1",
             b"tau" => s.tau_ms = parse_u32(value),
             b"profile" => s.profile_b = value == b"b" || value == b"B",
             b"speed" => s.speed_mm_s = parse_u32(value),
@@ -951,12 +1234,18 @@ mod sh {
     //! Semihosting file calls (ARM semihosting specification 2.0).
     use cortex_m_semihosting::{nr, syscall};
 
-    pub fn open(path: &[u8], mode: usize) -> Option<usize> {
+    /// Opens `path` (with `suffix` appended, if any).
+    pub fn open(path: &[u8], mode: usize, suffix: Option<u8>) -> Option<usize> {
         // SYS_OPEN wants a NUL-terminated name.
-        let mut name = [0u8; 97];
+        let mut name = [0u8; 98];
         let dst = name.get_mut(..path.len())?;
         dst.copy_from_slice(path);
-        let block = [name.as_ptr() as usize, mode, path.len()];
+        let mut len = path.len();
+        if let Some(c) = suffix {
+            *name.get_mut(len)? = c;
+            len += 1;
+        }
+        let block = [name.as_ptr() as usize, mode, len];
         // SAFETY: the block describes a live NUL-terminated buffer.
         let h = unsafe { syscall(nr::OPEN, &block) };
         (h != usize::MAX).then_some(h)
@@ -991,12 +1280,12 @@ impl SettingsFlash {
     /// Opens (or creates, erased) the host file that backs the stand-in.
     fn open(path: &[u8]) -> Option<Self> {
         // Mode 3 = "r+b"; mode 7 = "w+b" (create).
-        if let Some(handle) = sh::open(path, 3) {
+        if let Some(handle) = sh::open(path, 3, None) {
             if sh::flen(handle) == SETTINGS_FLASH_BYTES as usize {
                 return Some(Self { handle });
             }
         }
-        let handle = sh::open(path, 7)?;
+        let handle = sh::open(path, 7, None)?;
         let erased = [0xFFu8; 256];
         for _ in 0..(SETTINGS_FLASH_BYTES / 256) {
             if !sh::write(handle, &erased) {

@@ -10,7 +10,7 @@
 //! | PB13 | drum driver direction (low = forward) |
 //! | PA6 / PA7 | drum motor encoder A/B, TIM3 encoder mode |
 //! | PA9 / PA10 | USART1 TX/RX, touchscreen, 115200 8N1 |
-//! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable, RS-485 to the motor driver, 9600 8N1 |
+//! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable (high while sending, low after TC), RS-485 to the motor driver, Modbus RTU at the settings' baud rate, 8N1 |
 //! | PB10 | stop input: NC contact to ground, internal pull-up (FT pin), EXTI10 on both edges |
 //! | PB11 | work switch: contact to ground closed while the planting unit is down, internal pull-up (FT pin), polled every 10 ms |
 //! | PC13 | status LED (low = on) |
@@ -65,13 +65,12 @@ pub struct Board {
     /// Drum motor PWM and driver pins.
     pub drum: DrumDrive,
     /// Encoder and other polled sensors.
-    pub sensors: Sensors,
+    pub sensors: SensorsRef,
     /// Hall capture timer (its interrupt is TIM2).
     pub hall: HallCapture,
-    /// RS-485 link to the motor driver. Configured and kept idle (receive)
-    /// until the driver's speed read-back is used (docs/firmware.md).
-    #[allow(dead_code)]
-    pub rs485: Rs485,
+    /// RS-485 link to the motor driver (docs/drive-link.md): USART2 with
+    /// driver-enable on PA1, receiving until a frame is sent; in a static.
+    pub drive_line: DriveLineRef,
     /// Status LED.
     pub led: StatusLed,
     /// The stop input (its interrupt is EXTI15_10).
@@ -92,15 +91,180 @@ pub struct Board {
     pub sysclk_hz: u32,
 }
 
-/// The RS-485 transceiver on USART2.
-#[allow(dead_code)]
-pub struct Rs485 {
-    /// Transmitter.
-    pub tx: Tx<USART2>,
-    /// Receiver.
-    pub rx: Rx<USART2>,
-    /// Driver enable, low = receive.
-    pub de: PA1<Output<PushPull>>,
+/// The sensors as the application holds them (small on this board: by
+/// value).
+pub type SensorsRef = Sensors;
+
+/// The drum driver's line as the application holds it (the same with or
+/// without the feature `drive-link`: USART2 is set up either way, idle
+/// without it).
+pub type DriveLineRef = &'static mut DriveLine;
+
+/// Longest Modbus RTU frame this link sends or takes (its replies are at
+/// most 9 bytes; anything longer is garbage and fails its CRC).
+const DRIVE_FRAME_MAX: usize = 16;
+
+/// USART2, the RS-485 line to the drum driver, interrupt-driven
+/// (docs/drive-link.md, "Board layer"):
+///
+/// - [`DriveLine::send`] drives DE (PA1) high *before* the first byte is
+///   written, then enables TXEIE; the interrupt writes each next byte on
+///   TXE, and after the last one switches from TXEIE to TCIE;
+/// - on TC (the last stop bit has left the shift register: RM0008 §27.3.2,
+///   "TC … set when the transmission of a frame containing data is
+///   complete"), not TXE (which only says the data register is free while
+///   the last byte is still shifting out), DE goes low and the time is
+///   noted for [`DriveLine::sent`];
+/// - each received byte is stored with its time; a frame ends after 3.5
+///   characters of silence ([`DriveLine::receive`], polled by the link task
+///   every 1 ms: the F103's idle-line flag is one character, too short for
+///   RTU). Bytes while DE is high (an echo) are dropped.
+#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
+pub struct DriveLine {
+    _tx: Tx<USART2>,
+    _rx: Rx<USART2>,
+    de: PA1<Output<PushPull>>,
+    out: [u8; DRIVE_FRAME_MAX],
+    out_len: u8,
+    out_pos: u8,
+    sent_at: Option<u64>,
+    sending: bool,
+    rx: [u8; DRIVE_FRAME_MAX],
+    rx_len: u8,
+    rx_last_us: u64,
+    silent_us: u32,
+}
+
+/// USART_SR / USART_CR1 bits (RM0008 §27.6.1, §27.6.4).
+#[cfg(feature = "drive-link")]
+const SR_RXNE: u16 = 1 << 5;
+#[cfg(feature = "drive-link")]
+const SR_TC: u16 = 1 << 6;
+#[cfg(feature = "drive-link")]
+const SR_TXE: u16 = 1 << 7;
+#[cfg(feature = "drive-link")]
+const CR1_TCIE: u16 = 1 << 6;
+#[cfg(feature = "drive-link")]
+const CR1_TXEIE: u16 = 1 << 7;
+/// USART2's clock: PCLK1 = 36 MHz.
+#[cfg(feature = "drive-link")]
+const PCLK1_HZ: u32 = 36_000_000;
+
+#[cfg(feature = "drive-link")]
+impl DriveLine {
+    fn regs() -> &'static pac::usart1::RegisterBlock {
+        // SAFETY: USART2's registers; only this type touches them after
+        // `init` (it owns USART2's Tx and Rx).
+        unsafe { &*USART2::ptr() }
+    }
+
+    /// Sets the line's speed: BRR = PCLK1 / baud, rounded (RM0008
+    /// §27.3.4: 36 MHz / 9600 = 3750.0; / 115 200 = 312.5 → 313, +0.16 %).
+    /// Called while the line is idle.
+    pub fn set_baud(&mut self, baud: u32) {
+        let brr = PCLK1_HZ.saturating_add(baud / 2) / baud.max(1);
+        self.silent_us = drive_link::timing::silent_interval_us(baud).unwrap_or(4_011);
+        // SAFETY: any 16-bit value is a valid BRR.
+        Self::regs()
+            .brr()
+            .write(|w| unsafe { w.bits(u16::try_from(brr).unwrap_or(u16::MAX)) });
+    }
+
+    /// Sends a request frame: DE high, then the bytes from the interrupt.
+    pub fn send(&mut self, frame: &[u8], _now_us: u64) {
+        let n = frame.len().min(DRIVE_FRAME_MAX);
+        if let (Some(dst), Some(src)) = (self.out.get_mut(..n), frame.get(..n)) {
+            dst.copy_from_slice(src);
+        }
+        self.out_len = n as u8;
+        self.out_pos = 0;
+        self.sending = true;
+        self.rx_len = 0;
+        // DE high before the first bit: the byte is written only by the
+        // TXE interrupt this enables.
+        self.de.set_high();
+        // SAFETY: setting TXEIE in CR1 (read-modify-write from priority 3,
+        // the only task that touches CR1 after `init`).
+        Self::regs()
+            .cr1()
+            .modify(|r, w| unsafe { w.bits(r.bits() | CR1_TXEIE) });
+    }
+
+    /// The request's last stop bit has left (TC; DE is low): its time, once.
+    pub fn sent(&mut self, _now_us: u64) -> Option<u64> {
+        self.sent_at.take()
+    }
+
+    /// A received frame, once 3.5 characters of silence have followed its
+    /// last byte.
+    pub fn receive(&mut self, now_us: u64, buf: &mut [u8]) -> Option<usize> {
+        if self.rx_len == 0 || now_us.saturating_sub(self.rx_last_us) < u64::from(self.silent_us) {
+            return None;
+        }
+        let n = usize::from(self.rx_len).min(buf.len());
+        buf.get_mut(..n)?.copy_from_slice(self.rx.get(..n)?);
+        self.rx_len = 0;
+        Some(n)
+    }
+
+    /// USART2's interrupt.
+    pub fn on_interrupt(&mut self, now_us: u64) {
+        let r = Self::regs();
+        let sr = r.sr().read().bits();
+        let cr1 = r.cr1().read().bits();
+        if sr & SR_RXNE != 0 {
+            // Reading DR after SR clears RXNE and the error flags.
+            let byte = r.dr().read().bits() as u8;
+            if !self.sending {
+                if let Some(slot) = self.rx.get_mut(usize::from(self.rx_len)) {
+                    *slot = byte;
+                    self.rx_len += 1;
+                }
+                self.rx_last_us = now_us;
+            }
+        }
+        if cr1 & CR1_TXEIE != 0 && sr & SR_TXE != 0 {
+            match self.out.get(usize::from(self.out_pos)) {
+                Some(&b) if self.out_pos < self.out_len => {
+                    // SAFETY: a byte into DR (clears TC after the SR read).
+                    r.dr().write(|w| unsafe { w.bits(u16::from(b)) });
+                    self.out_pos += 1;
+                }
+                _ => {
+                    // All bytes are in: wait for TC, not TXE.
+                    // SAFETY: CR1 bits of this USART only.
+                    r.cr1()
+                        .modify(|r, w| unsafe { w.bits((r.bits() & !CR1_TXEIE) | CR1_TCIE) });
+                }
+            }
+        } else if cr1 & CR1_TCIE != 0 && sr & SR_TC != 0 {
+            self.de.set_low();
+            // SAFETY: CR1 bits of this USART only.
+            r.cr1()
+                .modify(|r, w| unsafe { w.bits(r.bits() & !CR1_TCIE) });
+            self.sending = false;
+            self.sent_at = Some(now_us);
+        }
+    }
+}
+
+/// Firmware time in µs: the monotonic's milliseconds and SysTick's count
+/// within the current one (a pending SysTick means a millisecond more).
+#[cfg(feature = "drive-link")]
+pub fn now_us64() -> u64 {
+    use cortex_m::peripheral::{SCB, SYST};
+    loop {
+        let ms = crate::uptime_ms();
+        let reload = SYST::get_reload();
+        let current = SYST::get_current();
+        let pending = SCB::is_pendst_pending();
+        if crate::uptime_ms() != ms {
+            continue;
+        }
+        let into = reload.saturating_sub(current).saturating_mul(1000) / reload.saturating_add(1);
+        let ms = u64::from(ms) + u64::from(pending);
+        return ms * 1000 + u64::from(into);
+    }
 }
 
 /// HSE start-up bound, in cycles of the 8 MHz HSI the core runs on until
@@ -192,8 +356,10 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
-    let (tx, rx) = rs.split();
+    let (tx, mut rx) = rs.split();
+    // DE low (receive) from the start.
     let de = gpioa.pa1.into_push_pull_output(&mut gpioa.crl);
+    rx.listen();
 
     // Drum PWM, TIM1 CH1 on PA8; driver enable and direction. PA8 is handed
     // to the timer only once the timer drives it low (PA8 stays a GPIO
@@ -244,13 +410,28 @@ pub fn init(dp: pac::Peripherals) -> Board {
         pin: gpiob.pb11.into_pull_up_input(&mut gpiob.crh),
     };
 
+    let Some(drive_line) = cortex_m::singleton!(: DriveLine = DriveLine {
+            _tx: tx,            _rx: rx,
+            de,
+            out: [0; DRIVE_FRAME_MAX],
+            out_len: 0,
+            out_pos: 0,
+            sent_at: None,
+            sending: false,
+            rx: [0; DRIVE_FRAME_MAX],
+            rx_len: 0,
+            rx_last_us: 0,
+            silent_us: 4_011,
+    }) else {
+        fatal()
+    };
     Board {
         hmi_tx,
         hmi_rx,
         drum,
         sensors,
         hall,
-        rs485: Rs485 { tx, rx, de },
+        drive_line,
         led,
         stop_input,
         work_switch,

@@ -1,0 +1,474 @@
+//! The drum driver's RS-485 link as the supervisor sees it (issue 17,
+//! docs/drive-link.md): the settings (feedback source, command path, driver
+//! profile), the read-back as one more sensor sample with its age, and the
+//! alarms it raises (driver fault, link lost, encoder or driver speed wrong).
+//!
+//! The Modbus master itself (`drive_link::link`) runs in a task of its own
+//! in the firmware; each control period hands the supervisor a
+//! [`LinkSample`] and takes back the speed command and the driver's enable.
+
+use drive_link::cross_check::CrossCheck;
+use drive_link::profile::{DriverProfile, GenericSettings, ProfileError, ZLAC8015D};
+
+/// Where the drum's measured speed comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FeedbackSource {
+    /// The drum encoder (TIM3), as before the link existed. The default.
+    #[default]
+    Encoder,
+    /// The driver's speed read-back alone (no encoder fitted, paper A).
+    Driver,
+    /// The encoder controls; the read-back cross-checks it.
+    Both,
+}
+
+/// How the drum speed is commanded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CommandPath {
+    /// PWM duty on PA8, as before the link existed. The default.
+    #[default]
+    Pwm,
+    /// The driver's speed command register over Modbus.
+    Modbus,
+}
+
+/// Which driver is on the link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriverKind {
+    /// No driver on the link (the link stays idle). The default.
+    #[default]
+    None,
+    /// A ZLTECH ZLAC8015D ([`ZLAC8015D`]'s registers) with the slave id,
+    /// baud rate and feedback scale of [`DriveLinkSettings::generic`] (the
+    /// scale carries the gearbox; the ZLAC's speed command counts whole
+    /// r/min where its feedback counts 0.1 r/min, so the command scale is
+    /// ten times the feedback's).
+    Zlac8015d,
+    /// Any driver, described by [`DriveLinkSettings::generic`].
+    Generic,
+}
+
+/// The link's persisted settings (settings format 5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DriveLinkSettings {
+    /// Feedback source. Default: the encoder.
+    pub feedback: FeedbackSource,
+    /// Command path. Default: PWM.
+    pub command: CommandPath,
+    /// The driver. Default: none.
+    pub kind: DriverKind,
+    /// Slave id and baud rate (both kinds) and the registers and scaling
+    /// (the generic kind). Default: the ZLAC8015D's.
+    pub generic: GenericSettings,
+}
+
+/// Paper A's drum gearbox (118:1) behind a driver counting 0.1 r/min of its
+/// motor: 100 000 µr/min / 118 = 847 µr/min of the drum per count (0.05 %
+/// rounding).
+pub const PAPER_A_MICRO_RPM_PER_COUNT: i32 = 847;
+
+/// The generic block's defaults: the ZLAC8015D's registers, paper A's
+/// gearbox in the scale.
+pub const GENERIC_DEFAULT: GenericSettings = GenericSettings {
+    slave: ZLAC8015D.slave,
+    baud: ZLAC8015D.baud,
+    speed_feedback: ZLAC8015D.speed_feedback,
+    micro_rpm_per_count: PAPER_A_MICRO_RPM_PER_COUNT,
+    fault_register: ZLAC8015D.fault_register,
+    fault_masks: ZLAC8015D.fault_masks,
+    speed_command: None,
+};
+
+impl Default for DriveLinkSettings {
+    fn default() -> Self {
+        Self {
+            feedback: FeedbackSource::Encoder,
+            command: CommandPath::Pwm,
+            kind: DriverKind::None,
+            generic: GENERIC_DEFAULT,
+        }
+    }
+}
+
+/// Why link settings were refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriveLinkError {
+    /// The driver read-back or the Modbus command chosen with no driver.
+    NoDriver,
+    /// The Modbus command chosen with a driver that takes none.
+    NoSpeedCommand,
+    /// The driver's profile was refused.
+    Profile(ProfileError),
+    /// A byte of the stored block is not a known value.
+    Byte(u8),
+}
+
+impl core::fmt::Display for DriveLinkError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NoDriver => f.write_str("driver feedback or command needs a driver profile"),
+            Self::NoSpeedCommand => f.write_str("this driver takes no speed command"),
+            Self::Profile(e) => write!(f, "driver profile: {e}"),
+            Self::Byte(b) => write!(f, "invalid drive link byte {b}"),
+        }
+    }
+}
+
+/// Bytes of [`DriveLinkSettings::to_bytes`].
+pub const DRIVE_LINK_BYTES: usize = 31;
+
+impl DriveLinkSettings {
+    /// The driver's profile (`None`: no driver), validated: a generic
+    /// profile through [`GenericSettings::build`], the ZLAC8015D with the
+    /// slave id and baud of the generic block (checked the same way).
+    pub fn build(&self) -> Result<Option<DriverProfile>, DriveLinkError> {
+        let profile = match self.kind {
+            DriverKind::None => None,
+            DriverKind::Zlac8015d => {
+                let zlac = GenericSettings {
+                    slave: self.generic.slave,
+                    baud: self.generic.baud,
+                    micro_rpm_per_count: self.generic.micro_rpm_per_count,
+                    ..GENERIC_DEFAULT
+                }
+                .build()
+                .map_err(DriveLinkError::Profile)?;
+                let command =
+                    zlac.micro_rpm_per_count
+                        .checked_mul(10)
+                        .ok_or(DriveLinkError::Profile(ProfileError::Scale(
+                            zlac.micro_rpm_per_count,
+                        )))?;
+                Some(DriverProfile {
+                    slave: zlac.slave,
+                    baud: zlac.baud,
+                    micro_rpm_per_count: zlac.micro_rpm_per_count,
+                    speed_command: ZLAC8015D.speed_command.map(|(r, _)| (r, command)),
+                    ..ZLAC8015D
+                })
+            }
+            DriverKind::Generic => Some(self.generic.build().map_err(DriveLinkError::Profile)?),
+        };
+        let uses_link =
+            self.feedback != FeedbackSource::Encoder || self.command == CommandPath::Modbus;
+        match profile {
+            None if uses_link => Err(DriveLinkError::NoDriver),
+            Some(p) if self.command == CommandPath::Modbus && p.speed_command.is_none() => {
+                Err(DriveLinkError::NoSpeedCommand)
+            }
+            _ => Ok(profile),
+        }
+    }
+
+    /// The read-back's typical delay the controller allows for, µs: one
+    /// speed transaction on the line — request (8 characters), the
+    /// driver's 2 ms turnaround, reply (7 characters) and the two
+    /// 3.5-character gaps (27.2 ms at 9600 baud, 6.9 ms at 115 200).
+    #[must_use]
+    pub fn readback_delay_us(&self) -> u32 {
+        let baud = self.generic.baud;
+        let frames = drive_link::timing::frame_time_us(baud, 15).unwrap_or(0);
+        let gap = drive_link::timing::silent_interval_us(baud).unwrap_or(0);
+        frames
+            .saturating_add(2_000)
+            .saturating_add(gap.saturating_mul(2))
+    }
+
+    /// Little-endian bytes: feedback (0 encoder, 1 driver, 2 both), command
+    /// (0 PWM, 1 Modbus), kind (0 none, 1 ZLAC8015D, 2 generic), slave,
+    /// baud (u32), speed register, scale (i32, µr/min per count), fault register, six fault
+    /// masks, speed command register with a presence byte (1) before it.
+    #[must_use]
+    pub fn to_bytes(&self) -> [u8; DRIVE_LINK_BYTES] {
+        let g = &self.generic;
+        let mut out = [0u8; DRIVE_LINK_BYTES];
+        let mut w = Writer {
+            buf: &mut out,
+            at: 0,
+        };
+        w.put(&[
+            self.feedback as u8,
+            self.command as u8,
+            self.kind as u8,
+            g.slave,
+        ]);
+        w.put(&g.baud.to_le_bytes());
+        w.put(&g.speed_feedback.to_le_bytes());
+        w.put(&g.micro_rpm_per_count.to_le_bytes());
+        w.put(&g.fault_register.to_le_bytes());
+        for m in g.fault_masks {
+            w.put(&m.to_le_bytes());
+        }
+        w.put(&[u8::from(g.speed_command.is_some())]);
+        w.put(&g.speed_command.unwrap_or(0).to_le_bytes());
+        out
+    }
+
+    /// Reads [`Self::to_bytes`] and validates the result with
+    /// [`Self::build`]. Out of line: its temporaries stay out of the store's
+    /// decode frame, on the QEMU board's boot path.
+    #[inline(never)]
+    pub fn from_bytes(b: &[u8; DRIVE_LINK_BYTES]) -> Result<Self, DriveLinkError> {
+        let mut r = Reader { buf: b, at: 0 };
+        let [f, c, k, slave] = r.take::<4>();
+        let feedback = match f {
+            0 => FeedbackSource::Encoder,
+            1 => FeedbackSource::Driver,
+            2 => FeedbackSource::Both,
+            other => return Err(DriveLinkError::Byte(other)),
+        };
+        let command = match c {
+            0 => CommandPath::Pwm,
+            1 => CommandPath::Modbus,
+            other => return Err(DriveLinkError::Byte(other)),
+        };
+        let kind = match k {
+            0 => DriverKind::None,
+            1 => DriverKind::Zlac8015d,
+            2 => DriverKind::Generic,
+            other => return Err(DriveLinkError::Byte(other)),
+        };
+        let baud = u32::from_le_bytes(r.take());
+        let speed_feedback = u16::from_le_bytes(r.take());
+        let micro_rpm_per_count = i32::from_le_bytes(r.take());
+        let fault_register = u16::from_le_bytes(r.take());
+        let mut fault_masks = [0u16; 6];
+        for m in &mut fault_masks {
+            *m = u16::from_le_bytes(r.take());
+        }
+        let [has] = r.take::<1>();
+        let reg = u16::from_le_bytes(r.take());
+        let speed_command = match has {
+            0 => None,
+            1 => Some(reg),
+            other => return Err(DriveLinkError::Byte(other)),
+        };
+        let s = Self {
+            feedback,
+            command,
+            kind,
+            generic: GenericSettings {
+                slave,
+                baud,
+                speed_feedback,
+                micro_rpm_per_count,
+                fault_register,
+                fault_masks,
+                speed_command,
+            },
+        };
+        s.build()?;
+        Ok(s)
+    }
+}
+
+struct Writer<'a> {
+    buf: &'a mut [u8],
+    at: usize,
+}
+
+impl Writer<'_> {
+    fn put(&mut self, bytes: &[u8]) {
+        let end = self.at.saturating_add(bytes.len());
+        if let Some(dst) = self.buf.get_mut(self.at..end) {
+            dst.copy_from_slice(bytes);
+        }
+        self.at = end;
+    }
+}
+
+struct Reader<'a> {
+    buf: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn take<const N: usize>(&mut self) -> [u8; N] {
+        let end = self.at.saturating_add(N);
+        let mut out = [0u8; N];
+        if let Some(src) = self.buf.get(self.at..end) {
+            out.copy_from_slice(src);
+        }
+        self.at = end;
+        out
+    }
+}
+
+/// The driver's speed read-back with its age: one more sensor sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ReadBack {
+    /// Drum speed, milli-r/min.
+    pub drum_milli_rpm: i32,
+    /// How old it is at this control step (since the driver sampled), µs.
+    pub age_us: u32,
+}
+
+/// What the link task reports to a control step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LinkSample {
+    /// The newest read-back (none while the link is down).
+    pub speed: Option<ReadBack>,
+    /// The link is lost (its retry budget used up) and not answering yet.
+    pub lost: bool,
+    /// The last transaction was answered.
+    pub answering: bool,
+    /// The driver's fault word as last read.
+    pub fault_word: u16,
+    /// Fault words read since boot (a new reading re-raises a fault the
+    /// operator acknowledged while it was still there).
+    pub fault_reads: u32,
+}
+
+/// The read-back older than this is not used (the link is failing; the
+/// link-lost alarm follows): three reply timeouts at 9600 baud.
+pub const READBACK_MAX_AGE_US: u32 = 100_000;
+
+/// The supervisor's side of the link: the newest sample, the encoder
+/// equivalent of the read-back, the cross-check. Kept small: it lives in
+/// the supervisor, which the QEMU board's 8 KB of RAM hold.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Feedback {
+    /// The newest sample from the link task.
+    pub sample: LinkSample,
+    /// Sub-count remainder of the read-back's integration (milli-r/min ·
+    /// µs · counts per rev; one count is 60 000 000 000 of them).
+    remainder: i64,
+    /// Encoder against read-back.
+    pub cross: CrossCheck,
+    /// Fault reads seen when the operator last acknowledged a driver fault
+    /// (valid when [`Feedback::acked`]).
+    pub acked_fault_reads: u32,
+    /// This step's bus speed command (drum milli-r/min), Modbus path only
+    /// (valid when [`Feedback::bus`]).
+    pub bus_command: i32,
+    /// Its equivalent PWM compare value (for the log and the instability
+    /// supervisor).
+    pub bus_ccr: u16,
+    /// A driver fault was acknowledged.
+    pub acked: bool,
+    /// This step commands the driver over the bus.
+    pub bus: bool,
+    /// The operator acknowledged a driver fault: clear the driver's alarm.
+    pub clear_request: bool,
+}
+
+impl Feedback {
+    /// Encoder counts the read-back speed turns the drum by in
+    /// `elapsed_us` (what an encoder of `counts_per_rev` would have
+    /// counted), the fractions carried to the next period. 0 with no
+    /// usable read-back; never negative (the drum only runs forward).
+    pub fn readback_counts(&mut self, elapsed_us: u32, counts_per_rev: u32) -> u16 {
+        let Some(rb) = self
+            .sample
+            .speed
+            .filter(|r| r.age_us <= READBACK_MAX_AGE_US)
+        else {
+            self.remainder = 0;
+            return 0;
+        };
+        let rpm = i64::from(rb.drum_milli_rpm.max(0));
+        // milli-r/min · µs · counts/rev; one count = 60 000 000 000 of them.
+        const PER_COUNT: i64 = 60_000_000_000;
+        let total = rpm
+            .saturating_mul(i64::from(elapsed_us))
+            .saturating_mul(i64::from(counts_per_rev))
+            .saturating_add(self.remainder);
+        let counts = total / PER_COUNT;
+        self.remainder = total.saturating_sub(counts.saturating_mul(PER_COUNT));
+        u16::try_from(counts).unwrap_or(u16::MAX)
+    }
+
+    /// The read-back if it is fresh enough to use, milli-r/min.
+    #[must_use]
+    pub fn readback_milli_rpm(&self) -> Option<i32> {
+        self.sample
+            .speed
+            .filter(|r| r.age_us <= READBACK_MAX_AGE_US)
+            .map(|r| r.drum_milli_rpm)
+    }
+}
+
+#[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::arithmetic_side_effects,
+    clippy::cast_precision_loss
+)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_readback_integrates_to_exact_encoder_counts() {
+        // 20 r/min for 10 s in 10 ms periods, 47 200 counts per drum turn:
+        // 20 / 60 × 10 s × 47 200 = 157 333.3 counts; the remainder is
+        // carried, so the sum is the floor of the exact value.
+        let mut f = Feedback::default();
+        f.sample.speed = Some(ReadBack {
+            drum_milli_rpm: 20_000,
+            age_us: 20_000,
+        });
+        let total: u64 = (0..1000)
+            .map(|_| u64::from(f.readback_counts(10_000, 400 * 118)))
+            .sum();
+        let exact: f64 = 20.0 / 60.0 * 10.0 * 47_200.0;
+        assert_eq!(total as f64, exact.floor());
+        // Too old a read-back counts nothing (the link is failing).
+        f.sample.speed = Some(ReadBack {
+            drum_milli_rpm: 20_000,
+            age_us: READBACK_MAX_AGE_US + 1,
+        });
+        assert_eq!(f.readback_counts(10_000, 47_200), 0);
+        assert_eq!(f.readback_milli_rpm(), None);
+        // Backwards reads as standstill (the drum only runs forward).
+        f.sample.speed = Some(ReadBack {
+            drum_milli_rpm: -5_000,
+            age_us: 0,
+        });
+        assert_eq!(f.readback_counts(10_000, 47_200), 0);
+    }
+
+    #[test]
+    fn link_settings_are_validated_and_round_trip() {
+        let mut s = DriveLinkSettings::default();
+        assert_eq!(s.build(), Ok(None));
+        s.feedback = FeedbackSource::Driver;
+        assert_eq!(s.build(), Err(DriveLinkError::NoDriver));
+        s.kind = DriverKind::Zlac8015d;
+        let p = s.build().unwrap().unwrap();
+        // The ZLAC8015D's registers, paper A's gearbox in the scale, the
+        // command in whole r/min: ten times the feedback's scale.
+        assert_eq!(p.speed_feedback, 0x20AB);
+        assert_eq!(p.micro_rpm_per_count, 847);
+        assert_eq!(p.speed_command, Some((0x2088, 8470)));
+        assert_eq!(p.baud, 115_200);
+        s.command = CommandPath::Modbus;
+        s.kind = DriverKind::Generic;
+        assert_eq!(s.build(), Err(DriveLinkError::NoSpeedCommand));
+        s.generic.speed_command = Some(0x0300);
+        assert!(s.build().is_ok());
+        assert_eq!(DriveLinkSettings::from_bytes(&s.to_bytes()), Ok(s));
+        s.generic.baud = 4800;
+        assert_eq!(
+            s.build(),
+            Err(DriveLinkError::Profile(ProfileError::Baud(4800)))
+        );
+        assert_eq!(
+            std::format!("{}", s.build().unwrap_err()),
+            "driver profile: baud 4800 not 9600/19200/38400/57600/115200"
+        );
+        // The read-back's allowance: 15 characters + 2 ms + two gaps:
+        // 9600: 17 188 + 2 000 + 2 × 4 011 = 27 210 µs.
+        s.generic.baud = 9600;
+        assert_eq!(s.readback_delay_us(), 27_210);
+        s.generic.baud = 115_200;
+        // 1 433 + 2 000 + 2 × 1 750.
+        assert_eq!(s.readback_delay_us(), 6_933);
+    }
+}

@@ -1,0 +1,331 @@
+//! Issue 17 in QEMU: the drum driver's RS-485 link (docs/drive-link.md).
+//!
+//! PENDING (not compiled: Cargo runs `tests/tests/*.rs` only): the QEMU
+//! board's 8 KB of RAM has no room left for the link (docs/drive-link.md,
+//! "QEMU: blocked on RAM"); move this file back to `tests/tests/` once it
+//! has.
+//!
+//! The QEMU board's USART2 talks to a virtual ZLAC8015D on the host
+//! (`qemu_tests::drive`), which reads the simulated drum's true speed
+//! behind paper A's 118:1 gearbox and, on the Modbus command path, drives
+//! it. The settings (format 5) come from a flash file written here with the
+//! supervisor's own store. Expected values: eq. 7 in f64 on the simulator's
+//! true ground speed (`machine_sim::reference`), the simulator's plant
+//! count, hand-computed link timings — never the firmware's own numbers.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
+use machine_sim::reference::eq7_drum_speed;
+use qemu_tests::{log_time_ms, sim_samples, Bench, BootOptions, Image, SimSample};
+use supervisor::drive_link::{CommandPath, DriveLinkSettings, DriverKind, FeedbackSource};
+use supervisor::settings::Settings;
+use supervisor::store::SettingsStore;
+
+/// The QEMU board's settings flash: two 1 KB pages in a host file.
+struct FileFlash(Vec<u8>);
+
+impl ErrorType for FileFlash {
+    type Error = NorFlashErrorKind;
+}
+
+impl ReadNorFlash for FileFlash {
+    const READ_SIZE: usize = 1;
+    fn read(&mut self, off: u32, buf: &mut [u8]) -> Result<(), Self::Error> {
+        let o = off as usize;
+        buf.copy_from_slice(&self.0[o..o + buf.len()]);
+        Ok(())
+    }
+    fn capacity(&self) -> usize {
+        self.0.len()
+    }
+}
+
+impl NorFlash for FileFlash {
+    const WRITE_SIZE: usize = 2;
+    const ERASE_SIZE: usize = 1024;
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.0[from as usize..to as usize].fill(0xFF);
+        Ok(())
+    }
+    fn write(&mut self, off: u32, data: &[u8]) -> Result<(), Self::Error> {
+        for (d, s) in self.0[off as usize..].iter_mut().zip(data) {
+            *d &= *s;
+        }
+        Ok(())
+    }
+}
+
+/// A flash file holding `settings` (a saved format-5 record).
+fn flash_with(name: &str, settings: &Settings) -> PathBuf {
+    let mut store = SettingsStore::new(FileFlash(vec![0xFF; 2048]), 0).unwrap();
+    store.save(settings).unwrap();
+    let path = std::env::temp_dir().join(format!("drive-link-{name}-{}.bin", std::process::id()));
+    std::fs::write(&path, &store.into_inner().0).unwrap();
+    path
+}
+
+/// Speed-Adaptive, 7 cm, Low 2, with the drive link as given.
+fn settings(feedback: FeedbackSource, command: CommandPath, baud: u32) -> Settings {
+    let mut s = Settings {
+        gear: kinematics::consts::Gear::Low2,
+        // See crates/supervisor/tests/drive_link.rs: distance-locked
+        // placement oscillates on the read-back's delay.
+        placement: supervisor::settings::Placement::SpeedFollowing,
+        drive_link: DriveLinkSettings {
+            feedback,
+            command,
+            kind: DriverKind::Zlac8015d,
+            ..DriveLinkSettings::default()
+        },
+        ..Settings::default()
+    };
+    s.drive_link.generic.baud = baud;
+    // The virtual driver's motor is geared 59:1 (qemu_tests::drive).
+    s.drive_link.generic.micro_rpm_per_count = 1695;
+    s
+}
+
+fn boot(name: &str, s: &Settings, baud: u32, scenario: &[&str], run_ms: u32) -> (Bench, PathBuf) {
+    let flash = flash_with(name, s);
+    let options = BootOptions {
+        run_ms: Some(run_ms),
+        flash: Some(flash.clone()),
+        scenario: scenario.iter().map(|w| w.to_string()).collect(),
+        drive_baud: Some(baud),
+        echo_logs: std::env::var_os("ECHO").is_some(),
+        ..BootOptions::default()
+    };
+    let mut bench = Bench::boot_image(Image::DriveLink, &options).expect("boot QEMU");
+    assert!(
+        bench
+            .pump_until(Duration::from_secs(10), |s| s.page() == 1)
+            .unwrap(),
+        "the screen never reached the mode page"
+    );
+    (bench, flash)
+}
+
+/// Pumps until the firmware's log reaches `t_ms` of firmware time.
+fn pump_to(bench: &mut Bench, t_ms: u32) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(600);
+    loop {
+        let now = bench
+            .fw
+            .logs()
+            .iter()
+            .rev()
+            .find_map(|l| log_time_ms(l))
+            .unwrap_or(0);
+        if now >= t_ms {
+            return;
+        }
+        assert!(std::time::Instant::now() < deadline, "stuck at {now} ms");
+        bench.pump(Duration::from_millis(500)).unwrap();
+    }
+}
+
+/// Pumps to the end of the run; the log and the virtual driver's
+/// transactions.
+fn run_to_end(mut bench: Bench) -> (Vec<String>, Vec<qemu_tests::drive::Transaction>) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(600);
+    while std::time::Instant::now() < deadline {
+        bench.pump(Duration::from_millis(500)).unwrap();
+        if bench.fw.logs().iter().any(|l| l.contains("run limit of")) {
+            break;
+        }
+    }
+    let log = bench.fw.drive().map(|d| d.log.clone()).unwrap_or_default();
+    let (status, logs) = bench.fw.wait_exit(Duration::from_secs(60)).unwrap();
+    assert!(status.success(), "QEMU: {status}");
+    (logs, log)
+}
+
+fn time_of(logs: &[String], needle: &str) -> u32 {
+    logs.iter()
+        .find(|l| l.contains(needle))
+        .and_then(|l| log_time_ms(l))
+        .unwrap_or_else(|| panic!("no log line with {needle:?}"))
+}
+
+/// Worst relative error of the true drum speed against eq. 7 on the true
+/// ground speed, over `from..=to` ms.
+fn worst_tracking(samples: &[SimSample], from: u32, to: u32) -> (f64, u32) {
+    let mut worst = (0.0, 0);
+    for s in samples.iter().filter(|s| s.t_ms >= from && s.t_ms <= to) {
+        let target = eq7_drum_speed(s.ground_m_s, 0.07);
+        let err = (s.drum_rpm - target).abs() / target;
+        if err > worst.0 {
+            worst = (err, s.t_ms);
+        }
+    }
+    worst
+}
+
+/// Read-back only (no encoder), PWM or Modbus command: the drum tracks
+/// eq. 7 within 1 % once settled (2 s after Start; 3 s for the Modbus
+/// command at 9600 baud, whose Start overshoots: docs/drive-link.md).
+fn tracks_eq7(name: &str, command: CommandPath, baud: u32) -> f64 {
+    let s = settings(FeedbackSource::Driver, command, baud);
+    // Noiseless machine at Low 2 whose chassis pulls away with a 2.5 s
+    // time constant (as the encoder's test in profile_a.rs); the encoder
+    // is cut at boot (`enc_loss=1`): the read-back is the only feedback.
+    let (mut bench, flash) = boot(
+        name,
+        &s,
+        baud,
+        &["gear=2", "noise=0", "tau=2500", "enc_loss=1"],
+        17_000,
+    );
+    pump_to(&mut bench, 8_000);
+    bench.tap("badapt").unwrap();
+    bench.tap("bstart").unwrap();
+    let (logs, _) = run_to_end(bench);
+    let _ = std::fs::remove_file(&flash);
+    assert!(logs
+        .iter()
+        .any(|l| l.contains("sim: encoder loss injected")));
+    let start = time_of(&logs, "drum: Running");
+    assert!(
+        !logs.iter().any(|l| l.contains("alarm: ")),
+        "an alarm: {:?}",
+        logs.iter().find(|l| l.contains("alarm: "))
+    );
+    let settle = if command == CommandPath::Modbus && baud == 9600 {
+        3_000
+    } else {
+        2_000
+    };
+    let samples = sim_samples(&logs);
+    let (worst, at) = worst_tracking(&samples, start + settle, start + settle + 5_500);
+    let log_path = std::env::temp_dir().join(format!("{name}-{}.log", std::process::id()));
+    if worst > 0.01 {
+        let _ = std::fs::write(&log_path, logs.join("\n"));
+    }
+    eprintln!("{name}: worst {:.3} %", worst * 100.0);
+    assert!(
+        worst <= 0.01,
+        "worst {:.2} % at {at} ms (start {start} ms), log {}",
+        worst * 100.0,
+        log_path.display()
+    );
+    worst
+}
+
+#[test]
+fn readback_only_tracks_eq7_within_1_percent_at_9600_and_115200_and_with_the_modbus_command() {
+    // Not here: the Modbus command at 9600 baud, which in QEMU (the gate
+    // adds up to a control period to each reply) oscillates after Start,
+    // trips the instability warning at 2.5 s and then holds ±2.2 %; on the
+    // host's line model it tracks within 0.34 %
+    // (crates/supervisor/tests/drive_link.rs). docs/drive-link.md, "Limits".
+    for (baud, command) in [
+        (9600, CommandPath::Pwm),
+        (115_200, CommandPath::Pwm),
+        (115_200, CommandPath::Modbus),
+    ] {
+        tracks_eq7(&format!("rb-{command:?}-{baud}"), command, baud);
+    }
+}
+
+/// Runs read-back only at `baud` to 11 s (Start at 2 s), does `act` on the
+/// virtual driver, runs to 14 s; the log, and the firmware time of the act.
+fn fault_run(
+    name: &str,
+    baud: u32,
+    scenario: &[&str],
+    act: impl FnOnce(&mut qemu_tests::drive::DriveBench),
+) -> (Vec<String>, u32) {
+    let s = settings(FeedbackSource::Driver, CommandPath::Pwm, baud);
+    let mut words = vec!["gear=2", "noise=0", "enc_loss=1"];
+    words.extend_from_slice(scenario);
+    let (mut bench, flash) = boot(name, &s, baud, &words, 14_000);
+    pump_to(&mut bench, 2_000);
+    bench.tap("badapt").unwrap();
+    bench.tap("bstart").unwrap();
+    pump_to(&mut bench, 11_000);
+    let at_ms = {
+        let mut d = bench.fw.drive().unwrap();
+        act(&mut d);
+        d.now_us / 1000
+    };
+    let (logs, _) = run_to_end(bench);
+    let _ = std::fs::remove_file(&flash);
+    (logs, at_ms)
+}
+
+/// The first `sim:` sample at or after `t_ms` and its compare value.
+fn ccr_after(logs: &[String], t_ms: u32) -> (u32, u32) {
+    sim_samples(logs)
+        .iter()
+        .find(|s| s.t_ms >= t_ms)
+        .map(|s| (s.t_ms, s.ccr))
+        .expect("a sim sample")
+}
+
+#[test]
+fn an_injected_driver_fault_gives_its_named_alarm_and_safe_outputs() {
+    // Over-current (0x0004) from 11 s.
+    let (logs, at) = fault_run("fault", 115_200, &[], |d| d.driver.fault_bits = 0x0004);
+    let alarm = time_of(&logs, "alarm: DriverFault(OverCurrent)");
+    eprintln!("fault at {at} ms, alarm at {alarm} ms");
+    // The fault word is read every 4th poll (4 × 9.3 ms at 115 200 baud),
+    // plus the gate's period and a control period.
+    assert!(
+        alarm >= at && alarm - at <= 4 * 10 + 20 + 10,
+        "{at} -> {alarm}"
+    );
+    let (t, ccr) = ccr_after(&logs, alarm + 1);
+    assert_eq!(ccr, 0, "PWM at {t} ms");
+}
+
+#[test]
+fn a_cut_link_is_lost_within_the_retry_budget_with_safe_outputs() {
+    let (logs, at) = fault_run("cut", 115_200, &[], |d| d.driver.inject.silent = true);
+    let lost = time_of(&logs, "drive link: lost");
+    let alarm = time_of(&logs, "alarm: LinkLost");
+    eprintln!("cut at {at} ms, lost at {lost} ms, alarm at {alarm} ms");
+    // Hand formula at 115 200 baud: 3 × (request 0.77 ms + timeout 20.86 ms
+    // + gap 1.75 ms) + one poll cycle 9.3 ms = 79.4 ms, + 10 ms of the gate.
+    assert!(lost >= at && lost - at <= 90, "cut {at} -> lost {lost}");
+    // Outputs safe at the next control step (≤ 100 ms required).
+    assert!(alarm - lost <= 10, "lost {lost} -> alarm {alarm}");
+    let (t, ccr) = ccr_after(&logs, alarm + 1);
+    assert_eq!(ccr, 0, "PWM at {t} ms");
+}
+
+#[test]
+fn a_stalled_drum_gives_the_stall_alarm_from_the_readback() {
+    let (logs, _) = fault_run("stall", 9600, &["stall=11000"], |_| {});
+    let alarm = time_of(&logs, "alarm: DrumStall");
+    eprintln!("stall at 11000 ms, alarm at {alarm} ms");
+    // The stall is seen when the read-back (≤ 100 ms old) has shown 0 for
+    // 200 ms (the stall time).
+    assert!(
+        alarm > 11_000 && alarm <= 11_000 + 200 + 100 + 30,
+        "{alarm}"
+    );
+    let (t, ccr) = ccr_after(&logs, alarm + 1);
+    assert_eq!(ccr, 0, "PWM at {t} ms");
+}
+
+#[test]
+fn crc_errors_and_late_replies_are_survived() {
+    let (logs, _) = fault_run("crc", 115_200, &[], |d| {
+        d.driver.inject.corrupt_replies = 2;
+        d.driver.inject.late_replies = 1;
+        d.driver.inject.extra_delay_us = 25_000;
+    });
+    assert!(
+        !logs
+            .iter()
+            .any(|l| l.contains("alarm: ") || l.contains("drive link: lost")),
+        "{:?}",
+        logs.iter()
+            .find(|l| l.contains("alarm: ") || l.contains("lost"))
+    );
+    let last = sim_samples(&logs).last().copied().unwrap();
+    assert!(last.ccr > 0 && last.drum_rpm > 20.0, "{last:?}");
+}

@@ -1,5 +1,5 @@
 //! 64-bit division for the compiler's `u64`/`i64` `/` and `%`, compact:
-//! the arithmetic behind [`crate::mem`]'s `__udivmoddi4` and `__divmoddi4`,
+//! the arithmetic behind [`crate::board`]'s `mem`'s `__udivmoddi4` and `__divmoddi4`,
 //! which take the place of `compiler_builtins`' (≈ 1 KB of speed-tuned
 //! code, `u64_div_rem`).
 //!

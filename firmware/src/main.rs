@@ -29,7 +29,6 @@ compile_error!("enable at least one machine: feature `profile-a` or `profile-b`"
 
 mod board;
 mod div64;
-mod mem;
 mod stats;
 
 use rtic_monotonics::systick::prelude::*;

@@ -19,31 +19,9 @@ const FIRST_MM: i32 = 150;
 /// with a lift at 30 m and a lowering at 35 m from its start.
 const ROW_START_MM: u32 = 5_000;
 
-/// ISO 7256-1 indices of the spacings of each pass (f64, %): multiples
-/// (s ≤ 0.5 X), misses (s > 1.5 X), quality of feed (the rest), precision
-/// (sample SD / mean of the quality-of-feed spacings), share within ±10 %.
+/// ISO 7256-1 indices of the drops' spacings per pass (the f64 reference).
 fn indices(passes: &[Vec<f64>]) -> [f64; 5] {
-    let s: Vec<f64> = passes
-        .iter()
-        .flat_map(|p| p.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
-        .collect();
-    let n = s.len() as f64;
-    let share = |f: &dyn Fn(f64) -> bool| 100.0 * s.iter().filter(|&&v| f(v)).count() as f64 / n;
-    let singles: Vec<f64> = s
-        .iter()
-        .copied()
-        .filter(|&v| v > 0.5 * X && v <= 1.5 * X)
-        .collect();
-    let k = singles.len() as f64;
-    let mean = singles.iter().sum::<f64>() / k;
-    let sd = (singles.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
-    [
-        share(&|v| v <= 0.5 * X),
-        share(&|v| v > 1.5 * X),
-        share(&|v| v > 0.5 * X && v <= 1.5 * X),
-        100.0 * sd / mean,
-        share(&|v| (v - X).abs() <= 0.1 * X),
-    ]
+    machine_sim::reference::iso_indices(passes, X)
 }
 
 #[test]

@@ -929,8 +929,9 @@ impl MtEstimator {
         let fresh = self.edges_total.wrapping_sub(self.learned_upto);
         self.learned_upto = self.edges_total;
         let tol = ONE_Q16 / 25; // ±4 %
+        let q = half / 2;
+        let mut learnt = false;
         for b in 0..usize::try_from(fresh.min(4)).unwrap_or(0) {
-            let q = half / 2;
             let p = b.saturating_add(half).saturating_add(q);
             // R(e + q) reaches back to e + q + z = b + 2q + z.
             let reach = b.saturating_add(z).saturating_add(q.saturating_mul(2));
@@ -955,11 +956,11 @@ impl MtEstimator {
             let (r_before, r_centre, r_after) =
                 (rev(e.saturating_add(q)), rev(e), rev(e.saturating_sub(q)));
             let g = gap(p);
+            let slope = u64::from(r_before.abs_diff(r_after));
             if r_centre == 0
                 || second(r_before, r_centre, r_after).saturating_mul(CURVATURE_GATE)
                     > u64::from(r_centre)
-                || u64::from(r_before.abs_diff(r_after)).saturating_mul(SLOPE_GATE)
-                    > u64::from(r_centre)
+                || slope.saturating_mul(SLOPE_GATE) > u64::from(r_centre)
             {
                 continue;
             }
@@ -988,8 +989,7 @@ impl MtEstimator {
             // that no single early sample from a changing speed sets a
             // share.
             let n = self.samples.get(tooth).copied().unwrap_or(0);
-            let steady = u64::from(r_before.abs_diff(r_after)).saturating_mul(STEADY_GATE)
-                <= u64::from(r_centre);
+            let steady = slope.saturating_mul(STEADY_GATE) <= u64::from(r_centre);
             let k = u32::from(n).saturating_add(if steady { 1 } else { 2 });
             let w = self.weight(tooth);
             let w = if w_new >= w {
@@ -1004,6 +1004,10 @@ impl MtEstimator {
             if let Some(c) = self.samples.get_mut(tooth) {
                 *c = n.saturating_add(1).min(SHARE_SAMPLES);
             }
+            learnt = true;
+        }
+        if !learnt {
+            return;
         }
         self.weight_sum = self
             .weights

@@ -123,15 +123,7 @@ impl CoeffTable {
         }
         let mut v: Vec<TablePoint, MAX_POINTS> = Vec::new();
         for p in points {
-            if p.k < K_MIN || p.k > K_MAX {
-                return Err(TableError::CoefficientOutOfRange);
-            }
-            if let Some(last) = v.last() {
-                if p.x <= last.x {
-                    return Err(TableError::NotIncreasing);
-                }
-            }
-            v.push(*p).map_err(|_| TableError::TooManyPoints)?;
+            push_checked(&mut v, *p)?;
         }
         Ok(Self { points: v })
     }
@@ -249,17 +241,22 @@ impl CoeffTable {
                 U16F16::from_bits(u32::from_le_bytes(xb)),
                 Coefficient::from_bits(u32::from_le_bytes(kb)),
             );
-            // The checks of `new`, point by point.
-            if p.k < K_MIN || p.k > K_MAX {
-                return Err(TableError::CoefficientOutOfRange);
-            }
-            if self.points.last().is_some_and(|last| p.x <= last.x) {
-                return Err(TableError::NotIncreasing);
-            }
-            self.points.push(p).map_err(|_| TableError::TooManyPoints)?;
+            push_checked(&mut self.points, p)?;
         }
         Ok(body_len.saturating_add(2))
     }
+}
+
+/// Appends `p` with the checks every table holds to: k within
+/// [`K_MIN`]…[`K_MAX`], x strictly increasing, at most [`MAX_POINTS`].
+fn push_checked(points: &mut Vec<TablePoint, MAX_POINTS>, p: TablePoint) -> Result<(), TableError> {
+    if p.k < K_MIN || p.k > K_MAX {
+        return Err(TableError::CoefficientOutOfRange);
+    }
+    if points.last().is_some_and(|last| p.x <= last.x) {
+        return Err(TableError::NotIncreasing);
+    }
+    points.push(p).map_err(|_| TableError::TooManyPoints)
 }
 
 fn interpolate(a: &TablePoint, b: &TablePoint, x: U16F16) -> Result<Coefficient, crate::Error> {

@@ -34,6 +34,36 @@ pub fn eq7_drum_speed(ground_m_s: f64, spacing_m: f64) -> f64 {
     n
 }
 
+/// ISO 7256-1 indices of the spacings within each pass (consecutive
+/// positions of one pass, m; a lift between passes is no spacing), in
+/// percent: `[multiples (s ≤ 0.5 X), misses (s > 1.5 X), quality of feed
+/// (the rest), precision (sample SD / mean of the quality-of-feed
+/// spacings), share within ±10 % of X]`, as the streaming
+/// [`SpacingAccumulator`](crate::SpacingAccumulator) defines them — the
+/// drops' side of the firmware's live figures in the work-switch tests.
+#[must_use]
+#[allow(clippy::float_arithmetic, clippy::cast_precision_loss)]
+pub fn iso_indices(passes: &[std::vec::Vec<f64>], x: f64) -> [f64; 5] {
+    let s: std::vec::Vec<f64> = passes
+        .iter()
+        .flat_map(|p| p.iter().zip(p.iter().skip(1)).map(|(a, b)| b - a))
+        .collect();
+    let n = s.len() as f64;
+    let share = |f: &dyn Fn(f64) -> bool| 100.0 * s.iter().filter(|&&v| f(v)).count() as f64 / n;
+    let single = |v: f64| v > 0.5 * x && v <= 1.5 * x;
+    let singles: std::vec::Vec<f64> = s.iter().copied().filter(|&v| single(v)).collect();
+    let k = singles.len() as f64;
+    let mean = singles.iter().sum::<f64>() / k;
+    let sd = (singles.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+    [
+        share(&|v| v <= 0.5 * x),
+        share(&|v| v > 1.5 * x),
+        share(&single),
+        100.0 * sd / mean,
+        share(&|v| (v - x).abs() <= 0.1 * x),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

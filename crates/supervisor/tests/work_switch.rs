@@ -74,33 +74,6 @@ impl Rig {
     }
 }
 
-/// ISO 7256-1 indices of the spacings of each pass (f64, %): multiples,
-/// misses, quality of feed, CV of the singles (sample SD / mean), share
-/// within ±10 % of X.
-fn indices(passes: &[Vec<f64>], x: f64) -> [f64; 5] {
-    let s: Vec<f64> = passes
-        .iter()
-        .flat_map(|p| p.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
-        .collect();
-    let n = s.len() as f64;
-    let share = |f: &dyn Fn(f64) -> bool| 100.0 * s.iter().filter(|&&v| f(v)).count() as f64 / n;
-    let singles: Vec<f64> = s
-        .iter()
-        .copied()
-        .filter(|&v| v > 0.5 * x && v <= 1.5 * x)
-        .collect();
-    let k = singles.len() as f64;
-    let mean = singles.iter().sum::<f64>() / k;
-    let sd = (singles.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
-    [
-        share(&|v| v <= 0.5 * x),
-        share(&|v| v > 1.5 * x),
-        share(&|v| v > 0.5 * x && v <= 1.5 * x),
-        100.0 * sd / mean,
-        share(&|v| (v - x).abs() <= 0.1 * x),
-    ]
-}
-
 #[test]
 fn a_lift_pauses_planting_and_the_quality_figures_match_the_drops() {
     // Noiseless: the control alone.
@@ -225,7 +198,7 @@ fn lift_and_lower_cv_tolerance(config: Config, cv_tolerance: f64) {
     // The supervisor's figures since Start against the drops, ±0.5
     // percentage points (the tolerance on the screen), the plant
     // count exactly (± the ramp's partition and the one in flight).
-    let want = indices(&[pass1.clone(), pass2.clone()], x);
+    let want = machine_sim::reference::iso_indices(&[pass1.clone(), pass2.clone()], x);
     let got = [
         shown.multiples_x10,
         shown.misses_x10,

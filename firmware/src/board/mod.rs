@@ -16,6 +16,9 @@
 //! [`drivers_enabled`], [`fatal`] and [`run_limit_ms`].
 
 mod fault;
+// The run-time memory and division routines of the target (they take the
+// place of compiler_builtins' weak symbols; `unsafe` by their ABI).
+mod mem;
 
 #[cfg(feature = "board-qemu")]
 mod qemu;

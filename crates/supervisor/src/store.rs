@@ -462,25 +462,35 @@ impl<F: NorFlash> SettingsStore<F> {
     /// Persists `settings`; returns the sequence number of the record that
     /// now holds them.
     ///
-    /// When the newest valid record already holds equal settings nothing is
-    /// written and its sequence is returned. Otherwise the slot that does not
+    /// When the newest valid record already holds these settings, byte for
+    /// byte in today's format, nothing is written and its sequence is
+    /// returned (a record of an older format is rewritten once in today's). Otherwise the slot that does not
     /// hold the newest valid record is erased and the new record is
     /// programmed there (one erase and `end / WRITE_SIZE` programs: 1 + 132
     /// on the STM32F1), with a sequence one above the newest complete record.
     /// If a slot cannot be read, nothing is written.
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
-        // The two slots (two decoded records) only for the decision: out of
-        // scope before the record is written and verified, so that the
-        // three never add up in one frame (the QEMU board's 8 KB).
+        // The decision reads the slots through one scratch decode; the
+        // records are compared as bytes (the encoding is canonical), so that
+        // no two decoded records add up in one frame (the QEMU board's 8 KB).
         let (target, sequence) = match self.plan_save(settings)? {
             Ok(unchanged) => return Ok(unchanged),
             Err(plan) => plan,
         };
         self.write_record(target, sequence, settings)?;
-        match self.scan(target) {
-            Slot::Valid(seq, ref s) if seq == sequence && s == settings => Ok(sequence),
-            Slot::Unreadable(e) => Err(StoreError::Flash(e)),
-            _ => Err(StoreError::Verify),
+        // The record must now scan as valid under its sequence (CRC and
+        // commit word read back, the payload decoded and validated) and hold
+        // exactly these settings' bytes.
+        let mut scratch = Settings::default();
+        match self.scan_into(target, &mut scratch) {
+            Slot::Valid(seq, ()) if seq == sequence => {}
+            Slot::Unreadable(e) => return Err(StoreError::Flash(e)),
+            _ => return Err(StoreError::Verify),
+        }
+        match self.holds(target, settings) {
+            Ok(true) => Ok(sequence),
+            Ok(false) | Err(ReadFail::Bounds) => Err(StoreError::Verify),
+            Err(ReadFail::Flash(e)) => Err(StoreError::Flash(e)),
         }
     }
 
@@ -493,7 +503,11 @@ impl<F: NorFlash> SettingsStore<F> {
         &mut self,
         settings: &Settings,
     ) -> Result<Result<u32, (SlotIndex, u32)>, StoreError<F::Error>> {
-        let slots = [self.scan(0), self.scan(1)];
+        let mut scratch = Settings::default();
+        let slots = [
+            self.scan_into(0, &mut scratch),
+            self.scan_into(1, &mut scratch),
+        ];
         if let Some(i) = slots.iter().position(|s| matches!(s, Slot::Unreadable(_))) {
             let [a, b] = slots;
             if let Slot::Unreadable(e) = if i == 0 { a } else { b } {
@@ -502,17 +516,50 @@ impl<F: NorFlash> SettingsStore<F> {
             return Err(StoreError::Verify);
         }
         let newest = newest_valid(&slots);
-        if let Some((_, seq, stored)) = newest {
-            if stored == settings {
-                return Ok(Ok(seq));
+        if let Some((slot, seq, ())) = newest {
+            match self.holds(slot, settings) {
+                Ok(true) => return Ok(Ok(seq)),
+                Ok(false) | Err(ReadFail::Bounds) => {}
+                Err(ReadFail::Flash(e)) => return Err(StoreError::Flash(e)),
             }
         }
         let target = match newest {
-            Some((slot, _, _)) => other(slot),
+            Some((slot, _, ())) => other(slot),
             None => least_valuable(&slots),
         };
         let sequence = newest_intact(&slots).map_or(1, |s| s.wrapping_add(1));
         Ok(Err((target, sequence)))
+    }
+
+    /// Whether a slot's payload is byte for byte `settings`' encoding in
+    /// today's format (a record of an older format never is: its first
+    /// byte, the format version, differs). The slot's record must be
+    /// complete (checked by the caller).
+    fn holds(&mut self, slot: SlotIndex, settings: &Settings) -> Result<bool, ReadFail<F::Error>> {
+        self.same_as(slot, HEADER_BYTES, &settings.encode())
+    }
+
+    /// Whether the bytes at `off` within a slot are `expected`, read
+    /// through [`MAX_ACCESS_SIZE`] chunks.
+    fn same_as(
+        &mut self,
+        slot: SlotIndex,
+        off: usize,
+        expected: &[u8],
+    ) -> Result<bool, ReadFail<F::Error>> {
+        let mut chunk = [0u8; MAX_ACCESS_SIZE];
+        for (i, want) in expected.chunks(MAX_ACCESS_SIZE).enumerate() {
+            let at = i
+                .checked_mul(MAX_ACCESS_SIZE)
+                .and_then(|o| o.checked_add(off))
+                .ok_or(ReadFail::Bounds)?;
+            let got = chunk.get_mut(..want.len()).ok_or(ReadFail::Bounds)?;
+            self.read(slot, at, got)?;
+            if got != want {
+                return Ok(false);
+            }
+        }
+        Ok(true)
     }
 
     /// Out of line, see [`SettingsStore::save`].
@@ -552,18 +599,11 @@ impl<F: NorFlash> SettingsStore<F> {
         self.flash.write(start, body)?;
         // Read back before committing: a record that did not program
         // correctly must never become valid.
-        let mut chunk = [0u8; MAX_ACCESS_SIZE];
-        for (i, expected) in body.chunks(MAX_ACCESS_SIZE).enumerate() {
-            let off = i.checked_mul(MAX_ACCESS_SIZE).ok_or_else(geometry)?;
-            let got = chunk.get_mut(..expected.len()).ok_or_else(geometry)?;
-            match self.read(slot, off, got) {
-                Ok(()) => {}
-                Err(ReadFail::Flash(e)) => return Err(StoreError::Flash(e)),
-                Err(ReadFail::Bounds) => return Err(geometry()),
-            }
-            if got != expected {
-                return Err(StoreError::Verify);
-            }
+        match self.same_as(slot, 0, body) {
+            Ok(true) => {}
+            Ok(false) => return Err(StoreError::Verify),
+            Err(ReadFail::Flash(e)) => return Err(StoreError::Flash(e)),
+            Err(ReadFail::Bounds) => return Err(geometry()),
         }
         let mut commit = [0u8; MAX_ACCESS_SIZE];
         commit
@@ -766,8 +806,8 @@ impl<F: NorFlash> SettingsStore<F> {
 }
 
 /// The newest valid slot: (index, sequence, settings).
-fn newest_valid<E>(slots: &[Slot<E>; 2]) -> Option<(SlotIndex, u32, &Settings)> {
-    let mut best: Option<(SlotIndex, u32, &Settings)> = None;
+fn newest_valid<E, S>(slots: &[Slot<E, S>; 2]) -> Option<(SlotIndex, u32, &S)> {
+    let mut best: Option<(SlotIndex, u32, &S)> = None;
     for (i, s) in slots.iter().enumerate() {
         if let Slot::Valid(seq, settings) = s {
             if best.is_none_or(|(_, b, _)| is_newer(*seq, b)) {
@@ -779,7 +819,7 @@ fn newest_valid<E>(slots: &[Slot<E>; 2]) -> Option<(SlotIndex, u32, &Settings)> 
 }
 
 /// The newest sequence among complete records (valid or of another version).
-fn newest_intact<E>(slots: &[Slot<E>; 2]) -> Option<u32> {
+fn newest_intact<E, S>(slots: &[Slot<E, S>; 2]) -> Option<u32> {
     slots
         .iter()
         .filter_map(Slot::intact_sequence)
@@ -789,7 +829,7 @@ fn newest_intact<E>(slots: &[Slot<E>; 2]) -> Option<u32> {
 /// With no valid record: the slot to overwrite. A blank or corrupt slot
 /// rather than a complete record of another version; of two such records,
 /// the older.
-fn least_valuable<E>(slots: &[Slot<E>; 2]) -> SlotIndex {
+fn least_valuable<E, S>(slots: &[Slot<E, S>; 2]) -> SlotIndex {
     match (slots[0].intact_sequence(), slots[1].intact_sequence()) {
         (Some(_), None) => 1,
         (Some(a), Some(b)) if is_newer(a, b) => 1,

@@ -186,27 +186,46 @@ impl DriveLinkSettings {
     #[must_use]
     pub fn to_bytes(&self) -> [u8; DRIVE_LINK_BYTES] {
         let g = &self.generic;
-        let mut out = [0u8; DRIVE_LINK_BYTES];
-        let mut w = Writer {
-            buf: &mut out,
-            at: 0,
-        };
-        w.put(&[
+        let [b0, b1, b2, b3] = g.baud.to_le_bytes();
+        let [sf0, sf1] = g.speed_feedback.to_le_bytes();
+        let [k0, k1, k2, k3] = g.micro_rpm_per_count.to_le_bytes();
+        let [fr0, fr1] = g.fault_register.to_le_bytes();
+        let [[m0, m1], [m2, m3], [m4, m5], [m6, m7], [m8, m9], [m10, m11]] =
+            g.fault_masks.map(u16::to_le_bytes);
+        let [c0, c1] = g.speed_command.unwrap_or(0).to_le_bytes();
+        [
             self.feedback as u8,
             self.command as u8,
             self.kind as u8,
             g.slave,
-        ]);
-        w.put(&g.baud.to_le_bytes());
-        w.put(&g.speed_feedback.to_le_bytes());
-        w.put(&g.micro_rpm_per_count.to_le_bytes());
-        w.put(&g.fault_register.to_le_bytes());
-        for m in g.fault_masks {
-            w.put(&m.to_le_bytes());
-        }
-        w.put(&[u8::from(g.speed_command.is_some())]);
-        w.put(&g.speed_command.unwrap_or(0).to_le_bytes());
-        out
+            b0,
+            b1,
+            b2,
+            b3,
+            sf0,
+            sf1,
+            k0,
+            k1,
+            k2,
+            k3,
+            fr0,
+            fr1,
+            m0,
+            m1,
+            m2,
+            m3,
+            m4,
+            m5,
+            m6,
+            m7,
+            m8,
+            m9,
+            m10,
+            m11,
+            u8::from(g.speed_command.is_some()),
+            c0,
+            c1,
+        ]
     }
 
     /// Reads [`Self::to_bytes`] and validates the result with
@@ -214,8 +233,8 @@ impl DriveLinkSettings {
     /// decode frame, on the QEMU board's boot path.
     #[inline(never)]
     pub fn from_bytes(b: &[u8; DRIVE_LINK_BYTES]) -> Result<Self, DriveLinkError> {
-        let mut r = Reader { buf: b, at: 0 };
-        let [f, c, k, slave] = r.take::<4>();
+        let [f, c, k, slave, b0, b1, b2, b3, sf0, sf1, k0, k1, k2, k3, fr0, fr1, m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, has, c0, c1] =
+            *b;
         let feedback = match f {
             0 => FeedbackSource::Encoder,
             1 => FeedbackSource::Driver,
@@ -233,19 +252,9 @@ impl DriveLinkSettings {
             2 => DriverKind::Generic,
             other => return Err(DriveLinkError::Byte(other)),
         };
-        let baud = u32::from_le_bytes(r.take());
-        let speed_feedback = u16::from_le_bytes(r.take());
-        let micro_rpm_per_count = i32::from_le_bytes(r.take());
-        let fault_register = u16::from_le_bytes(r.take());
-        let mut fault_masks = [0u16; 6];
-        for m in &mut fault_masks {
-            *m = u16::from_le_bytes(r.take());
-        }
-        let [has] = r.take::<1>();
-        let reg = u16::from_le_bytes(r.take());
         let speed_command = match has {
             0 => None,
-            1 => Some(reg),
+            1 => Some(u16::from_le_bytes([c0, c1])),
             other => return Err(DriveLinkError::Byte(other)),
         };
         let s = Self {
@@ -254,48 +263,17 @@ impl DriveLinkSettings {
             kind,
             generic: GenericSettings {
                 slave,
-                baud,
-                speed_feedback,
-                micro_rpm_per_count,
-                fault_register,
-                fault_masks,
+                baud: u32::from_le_bytes([b0, b1, b2, b3]),
+                speed_feedback: u16::from_le_bytes([sf0, sf1]),
+                micro_rpm_per_count: i32::from_le_bytes([k0, k1, k2, k3]),
+                fault_register: u16::from_le_bytes([fr0, fr1]),
+                fault_masks: [[m0, m1], [m2, m3], [m4, m5], [m6, m7], [m8, m9], [m10, m11]]
+                    .map(u16::from_le_bytes),
                 speed_command,
             },
         };
         s.build()?;
         Ok(s)
-    }
-}
-
-struct Writer<'a> {
-    buf: &'a mut [u8],
-    at: usize,
-}
-
-impl Writer<'_> {
-    fn put(&mut self, bytes: &[u8]) {
-        let end = self.at.saturating_add(bytes.len());
-        if let Some(dst) = self.buf.get_mut(self.at..end) {
-            dst.copy_from_slice(bytes);
-        }
-        self.at = end;
-    }
-}
-
-struct Reader<'a> {
-    buf: &'a [u8],
-    at: usize,
-}
-
-impl Reader<'_> {
-    fn take<const N: usize>(&mut self) -> [u8; N] {
-        let end = self.at.saturating_add(N);
-        let mut out = [0u8; N];
-        if let Some(src) = self.buf.get(self.at..end) {
-            out.copy_from_slice(src);
-        }
-        self.at = end;
-        out
     }
 }
 
@@ -470,5 +448,41 @@ mod tests {
         s.generic.baud = 115_200;
         // 1 433 + 2 000 + 2 × 1 750.
         assert_eq!(s.readback_delay_us(), 6_933);
+    }
+
+    #[test]
+    fn link_bytes_follow_the_documented_layout() {
+        // The layout of `to_bytes`' rustdoc, little-endian, written by hand:
+        // feedback 2 (both), command 1 (Modbus), kind 2 (generic), slave 7,
+        // baud 19 200 = 0x4B00, speed register 0x0102, scale −847 =
+        // 0xFFFFFCB1, fault register 0x0304, masks 0x0001, 0x0002, 0x0004,
+        // 0x0008, 0x0010, 0x0020, command present, register 0x0506.
+        let s = DriveLinkSettings {
+            feedback: FeedbackSource::Both,
+            command: CommandPath::Modbus,
+            kind: DriverKind::Generic,
+            generic: GenericSettings {
+                slave: 7,
+                baud: 19_200,
+                speed_feedback: 0x0102,
+                micro_rpm_per_count: -847,
+                fault_register: 0x0304,
+                fault_masks: [1, 2, 4, 8, 16, 32],
+                speed_command: Some(0x0506),
+            },
+        };
+        let bytes: [u8; DRIVE_LINK_BYTES] = [
+            2, 1, 2, 7, 0x00, 0x4B, 0, 0, 0x02, 0x01, 0xB1, 0xFC, 0xFF, 0xFF, 0x04, 0x03, 1, 0, 2,
+            0, 4, 0, 8, 0, 16, 0, 32, 0, 1, 0x06, 0x05,
+        ];
+        assert_eq!(s.to_bytes(), bytes);
+        assert_eq!(DriveLinkSettings::from_bytes(&bytes), Ok(s));
+        // An unknown presence byte is refused, not read as "none".
+        let mut bad = bytes;
+        bad[28] = 2;
+        assert_eq!(
+            DriveLinkSettings::from_bytes(&bad),
+            Err(DriveLinkError::Byte(2))
+        );
     }
 }

@@ -249,19 +249,27 @@ impl fmt::Display for ProfileError {
     }
 }
 
+/// The checks every profile's line settings pass: slave id 1–247, a baud
+/// rate of [`BAUD_RATES`], a nonzero feedback scale within ±[`MAX_SCALE`].
+pub fn check_line(slave: u8, baud: u32, micro_rpm_per_count: i32) -> Result<(), ProfileError> {
+    if !(1..=247).contains(&slave) {
+        return Err(ProfileError::SlaveId(slave));
+    }
+    if !BAUD_RATES.contains(&baud) {
+        return Err(ProfileError::Baud(baud));
+    }
+    let s = micro_rpm_per_count;
+    if s == 0 || s.unsigned_abs() > MAX_SCALE.unsigned_abs() {
+        return Err(ProfileError::Scale(s));
+    }
+    Ok(())
+}
+
 impl GenericSettings {
     /// Validates the settings into a profile.
     pub fn build(&self) -> Result<DriverProfile, ProfileError> {
-        if !(1..=247).contains(&self.slave) {
-            return Err(ProfileError::SlaveId(self.slave));
-        }
-        if !BAUD_RATES.contains(&self.baud) {
-            return Err(ProfileError::Baud(self.baud));
-        }
         let s = self.micro_rpm_per_count;
-        if s == 0 || s.unsigned_abs() > MAX_SCALE.unsigned_abs() {
-            return Err(ProfileError::Scale(s));
-        }
+        check_line(self.slave, self.baud, s)?;
         let mut seen = 0u16;
         for &m in &self.fault_masks {
             if seen & m != 0 {

@@ -1366,10 +1366,11 @@ impl Supervisor {
         x: U16F16,
         k: kinematics::units::Coefficient,
     ) -> Result<(), ()> {
+        let cal = &mut self.settings.calibration;
         let table = match kind {
-            CalibrationKind::SpeedK1 => &self.settings.calibration.k1,
-            CalibrationKind::SlipK2 => &self.settings.calibration.k2,
-            CalibrationKind::BeltK3 => &self.settings.calibration.k3,
+            CalibrationKind::SpeedK1 => &mut cal.k1,
+            CalibrationKind::SlipK2 => &mut cal.k2,
+            CalibrationKind::BeltK3 => &mut cal.k3,
         };
         let near = const { U16F16::lit("0.05") };
         let mut points: heapless::Vec<TablePoint, 8> = heapless::Vec::new();
@@ -1389,12 +1390,7 @@ impl Supervisor {
         if !placed {
             points.push(TablePoint::new(x, k)).map_err(|_| ())?;
         }
-        let table = CoeffTable::new(&points).map_err(|_| ())?;
-        match kind {
-            CalibrationKind::SpeedK1 => self.settings.calibration.k1 = table,
-            CalibrationKind::SlipK2 => self.settings.calibration.k2 = table,
-            CalibrationKind::BeltK3 => self.settings.calibration.k3 = table,
-        }
+        *table = CoeffTable::new(&points).map_err(|_| ())?;
         Ok(())
     }
 
@@ -1940,9 +1936,9 @@ impl Supervisor {
     #[inline(never)]
     fn fall_back(&mut self) {
         self.fallback = true;
-        if let Ok(mut c) = fallback_config(&self.control_model()).build() {
+        self.restore_controller();
+        if let Drum::Control(c) = &mut self.drum {
             c.start();
-            self.drum = Drum::Control(c);
         }
         if !self.alarm.is_some_and(|a| a.is_latched()) {
             self.alarm = Some(Alarm::DrumUnstable);

@@ -8,7 +8,7 @@
 //! [`LinkSample`] and takes back the speed command and the driver's enable.
 
 use drive_link::cross_check::CrossCheck;
-use drive_link::profile::{DriverProfile, GenericSettings, ProfileError, ZLAC8015D};
+use drive_link::profile::{check_line, DriverProfile, GenericSettings, ProfileError, ZLAC8015D};
 
 /// Where the drum's measured speed comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -130,24 +130,19 @@ impl DriveLinkSettings {
         let profile = match self.kind {
             DriverKind::None => None,
             DriverKind::Zlac8015d => {
-                let zlac = GenericSettings {
-                    slave: self.generic.slave,
-                    baud: self.generic.baud,
-                    micro_rpm_per_count: self.generic.micro_rpm_per_count,
-                    ..GENERIC_DEFAULT
-                }
-                .build()
-                .map_err(DriveLinkError::Profile)?;
-                let command =
-                    zlac.micro_rpm_per_count
-                        .checked_mul(10)
-                        .ok_or(DriveLinkError::Profile(ProfileError::Scale(
-                            zlac.micro_rpm_per_count,
-                        )))?;
+                // The ZLAC8015D's registers and fault bits with the generic
+                // block's slave id, baud and feedback scale; its speed
+                // command counts whole r/min (ten feedback counts).
+                let g = &self.generic;
+                let scale = g.micro_rpm_per_count;
+                check_line(g.slave, g.baud, scale).map_err(DriveLinkError::Profile)?;
+                let command = scale
+                    .checked_mul(10)
+                    .ok_or(DriveLinkError::Profile(ProfileError::Scale(scale)))?;
                 Some(DriverProfile {
-                    slave: zlac.slave,
-                    baud: zlac.baud,
-                    micro_rpm_per_count: zlac.micro_rpm_per_count,
+                    slave: g.slave,
+                    baud: g.baud,
+                    micro_rpm_per_count: scale,
                     speed_command: ZLAC8015D.speed_command.map(|(r, _)| (r, command)),
                     ..ZLAC8015D
                 })

@@ -340,6 +340,11 @@ mod app {
         "This firmware runs profile B only"
     };
 
+    /// The screen's message when the saved settings name a drum driver on
+    /// an image without the link.
+    #[cfg(not(feature = "drive-link"))]
+    const NO_DRIVE_LINK: &str = "Drive link not in this image";
+
     /// Builds the machine of the saved profile in its static slot; the
     /// notice says why it is not the saved one.
     #[inline(never)]
@@ -359,6 +364,15 @@ mod app {
                 Profile::SeedlingBelt
             };
             notice = Some(NOT_BUILT_IN);
+        }
+        // Saved link settings on an image without the link (docs/drive-link.md,
+        // "Images"): the drum runs on its encoder and the PWM, and the
+        // screen says so; the record keeps them until the operator saves.
+        #[cfg(not(feature = "drive-link"))]
+        if settings.drive_link.kind != supervisor::drive_link::DriverKind::None {
+            defmt::warn!("settings: the drive link is not in this image: encoder and PWM");
+            settings.drive_link = supervisor::drive_link::DriveLinkSettings::default();
+            notice = Some(NO_DRIVE_LINK);
         }
         let profile = settings.profile;
         match build_profile(slot, settings) {

@@ -329,3 +329,51 @@ fn crc_errors_and_late_replies_are_survived() {
     let last = sim_samples(&logs).last().copied().unwrap();
     assert!(last.ccr > 0 && last.drum_rpm > 20.0, "{last:?}");
 }
+
+/// An image without the link (`Image::ProfileAOnly`, like the real board's
+/// default) booting on saved settings that name the driver's read-back as
+/// the feedback: it says so on the screen and in the log, runs the drum on
+/// its encoder (no stall alarm from a read-back that never comes) and
+/// tracks eq. 7 within 1 % like profile_a.rs's encoder test. Before the
+/// image sanitised the settings, the read-back feedback integrated nothing
+/// and the drum stalled ("alarm: DrumStall" 0.2 s after Start).
+#[test]
+fn an_image_without_the_link_runs_saved_link_settings_on_its_encoder() {
+    let s = settings(FeedbackSource::Driver, CommandPath::Pwm, 115_200);
+    let flash = flash_with("nolink", &s);
+    let options = BootOptions {
+        run_ms: Some(9_000),
+        flash: Some(flash.clone()),
+        scenario: ["gear=2", "noise=0", "tau=2500"]
+            .iter()
+            .map(|w| w.to_string())
+            .collect(),
+        echo_logs: std::env::var_os("ECHO").is_some(),
+        ..BootOptions::default()
+    };
+    let mut bench = Bench::boot_image(Image::ProfileAOnly, &options).expect("boot QEMU");
+    assert!(
+        bench
+            .pump_until(Duration::from_secs(20), |s| {
+                s.page() == 1 && s.text("tmsg") == Some("Drive link not in this image")
+            })
+            .unwrap(),
+        "no notice on the screen"
+    );
+    pump_to(&mut bench, 2_000);
+    bench.tap("badapt").unwrap();
+    bench.tap("bstart").unwrap();
+    let (logs, _) = run_to_end(bench);
+    let _ = std::fs::remove_file(&flash);
+    assert!(logs
+        .iter()
+        .any(|l| l.contains("settings: the drive link is not in this image")));
+    assert!(
+        !logs.iter().any(|l| l.contains("alarm: ")),
+        "an alarm: {:?}",
+        logs.iter().find(|l| l.contains("alarm: "))
+    );
+    let start = time_of(&logs, "drum: Running");
+    let (worst, at) = worst_tracking(&sim_samples(&logs), start + 2_000, start + 6_000);
+    assert!(worst <= 0.01, "worst {:.2} % at {at} ms", worst * 100.0);
+}

@@ -106,6 +106,13 @@ pub enum DriveLinkError {
     Profile(ProfileError),
     /// A byte of the stored block is not a known value.
     Byte(u8),
+    /// The driver's speed register (signed 16 bit) ends below the drum's
+    /// top speed at this scale: a read-back there would be saturated, not
+    /// the drum's speed. Carries where it ends, milli-r/min of the drum.
+    SpeedRange {
+        /// 32 767 counts × the scale, milli-r/min.
+        top_milli_rpm: u32,
+    },
 }
 
 impl core::fmt::Display for DriveLinkError {
@@ -115,6 +122,12 @@ impl core::fmt::Display for DriveLinkError {
             Self::NoSpeedCommand => f.write_str("this driver takes no speed command"),
             Self::Profile(e) => write!(f, "driver profile: {e}"),
             Self::Byte(b) => write!(f, "invalid drive link byte {b}"),
+            Self::SpeedRange { top_milli_rpm } => write!(
+                f,
+                "driver speed register ends at {}.{:03} r/min, below the drum's 44.7",
+                top_milli_rpm / 1000,
+                top_milli_rpm % 1000
+            ),
         }
     }
 }
@@ -149,6 +162,20 @@ impl DriveLinkSettings {
             }
             DriverKind::Generic => Some(self.generic.build().map_err(DriveLinkError::Profile)?),
         };
+        if let Some(p) = profile {
+            // Every drum speed the machine runs (up to N_MAX, eq. 7's cap)
+            // must be read back exactly: 32 767 counts × scale ≥ 44.7 r/min,
+            // i.e. |scale| ≥ 1365 µr/min per count (a ZLAC8015D's 0.1 r/min
+            // behind paper A's 118:1 gearbox, 847, ends at 27.75 r/min).
+            let top_micro = u64::from(p.micro_rpm_per_count.unsigned_abs())
+                .saturating_mul(i16::MAX.unsigned_abs().into());
+            let need_micro = u64::from(kinematics::consts::N_MAX.to_milli()).saturating_mul(1000);
+            if top_micro < need_micro {
+                return Err(DriveLinkError::SpeedRange {
+                    top_milli_rpm: u32::try_from(top_micro / 1000).unwrap_or(u32::MAX),
+                });
+            }
+        }
         let uses_link =
             self.feedback != FeedbackSource::Encoder || self.command == CommandPath::Modbus;
         match profile {
@@ -414,12 +441,35 @@ mod tests {
         s.feedback = FeedbackSource::Driver;
         assert_eq!(s.build(), Err(DriveLinkError::NoDriver));
         s.kind = DriverKind::Zlac8015d;
+        // Paper A's 118:1 gearbox behind the ZLAC8015D's 0.1 r/min: its
+        // speed register ends at 32 767 × 847 µr/min = 27.753 r/min, below
+        // the drum's 44.7 (hand-computed): refused.
+        assert_eq!(
+            s.build(),
+            Err(DriveLinkError::SpeedRange {
+                top_milli_rpm: 27_753
+            })
+        );
+        assert_eq!(
+            std::format!("{}", s.build().unwrap_err()),
+            "driver speed register ends at 27.753 r/min, below the drum's 44.7"
+        );
+        // The edge: 44.7 r/min / 32 767 = 1364.18 µr/min per count, so
+        // 1364 ends at 44.694 r/min (refused) and 1365 at 44.727 (taken).
+        s.generic.micro_rpm_per_count = 1364;
+        assert!(s.build().is_err());
+        s.generic.micro_rpm_per_count = -1364;
+        assert!(s.build().is_err());
+        s.generic.micro_rpm_per_count = 1365;
+        assert!(s.build().is_ok());
+        // A 59:1 gearbox: 100 000 / 59 = 1695.
+        s.generic.micro_rpm_per_count = 1695;
         let p = s.build().unwrap().unwrap();
-        // The ZLAC8015D's registers, paper A's gearbox in the scale, the
-        // command in whole r/min: ten times the feedback's scale.
+        // The ZLAC8015D's registers, the gearbox in the scale, the command
+        // in whole r/min: ten times the feedback's scale.
         assert_eq!(p.speed_feedback, 0x20AB);
-        assert_eq!(p.micro_rpm_per_count, 847);
-        assert_eq!(p.speed_command, Some((0x2088, 8470)));
+        assert_eq!(p.micro_rpm_per_count, 1695);
+        assert_eq!(p.speed_command, Some((0x2088, 16_950)));
         assert_eq!(p.baud, 115_200);
         s.command = CommandPath::Modbus;
         s.kind = DriverKind::Generic;
@@ -449,8 +499,8 @@ mod tests {
     fn link_bytes_follow_the_documented_layout() {
         // The layout of `to_bytes`' rustdoc, little-endian, written by hand:
         // feedback 2 (both), command 1 (Modbus), kind 2 (generic), slave 7,
-        // baud 19 200 = 0x4B00, speed register 0x0102, scale −847 =
-        // 0xFFFFFCB1, fault register 0x0304, masks 0x0001, 0x0002, 0x0004,
+        // baud 19 200 = 0x4B00, speed register 0x0102, scale −1695 =
+        // 0xFFFFF961, fault register 0x0304, masks 0x0001, 0x0002, 0x0004,
         // 0x0008, 0x0010, 0x0020, command present, register 0x0506.
         let s = DriveLinkSettings {
             feedback: FeedbackSource::Both,
@@ -460,14 +510,14 @@ mod tests {
                 slave: 7,
                 baud: 19_200,
                 speed_feedback: 0x0102,
-                micro_rpm_per_count: -847,
+                micro_rpm_per_count: -1695,
                 fault_register: 0x0304,
                 fault_masks: [1, 2, 4, 8, 16, 32],
                 speed_command: Some(0x0506),
             },
         };
         let bytes: [u8; DRIVE_LINK_BYTES] = [
-            2, 1, 2, 7, 0x00, 0x4B, 0, 0, 0x02, 0x01, 0xB1, 0xFC, 0xFF, 0xFF, 0x04, 0x03, 1, 0, 2,
+            2, 1, 2, 7, 0x00, 0x4B, 0, 0, 0x02, 0x01, 0x61, 0xF9, 0xFF, 0xFF, 0x04, 0x03, 1, 0, 2,
             0, 4, 0, 8, 0, 16, 0, 32, 0, 1, 0x06, 0x05,
         ];
         assert_eq!(s.to_bytes(), bytes);

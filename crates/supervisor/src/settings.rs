@@ -582,7 +582,7 @@ mod tests {
                     slave: 17,
                     baud: 9600,
                     speed_feedback: 0x1234,
-                    micro_rpm_per_count: -250,
+                    micro_rpm_per_count: -2500,
                     fault_register: 0x0100,
                     fault_masks: [1, 2, 4, 8, 0x10, 0x8000],
                     speed_command: Some(0x0200),
@@ -605,12 +605,12 @@ mod tests {
             [7, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02, 0xE8, 0x03]
         );
         // Format 5's drive link block: both (2), Modbus (1), generic (2),
-        // slave 17; 9600 = 0x2580 (u32); 0x1234; −250 = 0xFFFFFF06 (i32);
+        // slave 17; 9600 = 0x2580 (u32); 0x1234; −2500 = 0xFFFFF63C (i32);
         // 0x0100; the masks; command present (1), 0x0200.
         assert_eq!(
             b[252..],
             [
-                2, 1, 2, 17, 0x80, 0x25, 0, 0, 0x34, 0x12, 0x06, 0xFF, 0xFF, 0xFF, 0x00, 0x01, 1,
+                2, 1, 2, 17, 0x80, 0x25, 0, 0, 0x34, 0x12, 0x3C, 0xF6, 0xFF, 0xFF, 0x00, 0x01, 1,
                 0, 2, 0, 4, 0, 8, 0, 0x10, 0, 0x00, 0x80, 1, 0x00, 0x02
             ]
         );
@@ -749,8 +749,20 @@ mod tests {
             std::format!("{e}"),
             "driver feedback or command needs a driver profile"
         );
-        // With the ZLAC8015D it loads; slave id 0 (byte 255) is refused.
+        // With the ZLAC8015D behind paper A's 118:1 (the default scale,
+        // 847 µr/min per count) its speed register ends at 27.753 r/min:
+        // refused; with a 59:1 gearbox (1695 = 0x069F, bytes 262–265) it
+        // loads; slave id 0 (byte 255) is refused.
         b[254] = 1;
+        assert_eq!(
+            decode(&b),
+            Err(SettingsError::DriveLink(
+                crate::drive_link::DriveLinkError::SpeedRange {
+                    top_milli_rpm: 27_753
+                }
+            ))
+        );
+        b[262..266].copy_from_slice(&1695i32.to_le_bytes());
         assert_eq!(
             decode(&b).map(|s| s.drive_link.feedback),
             Ok(FeedbackSource::Driver)
@@ -1047,6 +1059,10 @@ mod tests {
                             DriveLinkSettings {
                                 feedback: FeedbackSource::Driver,
                                 kind: DriverKind::Zlac8015d,
+                                generic: drive_link::profile::GenericSettings {
+                                    micro_rpm_per_count: 1695,
+                                    ..crate::drive_link::GENERIC_DEFAULT
+                                },
                                 ..DriveLinkSettings::default()
                             }
                         } else {

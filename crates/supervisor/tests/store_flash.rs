@@ -289,7 +289,11 @@ fn settings_b() -> Settings {
             feedback: supervisor::drive_link::FeedbackSource::Driver,
             command: supervisor::drive_link::CommandPath::Modbus,
             kind: supervisor::drive_link::DriverKind::Zlac8015d,
-            ..Default::default()
+            // A 59:1 gearbox behind the driver's 0.1 r/min (100 000 / 59).
+            generic: drive_link::profile::GenericSettings {
+                micro_rpm_per_count: 1695,
+                ..supervisor::drive_link::GENERIC_DEFAULT
+            },
         },
     }
 }

@@ -45,8 +45,13 @@ impl Crc32 {
     /// Feeds `bytes`.
     #[must_use]
     pub fn update(mut self, bytes: &[u8]) -> Self {
-        self.digest.update(bytes);
+        self.feed(bytes);
         self
+    }
+
+    /// Feeds `bytes` in place.
+    pub fn feed(&mut self, bytes: &[u8]) {
+        self.digest.update(bytes);
     }
 
     /// The CRC of everything fed so far.

@@ -539,27 +539,17 @@ impl<F: NorFlash> SettingsStore<F> {
         self.same_as(slot, HEADER_BYTES, &settings.encode())
     }
 
-    /// Whether the bytes at `off` within a slot are `expected`, read
-    /// through [`MAX_ACCESS_SIZE`] chunks.
+    /// Whether the bytes at `off` within a slot are `expected`.
     fn same_as(
         &mut self,
         slot: SlotIndex,
         off: usize,
         expected: &[u8],
     ) -> Result<bool, ReadFail<F::Error>> {
-        let mut chunk = [0u8; MAX_ACCESS_SIZE];
-        for (i, want) in expected.chunks(MAX_ACCESS_SIZE).enumerate() {
-            let at = i
-                .checked_mul(MAX_ACCESS_SIZE)
-                .and_then(|o| o.checked_add(off))
-                .ok_or(ReadFail::Bounds)?;
-            let got = chunk.get_mut(..want.len()).ok_or(ReadFail::Bounds)?;
-            self.read(slot, at, got)?;
-            if got != want {
-                return Ok(false);
-            }
-        }
-        Ok(true)
+        let end = off.checked_add(expected.len()).ok_or(ReadFail::Bounds)?;
+        self.walk(slot, off, end, &mut |at, got| {
+            expected.get(at..at.wrapping_add(got.len())) == Some(got)
+        })
     }
 
     /// Out of line, see [`SettingsStore::save`].
@@ -666,39 +656,46 @@ impl<F: NorFlash> SettingsStore<F> {
         Ok(())
     }
 
-    /// CRC-32 of `[from, to)` within a slot. Out of line, like
-    /// [`Self::blank`] and [`Self::decode_slot`]: their buffers must not add up
-    /// in `scan`'s frame (it runs in `init`, on the QEMU board's 4.2 KB stack).
+    /// Reads `[from, to)` of a slot in [`MAX_ACCESS_SIZE`] chunks and
+    /// hands each to `visit` with its offset, until `visit` says stop
+    /// (`false`): one loop for the CRC, the blank check and the byte
+    /// comparisons. Out of line, so that its chunk buffer does not add to
+    /// `scan`'s frame (it runs in `init`, on the QEMU board's 4.2 KB stack).
     #[inline(never)]
-    fn crc(&mut self, slot: SlotIndex, from: usize, to: usize) -> Result<u32, ReadFail<F::Error>> {
-        let mut crc = Crc32::new();
+    fn walk(
+        &mut self,
+        slot: SlotIndex,
+        from: usize,
+        to: usize,
+        visit: &mut dyn FnMut(usize, &[u8]) -> bool,
+    ) -> Result<bool, ReadFail<F::Error>> {
         let mut pos = from;
         let mut buf = [0u8; MAX_ACCESS_SIZE];
         while pos < to {
             let n = to.saturating_sub(pos).min(MAX_ACCESS_SIZE);
             let b = buf.get_mut(..n).ok_or(ReadFail::Bounds)?;
             self.read(slot, pos, b)?;
-            crc = crc.update(b);
-            pos = pos.checked_add(n).ok_or(ReadFail::Bounds)?;
-        }
-        Ok(crc.finish())
-    }
-
-    /// Whether `[0, to)` of a slot reads erased.
-    #[inline(never)]
-    fn blank(&mut self, slot: SlotIndex, to: usize) -> Result<bool, ReadFail<F::Error>> {
-        let mut pos = 0usize;
-        let mut buf = [0u8; MAX_ACCESS_SIZE];
-        while pos < to {
-            let n = to.saturating_sub(pos).min(MAX_ACCESS_SIZE);
-            let b = buf.get_mut(..n).ok_or(ReadFail::Bounds)?;
-            self.read(slot, pos, b)?;
-            if b.iter().any(|&x| x != 0xFF) {
+            if !visit(pos.wrapping_sub(from), b) {
                 return Ok(false);
             }
             pos = pos.checked_add(n).ok_or(ReadFail::Bounds)?;
         }
         Ok(true)
+    }
+
+    /// CRC-32 of `[from, to)` within a slot.
+    fn crc(&mut self, slot: SlotIndex, from: usize, to: usize) -> Result<u32, ReadFail<F::Error>> {
+        let mut crc = Crc32::new();
+        self.walk(slot, from, to, &mut |_, b| {
+            crc.feed(b);
+            true
+        })?;
+        Ok(crc.finish())
+    }
+
+    /// Whether `[0, to)` of a slot reads erased.
+    fn blank(&mut self, slot: SlotIndex, to: usize) -> Result<bool, ReadFail<F::Error>> {
+        self.walk(slot, 0, to, &mut |_, b| b.iter().all(|&x| x == 0xFF))
     }
 
     /// A slot with its settings (for `save`, which compares them).

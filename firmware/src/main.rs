@@ -990,13 +990,19 @@ mod app {
                         refresh_settings(cx);
                         Effect::Message(NOT_BUILT_IN)
                     }
-                    // Start only with the stop input proven closed; it also
-                    // releases the stop latch.
-                    Command::Start => match cx.shared.stop.lock(|s| s.latch.start()) {
-                        Ok(()) => cx.shared.machine.lock(|m| m.command(cmd)),
-                        Err(e) => Effect::Message(e.message()),
-                    },
-                    _ => cx.shared.machine.lock(|m| m.command(cmd)),
+                    _ => {
+                        // Start only with the stop input proven closed; it
+                        // also releases the stop latch. (One lock site for
+                        // every command: each costs flash.)
+                        let refused = match cmd {
+                            Command::Start => cx.shared.stop.lock(|s| s.latch.start()).err(),
+                            _ => None,
+                        };
+                        match refused {
+                            Some(e) => Effect::Message(e.message()),
+                            None => cx.shared.machine.lock(|m| m.command(cmd)),
+                        }
+                    }
                 };
                 match effect {
                     Effect::None => {}
@@ -1029,15 +1035,20 @@ mod app {
                 refresh_settings(cx);
                 // An alarm latched while the screen was away, or before it
                 // restarted, goes back on it.
+                // (Both read first, then one lock of the screen: each lock
+                // site costs flash.)
                 #[cfg(feature = "profile-a")]
-                if let Some(alarm) = cx.shared.machine.lock(|m| latched_alarm(m)) {
-                    cx.shared.hmi.lock(|hmi| show_alarm(hmi, alarm));
-                }
-                if cx.shared.stop.lock(|s| s.latch.is_latched()) {
-                    cx.shared.hmi.lock(|hmi| {
+                let alarm = cx.shared.machine.lock(|m| latched_alarm(m));
+                let stop_latched = cx.shared.stop.lock(|s| s.latch.is_latched());
+                cx.shared.hmi.lock(|hmi| {
+                    #[cfg(feature = "profile-a")]
+                    if let Some(alarm) = alarm {
+                        show_alarm(hmi, alarm);
+                    }
+                    if stop_latched {
                         let _ = hmi.show_alarm(STOP_INPUT_ALARM);
-                    });
-                }
+                    }
+                });
                 if let Some(notice) = cx.local.boot_notice.take() {
                     say(cx, notice);
                 }
@@ -1162,15 +1173,19 @@ mod app {
         loop {
             let uptime = uptime_ms();
             cx.local.led.set(runs.is_multiple_of(2));
-            let screen = cx.shared.machine.lock(|m| m.screen_status());
+            // The log line and the screen's values from one lock (one lock
+            // site less in flash; the line shows the same instant).
+            let screen = cx.shared.machine.lock(|m| {
+                if runs.is_multiple_of(STATUS_LOG_EVERY) {
+                    log_status(m, uptime);
+                }
+                m.screen_status()
+            });
             cx.shared.hmi.lock(|hmi| {
                 if hmi.write_status(&screen).is_err() {
                     stats::HMI_TX_DROPPED.inc();
                 }
             });
-            if runs.is_multiple_of(STATUS_LOG_EVERY) {
-                cx.shared.machine.lock(|m| log_status(m, uptime));
-            }
             if let Some(limit) = *cx.local.run_limit_ms {
                 if uptime >= limit {
                     defmt::info!("run limit of {=u32} ms reached, exiting", limit);
@@ -1278,14 +1293,22 @@ mod app {
         while let Ok(()) = cx.local.saves_out.recv().await {
             let mut waited = 0;
             let text = loop {
-                if cx.shared.machine.lock(|m| motors_commanded(m)) {
-                    defmt::warn!("settings: save refused, the motors were started after Save");
-                    break "Motors running: settings not saved";
-                }
-                if !board::drivers_enabled() {
-                    // From here to the end of the save: no await.
-                    let store = &mut *cx.local.store;
-                    break cx.shared.machine.lock(|m| save_settings(store, m));
+                // The check and the save under one lock (one lock site in
+                // flash; nothing can start the motors in between).
+                let store = &mut *cx.local.store;
+                let done = cx.shared.machine.lock(|m| {
+                    if motors_commanded(m) {
+                        defmt::warn!("settings: save refused, the motors were started after Save");
+                        Some("Motors running: settings not saved")
+                    } else if !board::drivers_enabled() {
+                        // From here to the end of the save: no await.
+                        Some(save_settings(store, m))
+                    } else {
+                        None
+                    }
+                });
+                if let Some(text) = done {
+                    break text;
                 }
                 if waited >= SAVE_WAIT_PERIODS {
                     defmt::warn!("settings: save refused, the motor drivers are still enabled");

@@ -53,7 +53,7 @@ fn pump_until_log(bench: &mut Bench, what: &str, pred: impl Fn(&str) -> bool) ->
 fn touch(page: Page, name: &str, press: bool) -> Vec<u8> {
     let c = COMPONENTS
         .iter()
-        .find(|c| c.page == page && c.name == name)
+        .find(|c| c.page == page && c.name() == name)
         .expect("component in the contract");
     vec![0x65, page.id(), c.id, u8::from(press), 0xFF, 0xFF, 0xFF]
 }

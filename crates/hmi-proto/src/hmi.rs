@@ -577,6 +577,9 @@ impl Hmi {
         let Role::Action(action) = comp.role else {
             return;
         };
+        // The actions that change a setting shown on the screen change this
+        // copy; it is written once below (one copy and one call in flash).
+        let mut s = self.settings;
         let cmd = match action {
             Action::ShowPage(p) => {
                 let _ = self.show_page(p);
@@ -587,14 +590,7 @@ impl Hmi {
                 None
             }
             Action::NextProfile => {
-                let mut s = self.settings;
                 s.profile = s.profile.next();
-                let _ = self.set_settings(s);
-                let _ = self.show_message(if s.profile == self.active_profile {
-                    ""
-                } else {
-                    PROFILE_RESTART_MESSAGE
-                });
                 Some(Command::SelectProfile(s.profile))
             }
             Action::SelectMode(m) => {
@@ -615,20 +611,15 @@ impl Hmi {
             Action::Start => Some(Command::Start),
             Action::Stop => Some(Command::Stop),
             Action::GearDown | Action::GearUp => {
-                let g = if action == Action::GearUp {
-                    self.settings.gear.next()
+                s.gear = if action == Action::GearUp {
+                    s.gear.next()
                 } else {
-                    self.settings.gear.prev()
+                    s.gear.prev()
                 };
-                let mut s = self.settings;
-                s.gear = g;
-                let _ = self.set_settings(s);
-                Some(Command::SelectGear(g))
+                Some(Command::SelectGear(s.gear))
             }
             Action::NextCalibration => {
-                let mut s = self.settings;
                 s.calibration_kind = s.calibration_kind.next();
-                let _ = self.set_settings(s);
                 Some(Command::SelectCalibration(s.calibration_kind))
             }
             Action::CalibrationStart => Some(Command::CalibrationStart),
@@ -642,15 +633,11 @@ impl Hmi {
             Action::IdentifyDrive => Some(Command::IdentifyDrive),
             Action::AcceptDriveModel => Some(Command::AcceptDriveModel),
             Action::ToggleEncoderDirection => {
-                let mut s = self.settings;
                 s.drum_encoder_reversed = !s.drum_encoder_reversed;
-                let _ = self.set_settings(s);
                 Some(Command::SetDrumEncoderReversed(s.drum_encoder_reversed))
             }
             Action::ToggleWorkSwitch => {
-                let mut s = self.settings;
                 s.work_switch_fitted = !s.work_switch_fitted;
-                let _ = self.set_settings(s);
                 Some(Command::SetWorkSwitchFitted(s.work_switch_fitted))
             }
             // The label changes when the supervisor's settings come back
@@ -659,6 +646,16 @@ impl Hmi {
                 Some(Command::SetSpeedFollowing(!self.settings.speed_following))
             }
         };
+        if s != self.settings {
+            let _ = self.set_settings(s);
+        }
+        if action == Action::NextProfile {
+            let _ = self.show_message(if s.profile == self.active_profile {
+                ""
+            } else {
+                PROFILE_RESTART_MESSAGE
+            });
+        }
         if let Some(c) = cmd {
             self.event(Event::Command(c));
         }

@@ -987,6 +987,10 @@ pub enum Kind {
 }
 
 /// One component of the contract.
+///
+/// Eight bytes in flash: the name is an offset and length into one blob of
+/// every name ([`Component::name`]), built at compile time from the table's
+/// source (`docs/hmi.md`, "Flash").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Component {
@@ -994,8 +998,8 @@ pub struct Component {
     pub page: Page,
     /// Component id (creation order on the page, the page itself is 0).
     pub id: u8,
-    /// Object name (`objname`).
-    pub name: &'static str,
+    /// Object name (`objname`): `offset << 4 | length` in [`NAMES`].
+    name: u16,
     /// Type to create.
     pub kind: Kind,
     /// What it does.
@@ -1003,9 +1007,18 @@ pub struct Component {
 }
 
 impl Component {
+    /// Object name (`objname`).
+    pub fn name(&self) -> &'static str {
+        let start = usize::from(self.name >> NAME_LEN_BITS);
+        let len = usize::from(self.name & NAME_LEN_MASK);
+        // Always in the blob and on character boundaries (checked by the
+        // test `packed_names_are_the_sources`); "" is never reached.
+        NAMES.get(start..start.saturating_add(len)).unwrap_or("")
+    }
+
     /// The name as an [`ObjName`] (the table's names are checked by a test).
-    pub const fn obj(&self) -> ObjName<'static> {
-        ObjName::new_unchecked(self.name)
+    pub fn obj(&self) -> ObjName<'static> {
+        ObjName::new_unchecked(self.name())
     }
 
     /// Looks up the component a touch event names.
@@ -1026,8 +1039,17 @@ impl Component {
     }
 }
 
-const fn c(page: Page, id: u8, name: &'static str, kind: Kind, role: Role) -> Component {
-    Component {
+/// One row of the table's source ([`SOURCE`]); never in the image.
+struct Source {
+    page: Page,
+    id: u8,
+    name: &'static str,
+    kind: Kind,
+    role: Role,
+}
+
+const fn c(page: Page, id: u8, name: &'static str, kind: Kind, role: Role) -> Source {
+    Source {
         page,
         id,
         name,
@@ -1036,13 +1058,126 @@ const fn c(page: Page, id: u8, name: &'static str, kind: Kind, role: Role) -> Co
     }
 }
 
+/// Bits of a packed name holding its length (names have at most 15 bytes;
+/// the blob at most 4095).
+const NAME_LEN_BITS: u32 = 4;
+const NAME_LEN_MASK: u16 = (1 << NAME_LEN_BITS) - 1;
+/// Room for the blob while it is built (more is a build error).
+const NAMES_ROOM: usize = 1024;
+
+/// Where `name` starts in `blob[..len]`, if it is there already (as a
+/// whole name or inside a longer one). Compile time only, like [`pack_names`].
+#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+const fn find_name(blob: &[u8; NAMES_ROOM], len: usize, name: &[u8]) -> Option<usize> {
+    let mut at = 0;
+    while at + name.len() <= len {
+        let mut i = 0;
+        while i < name.len() && blob[at + i] == name[i] {
+            i += 1;
+        }
+        if i == name.len() {
+            return Some(at);
+        }
+        at += 1;
+    }
+    None
+}
+
+/// Every name once, and the packed name of every row. Evaluated only at
+/// compile time: an index out of range or a name too long is a build error.
+#[allow(
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::cast_possible_truncation,
+    clippy::panic
+)]
+const fn pack_names() -> ([u8; NAMES_ROOM], usize, [u16; SOURCE.len()]) {
+    let mut blob = [0u8; NAMES_ROOM];
+    let mut len = 0;
+    let mut packed = [0u16; SOURCE.len()];
+    let mut row = 0;
+    while row < SOURCE.len() {
+        let name = SOURCE[row].name.as_bytes();
+        assert!(!name.is_empty() && name.len() <= NAME_LEN_MASK as usize);
+        let start = match find_name(&blob, len, name) {
+            Some(at) => at,
+            None => {
+                let mut i = 0;
+                while i < name.len() {
+                    blob[len + i] = name[i];
+                    i += 1;
+                }
+                len += name.len();
+                len - name.len()
+            }
+        };
+        assert!(start < (1 << (16 - NAME_LEN_BITS)));
+        packed[row] = (start as u16) << NAME_LEN_BITS | name.len() as u16;
+        row += 1;
+    }
+    (blob, len, packed)
+}
+
+const PACKED_NAMES: ([u8; NAMES_ROOM], usize, [u16; SOURCE.len()]) = pack_names();
+
+/// The used part of the blob (compile time only).
+#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+const fn used_names<const N: usize>() -> [u8; N] {
+    let mut out = [0u8; N];
+    let mut i = 0;
+    while i < N {
+        out[i] = PACKED_NAMES.0[i];
+        i += 1;
+    }
+    out
+}
+
+const NAME_BYTES: [u8; PACKED_NAMES.1] = used_names();
+
+/// Every component name once, each found by offset and length.
+const NAMES: &str = match core::str::from_utf8(&NAME_BYTES) {
+    Ok(s) => s,
+    Err(_) => panic!("component names are ASCII"),
+};
+
+/// The table packed for flash.
+#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+const fn pack_table() -> [Component; SOURCE.len()] {
+    let mut out = [Component {
+        page: Page::Boot,
+        id: 0,
+        name: 0,
+        kind: Kind::Button,
+        role: Role::Message,
+    }; SOURCE.len()];
+    let mut row = 0;
+    while row < SOURCE.len() {
+        let s = &SOURCE[row];
+        out[row] = Component {
+            page: s.page,
+            id: s.id,
+            name: PACKED_NAMES.2[row],
+            kind: s.kind,
+            role: s.role,
+        };
+        row += 1;
+    }
+    out
+}
+
+const PACKED_TABLE: [Component; SOURCE.len()] = pack_table();
+
+/// Every component the MCU knows, by page and id (see `docs/hmi.md`).
+pub const COMPONENTS: &[Component] = &PACKED_TABLE;
+
 use Action as A;
 use Kind as K;
 use Page as P;
 use Role as R;
 
-/// Every component the MCU knows, by page and id (see `docs/hmi.md`).
-pub const COMPONENTS: &[Component] = &[
+/// The table's source: every component by page and id (see `docs/hmi.md`),
+/// packed into [`COMPONENTS`] at compile time.
+const SOURCE: &[Source] = &[
     // 0 boot
     c(P::Boot, 1, "tmsg", K::Text, R::Message),
     c(P::Boot, 2, "tver", K::Text, R::Version),
@@ -1722,14 +1857,33 @@ mod tests {
     #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
     use super::*;
 
+    /// Each packed name reads back as the source row's name (the `&str`
+    /// literal in [`SOURCE`], which does not go through the packing).
+    #[test]
+    fn packed_names_are_the_sources() {
+        assert_eq!(COMPONENTS.len(), SOURCE.len());
+        for (packed, source) in COMPONENTS.iter().zip(SOURCE) {
+            assert_eq!(packed.name(), source.name);
+            assert_eq!(packed.obj(), ObjName::new(source.name).unwrap());
+            assert_eq!(
+                (packed.page, packed.id, packed.kind, packed.role),
+                (source.page, source.id, source.kind, source.role)
+            );
+        }
+        // Duplicates are stored once: the blob is shorter than all names.
+        let all: usize = SOURCE.iter().map(|s| s.name.len()).sum();
+        assert!(NAMES.len() < all, "{} {all}", NAMES.len());
+        assert_eq!(core::mem::size_of::<Component>(), 8);
+    }
+
     #[test]
     fn table_is_consistent() {
         for (i, a) in COMPONENTS.iter().enumerate() {
-            assert!(ObjName::new(a.name).is_ok(), "{}", a.name);
+            assert!(ObjName::new(a.name()).is_ok(), "{}", a.name());
             assert!(a.id >= 1);
             for b in COMPONENTS.get(i + 1..).unwrap() {
                 assert!(!(a.page == b.page && a.id == b.id), "{a:?} {b:?}");
-                assert!(!(a.page == b.page && a.name == b.name), "{a:?} {b:?}");
+                assert!(!(a.page == b.page && a.name() == b.name()), "{a:?} {b:?}");
             }
             if let Role::Action(Action::Apply(f)) = a.role {
                 assert!(Component::input(a.page, f).is_some(), "{a:?}");

@@ -134,7 +134,7 @@ impl VirtualScreen {
             .map(|c| VirtualComponent {
                 page: c.page.id(),
                 id: c.id,
-                name: c.name.to_string(),
+                name: c.name().to_string(),
                 is_text: c.kind == Kind::Text,
                 send_on_press: c.role == crate::screen::Role::Action(crate::screen::Action::Stop),
                 send_on_release: c.kind == Kind::Button,

@@ -990,6 +990,9 @@ mod app {
                         refresh_settings(cx);
                         Effect::Message(NOT_BUILT_IN)
                     }
+                    // Page 10 is read-only on an image without the link.
+                    #[cfg(not(feature = "drive-link"))]
+                    Command::SetLinkValue(_) => Effect::Message(NO_DRIVE_LINK),
                     _ => {
                         // Start only with the stop input proven closed; it
                         // also releases the stop latch. (One lock site for
@@ -1016,6 +1019,9 @@ mod app {
                     }
                     Effect::Message(text) => {
                         defmt::warn!("screen message: {=str}", text);
+                        // A value the machine refused goes back to the one
+                        // in force on the screen (the screen link took it).
+                        refresh_settings(cx);
                         say(cx, text);
                     }
                     Effect::AlarmCleared => {

@@ -360,6 +360,29 @@ fn an_image_without_the_link_runs_saved_link_settings_on_its_encoder() {
             .unwrap(),
         "no notice on the screen"
     );
+    // Page 10 is read-only here: a value is refused with the same notice.
+    for (button, page) in [("bset", 6), ("bdrive", 9), ("blink", 10)] {
+        bench.tap(button).unwrap();
+        assert!(bench
+            .pump_until(Duration::from_secs(20), |s| s.page() == page)
+            .unwrap());
+    }
+    bench.screen.set_value("nlval", 0).unwrap();
+    bench.tap("blval").unwrap();
+    assert!(
+        bench
+            .pump_until(Duration::from_secs(20), |s| {
+                s.page() == 10 && s.text("tmsg") == Some("Drive link not in this image")
+            })
+            .unwrap(),
+        "page 10 took a value"
+    );
+    for page in [9, 6, 1] {
+        bench.tap("bback").unwrap();
+        assert!(bench
+            .pump_until(Duration::from_secs(20), |s| s.page() == page)
+            .unwrap());
+    }
     pump_to(&mut bench, 2_000);
     bench.tap("badapt").unwrap();
     bench.tap("bstart").unwrap();

@@ -645,6 +645,11 @@ impl Hmi {
             Action::TogglePlacement => {
                 Some(Command::SetSpeedFollowing(!self.settings.speed_following))
             }
+            // Its value comes back with the supervisor's settings.
+            Action::NextLinkParameter => {
+                s.link_parameter = s.link_parameter.next();
+                Some(Command::SelectLinkParameter(s.link_parameter))
+            }
         };
         if s != self.settings {
             let _ = self.set_settings(s);
@@ -682,12 +687,19 @@ impl Hmi {
                     Command::SetBeltThickness(v) => s.belt.belt_thickness = v,
                     Command::SetSpeedThreshold(v) => s.belt.speed_threshold = v,
                     Command::SetFirstPlantDistance(v) => s.first_plant_distance = v,
+                    Command::SetLinkValue(v) => s.link_value = v,
                     _ => {}
                 }
                 if let Command::SetBrightness(v) = cmd {
                     let _ = self.send(&Instruction::Dims(v.raw()));
                 }
-                let _ = self.show_message("");
+                // A link value applies after Save and a restart; the
+                // supervisor's refusal, if any, replaces this message.
+                let _ = self.show_message(if field == Field::LinkValue {
+                    crate::screen::LINK_RESTART_MESSAGE
+                } else {
+                    ""
+                });
                 self.event(Event::Command(cmd));
             }
             Err(e) => {

@@ -71,11 +71,13 @@ pub enum Page {
     BeltParameters = 8,
     /// 9 `drive`: drum drive identification (profile A).
     Drive = 9,
+    /// 10 `link`: the drum driver's RS-485 link settings (profile A).
+    Link = 10,
 }
 
 impl Page {
     /// All pages in id order.
-    pub const ALL: [Page; 10] = [
+    pub const ALL: [Page; 11] = [
         Self::Boot,
         Self::Mode,
         Self::Fixed,
@@ -86,6 +88,7 @@ impl Page {
         Self::Belt,
         Self::BeltParameters,
         Self::Drive,
+        Self::Link,
     ];
 
     /// The page id.
@@ -111,6 +114,7 @@ impl Page {
             Self::Belt => "belt",
             Self::BeltParameters => "beltpar",
             Self::Drive => "drive",
+            Self::Link => "link",
         }
     }
 
@@ -228,6 +232,89 @@ impl CalibrationKind {
     }
 }
 
+/// The drum driver link's setting page 10 edits (docs/drive-link.md,
+/// settings format 5): one at a time, picked with `blpar`, its value in
+/// `nlval`, applied with `blval`. The codes of the three choices are in
+/// their labels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LinkParameter {
+    /// Feedback source: 0 encoder, 1 driver read-back, 2 both (the default
+    /// selection).
+    #[default]
+    Feedback,
+    /// Command path: 0 PWM, 1 the driver's speed command over Modbus.
+    Command,
+    /// Driver: 0 none, 1 ZLAC8015D, 2 generic.
+    Driver,
+    /// Modbus slave id, 1–247.
+    Slave,
+    /// Baud rate: 9600, 19 200, 38 400, 57 600 or 115 200.
+    Baud,
+    /// Read-back scale: micro-r/min of the drum per register count (the
+    /// gearbox included; negative: the driver counts the other way).
+    Scale,
+    /// Generic driver: the speed read-back's holding register.
+    SpeedRegister,
+    /// Generic driver: the fault word's holding register.
+    FaultRegister,
+    /// Generic driver: the speed command's holding register (0: none).
+    CommandRegister,
+}
+
+impl LinkParameter {
+    /// Every parameter, in the selector's order.
+    pub const ALL: [LinkParameter; 9] = [
+        Self::Feedback,
+        Self::Command,
+        Self::Driver,
+        Self::Slave,
+        Self::Baud,
+        Self::Scale,
+        Self::SpeedRegister,
+        Self::FaultRegister,
+        Self::CommandRegister,
+    ];
+
+    /// The label shown in `tlpar` (≤ 40 characters).
+    pub const fn label(self) -> &'static str {
+        match self {
+            Self::Feedback => "Feedback 0enc 1drv 2both",
+            Self::Command => "Command 0PWM 1Modbus",
+            Self::Driver => "Driver 0none 1ZLAC 2gen",
+            Self::Slave => "Slave id",
+            Self::Baud => "Baud",
+            Self::Scale => "Scale urpm/count",
+            Self::SpeedRegister => "Speed register",
+            Self::FaultRegister => "Fault register",
+            Self::CommandRegister => "Command reg (0 none)",
+        }
+    }
+
+    /// The next parameter (the last wraps to the first).
+    pub const fn next(self) -> Self {
+        match self {
+            Self::Feedback => Self::Command,
+            Self::Command => Self::Driver,
+            Self::Driver => Self::Slave,
+            Self::Slave => Self::Baud,
+            Self::Baud => Self::Scale,
+            Self::Scale => Self::SpeedRegister,
+            Self::SpeedRegister => Self::FaultRegister,
+            Self::FaultRegister => Self::CommandRegister,
+            Self::CommandRegister => Self::Feedback,
+        }
+    }
+}
+
+/// The bound of [`Field::LinkValue`]: the widest link value, the read-back
+/// scale's (`drive_link::profile::MAX_SCALE`, 10⁸ µr/min per count).
+pub const LINK_VALUE_MAX: i32 = 100_000_000;
+
+/// The screen's message after a link setting is taken: the link runs the
+/// settings it started with until *Save settings* and a restart.
+pub const LINK_RESTART_MESSAGE: &str = "Save, then restart to apply";
+
 /// Tractor gear presets (spec §4: Low 1–3, High 1–3); the wire index is 1–6.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -324,11 +411,14 @@ pub enum Field {
     /// Where the first plant of a pass lands after the work switch closes,
     /// mm (page 6).
     FirstPlantDistance,
+    /// The value of the drum driver link's selected [`LinkParameter`]
+    /// (page 10); the supervisor checks it against the parameter.
+    LinkValue,
 }
 
 impl Field {
     /// Every field.
-    pub const ALL: [Field; 14] = [
+    pub const ALL: [Field; 15] = [
         Self::MotorCoefficient,
         Self::FixedDrumSpeed,
         Self::Spacing,
@@ -343,6 +433,7 @@ impl Field {
         Self::BeltThickness,
         Self::SpeedThreshold,
         Self::FirstPlantDistance,
+        Self::LinkValue,
     ];
 }
 
@@ -375,6 +466,7 @@ impl ParamError {
             Field::BeltThickness => "Belt thickness must be 0.01-10.00 mm",
             Field::SpeedThreshold => "Threshold Y must be 0.001-0.500 m/s",
             Field::FirstPlantDistance => "First plant must be 0.0-100.0 cm",
+            Field::LinkValue => "Value out of range",
         }
     }
 }
@@ -548,10 +640,12 @@ impl Field {
             Self::BeltThickness => Command::SetBeltThickness(BeltThickness(v16)),
             Self::SpeedThreshold => Command::SetSpeedThreshold(SpeedThreshold(v16)),
             Self::FirstPlantDistance => Command::SetFirstPlantDistance(FirstPlantDistance(v16)),
+            Self::LinkValue => Command::SetLinkValue(v),
         })
     }
 
-    /// The field's accepted raw range (its type's `MIN` and `MAX`).
+    /// The field's accepted raw range (its type's `MIN` and `MAX`; for
+    /// [`Field::LinkValue`] ±[`LINK_VALUE_MAX`]).
     const fn bounds(self) -> (i32, i32) {
         // Every bound is within 0..=100 000: exact in `i32`.
         #[allow(clippy::cast_possible_wrap)]
@@ -579,6 +673,9 @@ impl Field {
                 FirstPlantDistance::MIN as i32,
                 FirstPlantDistance::MAX as i32,
             ),
+            // The widest of the link's values: its read-back scale
+            // (`drive_link::profile::MAX_SCALE`).
+            Self::LinkValue => (-LINK_VALUE_MAX, LINK_VALUE_MAX),
         }
     }
 
@@ -601,6 +698,7 @@ impl Field {
             Self::BeltThickness => i32::from(s.belt.belt_thickness.raw()),
             Self::SpeedThreshold => i32::from(s.belt.speed_threshold.raw()),
             Self::FirstPlantDistance => i32::from(s.first_plant_distance.raw()),
+            Self::LinkValue => s.link_value,
         }
     }
 }
@@ -675,6 +773,11 @@ pub enum Command {
     /// distance-locked (`false`, the default); page 6 `bplace` toggles it.
     /// Only with the drum stopped; persisted with *Save settings*.
     SetSpeedFollowing(bool),
+    /// Page 10: the link setting `nlval` shows and `blval` sets next.
+    SelectLinkParameter(LinkParameter),
+    /// Page 10: the selected link setting's new value (the whole link
+    /// settings are validated; they apply after *Save* and a restart).
+    SetLinkValue(i32),
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -732,6 +835,10 @@ pub struct Settings {
     /// Plants placed by following the travel speed (the papers' law)
     /// instead of locked to the ground distance (page 6 `tplace`).
     pub speed_following: bool,
+    /// The link setting page 10 shows (`tlpar`).
+    pub link_parameter: LinkParameter,
+    /// Its value as saved (`nlval`).
+    pub link_value: i32,
 }
 
 /// The label of the placement setting (page 6 `tplace`).
@@ -940,6 +1047,8 @@ pub enum Action {
     TogglePlacement,
     /// [`Command::AcceptDriveModel`].
     AcceptDriveModel,
+    /// [`Command::SelectLinkParameter`] with the next parameter.
+    NextLinkParameter,
 }
 
 /// The role of a component in the contract.
@@ -966,6 +1075,8 @@ pub enum Role {
     WorkSwitchLabel,
     /// The placement setting's label, written with `tplace.txt=`.
     PlacementLabel,
+    /// The selected link setting's label, written with `tlpar.txt=`.
+    LinkParameterLabel,
     /// The alarm text, written with `talarm.txt=`.
     AlarmText,
     /// The page's message box for validation errors and notices.
@@ -1779,6 +1890,38 @@ const SOURCE: &[Source] = &[
     ),
     c(P::Drive, 8, "bstop", K::Button, R::Action(A::Stop)),
     c(P::Drive, 9, "tmsg", K::Text, R::Message),
+    c(
+        P::Drive,
+        10,
+        "blink",
+        K::Button,
+        R::Action(A::ShowPage(P::Link)),
+    ),
+    // 10 link (profile A: the drum driver's RS-485 link, docs/drive-link.md)
+    c(P::Link, 1, "tlpar", K::Text, R::LinkParameterLabel),
+    c(
+        P::Link,
+        2,
+        "blpar",
+        K::Button,
+        R::Action(A::NextLinkParameter),
+    ),
+    c(P::Link, 3, "nlval", K::Number, R::Input(Field::LinkValue)),
+    c(
+        P::Link,
+        4,
+        "blval",
+        K::Button,
+        R::Action(A::Apply(Field::LinkValue)),
+    ),
+    c(
+        P::Link,
+        5,
+        "bback",
+        K::Button,
+        R::Action(A::ShowPage(P::Drive)),
+    ),
+    c(P::Link, 6, "tmsg", K::Text, R::Message),
 ];
 
 /// Most instructions one page refresh needs ([`page_instructions`]).
@@ -1835,6 +1978,10 @@ pub(crate) fn component_instruction(
         Role::PlacementLabel => Instruction::SetText(
             comp.obj(),
             ScreenText::new(placement_label(settings.speed_following)).unwrap_or(version),
+        ),
+        Role::LinkParameterLabel => Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(settings.link_parameter.label()).unwrap_or(version),
         ),
         _ => return None,
     })

@@ -209,9 +209,32 @@ fn validate_agrees_with_each_types_constructor() {
             Field::FirstPlantDistance => {
                 Command::SetFirstPlantDistance(FirstPlantDistance::new(raw)?)
             }
+            // ±10⁸ µr/min per count: drive_link::profile::MAX_SCALE, the
+            // widest link value (the supervisor checks each parameter).
+            Field::LinkValue => {
+                if (-100_000_000..=100_000_000).contains(&raw) {
+                    Command::SetLinkValue(raw)
+                } else {
+                    return Err(ParamError {
+                        field: f,
+                        value: raw,
+                    });
+                }
+            }
         })
     };
-    let extremes = [i32::MIN, -65_536, 65_535, 65_536, 65_791, i32::MAX];
+    let extremes = [
+        i32::MIN,
+        -100_000_001,
+        -100_000_000,
+        -65_536,
+        65_535,
+        65_536,
+        65_791,
+        100_000_000,
+        100_000_001,
+        i32::MAX,
+    ];
     for f in Field::ALL {
         for raw in (-2..=100_002).chain(extremes) {
             assert_eq!(f.validate(raw), expected(f, raw), "{f:?} {raw}");
@@ -493,7 +516,7 @@ fn virtual_screen_answers_like_the_real_one() {
     s.feed(b"tmsg.txt=\"a\\\"b\\\\c\\rd\"\xff\xff\xffget tmsg.txt\xff\xff\xff");
     assert_eq!(s.text("tmsg"), Some("a\"b\\c\nd"));
     assert_eq!(s.take_output(), b"\x70a\"b\\c\nd\xff\xff\xff");
-    s.feed(b"page 10\xff\xff\xffget nspeed.txt\xff\xff\xffbogus\xff\xff\xff");
+    s.feed(b"page 11\xff\xff\xffget nspeed.txt\xff\xff\xffbogus\xff\xff\xff");
     assert_eq!(
         s.take_output(),
         b"\x03\xff\xff\xff\x1a\xff\xff\xff\x00\xff\xff\xff"
@@ -1051,4 +1074,55 @@ proptest! {
             prop_assert!(t - heard < LINK_TIMEOUT_MS + 50);
         }
     }
+}
+
+/// Page 10 (docs/hmi.md): from page 9's `blink`, the selector walks the
+/// nine link settings (label in `tlpar`, each step a command so that the
+/// supervisor sends the value back), `blval` reads `nlval` and commands the
+/// value for the selected one with the restart notice; a value beyond
+/// ±10⁸ is refused on the screen, the old value written back.
+#[test]
+fn page_10_edits_the_drive_link_one_setting_at_a_time() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("bset").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bdrive").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("blink").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), 10);
+    assert_eq!(screen.text("tlpar"), Some("Feedback 0enc 1drv 2both"));
+    let mut seen = vec![LinkParameter::Feedback];
+    for _ in 0..9 {
+        screen.release("blpar").unwrap();
+        let ev = pump(&mut hmi, &mut screen);
+        let [Event::Command(Command::SelectLinkParameter(p))] = ev[..] else {
+            panic!("{ev:?}");
+        };
+        assert_eq!(screen.text("tlpar"), Some(p.label()));
+        seen.push(p);
+    }
+    // Nine steps: every parameter once, back to the first.
+    assert_eq!(seen[..9], LinkParameter::ALL);
+    assert_eq!(seen[9], LinkParameter::Feedback);
+    screen.set_value("nlval", 1).unwrap();
+    screen.release("blval").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetLinkValue(1))]
+    );
+    assert_eq!(screen.text("tmsg"), Some("Save, then restart to apply"));
+    screen.set_value("nlval", 100_000_001).unwrap();
+    screen.release("blval").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![Event::Rejected(ParamError {
+            field: Field::LinkValue,
+            value: 100_000_001
+        })]
+    );
+    assert_eq!(screen.value("nlval"), Some(1));
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), 9);
 }

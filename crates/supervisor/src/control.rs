@@ -354,6 +354,12 @@ pub struct Supervisor {
     alarm: Option<Alarm>,
     calibration_run: CalibrationRun,
     calibration_kind: CalibrationKind,
+    /// The link setting page 10 shows and sets.
+    link_parameter: screen::LinkParameter,
+    /// The link settings in force: those the supervisor was built with.
+    /// Page 10 edits `settings.drive_link`, which the board's link task
+    /// takes only at the next start (docs/drive-link.md).
+    link_in_force: crate::drive_link::DriveLinkSettings,
     /// Drum encoder counts since boot.
     drum_counts_total: u64,
     last_encoder: Option<u16>,
@@ -806,6 +812,7 @@ impl Supervisor {
         .map_err(|_| Error::Estimator)?;
         let plan = Self::plan_for(&settings, hw)?;
         let law = DriveLaw::of(&settings.drive, hw.control_period_us);
+        let link_in_force = settings.drive_link;
         let phase = Phase::new(hw.encoder_counts_per_drum_rev, settings.spacing.raw());
         Ok(Self {
             hw,
@@ -818,6 +825,8 @@ impl Supervisor {
             alarm: None,
             calibration_run: CalibrationRun::Idle,
             calibration_kind: CalibrationKind::SlipK2,
+            link_parameter: screen::LinkParameter::Feedback,
+            link_in_force,
             drum_counts_total: 0,
             last_encoder: None,
             last_step_at: None,
@@ -1202,6 +1211,25 @@ impl Supervisor {
                 // The screen link shows the "restart" message itself.
                 self.settings.profile = crate::machine::profile_from_screen(p);
                 Effect::None
+            }
+            Command::SelectLinkParameter(p) => {
+                self.link_parameter = p;
+                Effect::SettingsChanged
+            }
+            // Into the settings (saved by Save), not into the link in
+            // force: the board sets its link up at start (page 10).
+            Command::SetLinkValue(v) => {
+                if self.run != RunState::Stopped {
+                    return Effect::Message("Stop the drum first");
+                }
+                match self.settings.drive_link.with(self.link_parameter, v) {
+                    Some(Ok(link)) => {
+                        self.settings.drive_link = link;
+                        Effect::SettingsChanged
+                    }
+                    Some(Err(e)) => Effect::Message(e.text()),
+                    None => Effect::Message("Value out of range"),
+                }
             }
             // Profile B's parameters are kept (and saved) here too, so that
             // they survive a switch of machine.
@@ -1739,14 +1767,14 @@ impl Supervisor {
     /// Whether the link is in use (a driver profile and a feedback or
     /// command that needs it, or a profile at all: its faults are read).
     fn link_in_use(&self) -> bool {
-        self.settings.drive_link.kind != crate::drive_link::DriverKind::None
+        self.link_in_force.kind != crate::drive_link::DriverKind::None
     }
 
     /// This period's drum counts from the feedback source in force: the
     /// encoder's, or the read-back integrated over the period.
     fn feedback_counts(&mut self, encoder_delta: u16, elapsed_us: u32) -> u16 {
         use crate::drive_link::FeedbackSource;
-        match self.settings.drive_link.feedback {
+        match self.link_in_force.feedback {
             FeedbackSource::Encoder | FeedbackSource::Both => encoder_delta,
             FeedbackSource::Driver => self
                 .link
@@ -1761,7 +1789,7 @@ impl Supervisor {
     fn control_model(&self) -> DriveModel {
         use crate::drive_link::{CommandPath, FeedbackSource};
         let m = self.settings.drive;
-        let link = &self.settings.drive_link;
+        let link = &self.link_in_force;
         // One transaction's delay for the read-back as the feedback, one
         // more for the bus command (written every other transaction).
         let transactions = u32::from(link.feedback == FeedbackSource::Driver)
@@ -1783,7 +1811,7 @@ impl Supervisor {
     /// link transaction for the bus command (rounded).
     fn readback_delay_periods(&self) -> usize {
         use crate::drive_link::{CommandPath, FeedbackSource};
-        let link = &self.settings.drive_link;
+        let link = &self.link_in_force;
         let period = self.hw.control_period_us.max(1);
         let periods = |us: u32| {
             us.saturating_add(period / 2)
@@ -1809,7 +1837,7 @@ impl Supervisor {
     /// least the cross-check's floor, 1 r/min), so a still encoder is the
     /// cross-check's alarm, not a stall.
     fn driver_turning(&self) -> bool {
-        self.settings.drive_link.feedback == crate::drive_link::FeedbackSource::Both
+        self.link_in_force.feedback == crate::drive_link::FeedbackSource::Both
             && self
                 .link
                 .readback_milli_rpm()
@@ -1830,8 +1858,7 @@ impl Supervisor {
             && !(self.link.acked && self.link.acked_fault_reads == sample.fault_reads)
         {
             let fault = self
-                .settings
-                .drive_link
+                .link_in_force
                 .build()
                 .ok()
                 .flatten()
@@ -1842,7 +1869,7 @@ impl Supervisor {
             }
             return;
         }
-        if self.settings.drive_link.feedback == crate::drive_link::FeedbackSource::Both
+        if self.link_in_force.feedback == crate::drive_link::FeedbackSource::Both
             && self.run == RunState::Running
         {
             let encoder = milli(self.drum_speed_of(encoder_delta, elapsed_us));
@@ -1887,7 +1914,7 @@ impl Supervisor {
     /// command (PWM 0).
     fn drum_output(&mut self, out: I16F16) -> Actuation {
         let ccr = self.ccr_of(out);
-        if self.settings.drive_link.command == crate::drive_link::CommandPath::Modbus {
+        if self.link_in_force.command == crate::drive_link::CommandPath::Modbus {
             self.link.bus_command = i32::try_from(milli(out)).unwrap_or(i32::MAX);
             self.link.bus_ccr = ccr;
             self.link.bus = true;
@@ -2163,6 +2190,8 @@ impl Supervisor {
             work_switch_fitted: settings.work_switch_fitted,
             first_plant_distance: settings.first_plant_distance,
             speed_following: settings.placement == Placement::SpeedFollowing,
+            link_parameter: self.link_parameter,
+            link_value: settings.drive_link.value(self.link_parameter),
         }
     }
 }
@@ -2237,6 +2266,81 @@ mod tests {
         // The largest I16F16, 32 767 + 65 535/65 536 r/min, rounds up.
         assert_eq!(milli(I16F16::MAX), 32_768_000);
         assert_eq!(milli(I16F16::from_num(-1)), 0);
+    }
+
+    /// Page 10 (docs/hmi.md): the selector shows each setting's saved
+    /// value; a value goes into the saved link settings only when the whole
+    /// passes `DriveLinkSettings::build`, refused by name otherwise; the
+    /// link in force stays the one the supervisor was built with until a
+    /// restart: with the read-back chosen as the feedback on the page, the
+    /// drum still runs on its encoder (no stall alarm: before
+    /// `link_in_force`, the read-back that no link delivers counted 0 and
+    /// the stall alarm latched 0.2 s after Start).
+    #[test]
+    fn page_10_edits_the_saved_link_settings_not_the_link_in_force() {
+        use crate::drive_link::FeedbackSource;
+        use hmi_proto::screen::{LinkParameter as P, Mode};
+        let settings = Settings {
+            mode: Mode::Fixed,
+            fixed_drum_speed: DrumSpeed::new(2000).unwrap(),
+            ..Settings::default()
+        };
+        let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+        let set = |sup: &mut Supervisor, p: P, v: i32| {
+            assert_eq!(
+                sup.command(Command::SelectLinkParameter(p)),
+                Effect::SettingsChanged
+            );
+            sup.command(Command::SetLinkValue(v))
+        };
+        // The ZLAC8015D's default line: 115 200 baud, slave 1.
+        sup.command(Command::SelectLinkParameter(P::Baud));
+        assert_eq!(sup.screen_settings().link_value, 115_200);
+        assert_eq!(
+            set(&mut sup, P::Feedback, 1),
+            Effect::Message("Needs a driver (Driver 1 or 2)")
+        );
+        // Paper A's 118:1 behind the driver's 0.1 r/min (847 µr/min per
+        // count) reads at most 27.75 r/min: refused until the scale is set.
+        assert_eq!(
+            set(&mut sup, P::Driver, 1),
+            Effect::Message("Scale under 1365: reads < 44.7 r/min")
+        );
+        assert_eq!(set(&mut sup, P::Scale, 1695), Effect::SettingsChanged);
+        assert_eq!(set(&mut sup, P::Driver, 1), Effect::SettingsChanged);
+        assert_eq!(set(&mut sup, P::Feedback, 1), Effect::SettingsChanged);
+        assert_eq!(sup.settings().drive_link.feedback, FeedbackSource::Driver);
+        assert_eq!(sup.screen_settings().link_value, 1);
+        assert_eq!(
+            sup.command(Command::SetLinkValue(3)),
+            Effect::Message("Value out of range")
+        );
+        assert_eq!(
+            set(&mut sup, P::SpeedRegister, 65_536),
+            Effect::Message("Value out of range")
+        );
+        assert_eq!(
+            set(&mut sup, P::Baud, 4800),
+            Effect::Message("Baud: 9600 19200 38400 57600 115200")
+        );
+        assert_eq!(
+            set(&mut sup, P::Slave, 0),
+            Effect::Message("Slave id must be 1-247")
+        );
+        assert_eq!(sup.settings().drive_link.generic.baud, 115_200);
+        // Fixed 20 r/min on the encoder: 20 / 60 rev/s × 47 200 counts ×
+        // 0.01 s = 157.3 counts per period.
+        sup.command(Command::Start);
+        let mut encoder: u16 = 0;
+        for period in 0..50u32 {
+            sup.control_step(Ticks(period * 10_000), encoder);
+            encoder = encoder.wrapping_add(157);
+        }
+        assert_eq!(sup.alarm(), None);
+        assert_eq!(
+            sup.command(Command::SetLinkValue(1)),
+            Effect::Message("Stop the drum first")
+        );
     }
 
     #[test]

@@ -9,6 +9,7 @@
 
 use drive_link::cross_check::CrossCheck;
 use drive_link::profile::{check_line, DriverProfile, GenericSettings, ProfileError, ZLAC8015D};
+use hmi_proto::screen::LinkParameter;
 
 /// Where the drum's measured speed comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -115,6 +116,24 @@ pub enum DriveLinkError {
     },
 }
 
+impl DriveLinkError {
+    /// The screen's text (page 10's `tmsg`, ≤ 40 characters).
+    #[must_use]
+    pub const fn text(&self) -> &'static str {
+        match self {
+            Self::NoDriver => "Needs a driver (Driver 1 or 2)",
+            Self::NoSpeedCommand => "Driver takes no speed command",
+            Self::Profile(ProfileError::SlaveId(_)) => "Slave id must be 1-247",
+            Self::Profile(ProfileError::Baud(_)) => "Baud: 9600 19200 38400 57600 115200",
+            Self::Profile(ProfileError::Scale(_)) => "Scale must be nonzero",
+            Self::Profile(ProfileError::FaultMasksOverlap) => "Fault masks overlap",
+            Self::Profile(ProfileError::RegisterClash) => "Registers must differ",
+            Self::SpeedRange { .. } => "Scale under 1365: reads < 44.7 r/min",
+            Self::Byte(_) => "Value out of range",
+        }
+    }
+}
+
 impl core::fmt::Display for DriveLinkError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
@@ -184,6 +203,83 @@ impl DriveLinkSettings {
                 Err(DriveLinkError::NoSpeedCommand)
             }
             _ => Ok(profile),
+        }
+    }
+
+    /// Where page 10's setting `p` sits in [`Self::to_bytes`]: offset and
+    /// width (1, 2 or 4 bytes, little-endian).
+    const fn field(p: LinkParameter) -> (usize, usize) {
+        match p {
+            LinkParameter::Feedback => (0, 1),
+            LinkParameter::Command => (1, 1),
+            LinkParameter::Driver => (2, 1),
+            LinkParameter::Slave => (3, 1),
+            LinkParameter::Baud => (4, 4),
+            LinkParameter::SpeedRegister => (8, 2),
+            LinkParameter::Scale => (10, 4),
+            LinkParameter::FaultRegister => (14, 2),
+            LinkParameter::CommandRegister => (29, 2),
+        }
+    }
+
+    /// The value page 10 shows for `p` (docs/hmi.md): the choices as their
+    /// codes, the numbers as they are (a missing command register as 0).
+    #[must_use]
+    pub fn value(&self, p: LinkParameter) -> i32 {
+        let (at, width) = Self::field(p);
+        let mut word = [0u8; 4];
+        let bytes = self.to_bytes();
+        if let (Some(dst), Some(src)) = (
+            word.get_mut(..width),
+            bytes.get(at..at.saturating_add(width)),
+        ) {
+            dst.copy_from_slice(src);
+        }
+        // The scale is the only signed value; the widest unsigned one, the
+        // baud, is ≤ 115 200.
+        i32::from_le_bytes(word)
+    }
+
+    /// These settings with `p` set to `v` (page 10), validated whole the
+    /// way a stored block is ([`Self::from_bytes`], [`Self::build`]):
+    /// `None` when `v` is no value of `p` (a code beyond the choices, a
+    /// value wider than its field). A generic block no driver uses is
+    /// checked when a driver is picked.
+    ///
+    /// ```
+    /// use hmi_proto::screen::LinkParameter;
+    /// use supervisor::drive_link::{DriveLinkError, DriveLinkSettings};
+    /// let s = DriveLinkSettings::default();
+    /// // Slave id 12: taken.
+    /// assert_eq!(s.with(LinkParameter::Slave, 12).unwrap().unwrap().generic.slave, 12);
+    /// // The driver's read-back as the feedback without a driver: refused.
+    /// assert_eq!(s.with(LinkParameter::Feedback, 1), Some(Err(DriveLinkError::NoDriver)));
+    /// // Feedback code 3 does not exist; a register has 16 bits.
+    /// assert_eq!(s.with(LinkParameter::Feedback, 3), None);
+    /// assert_eq!(s.with(LinkParameter::SpeedRegister, 65_536), None);
+    /// ```
+    pub fn with(&self, p: LinkParameter, v: i32) -> Option<Result<Self, DriveLinkError>> {
+        let (at, width) = Self::field(p);
+        let le = v.to_le_bytes();
+        // Narrower fields take only values that fit them.
+        let fits = match width {
+            1 => u8::try_from(v).is_ok(),
+            2 => u16::try_from(v).is_ok(),
+            _ => true,
+        };
+        let mut bytes = self.to_bytes();
+        bytes
+            .get_mut(at..at.saturating_add(width))
+            .zip(le.get(..width))
+            .filter(|_| fits)
+            .map(|(dst, src)| dst.copy_from_slice(src))?;
+        if p == LinkParameter::CommandRegister {
+            // Its presence byte: 0 is "no command register".
+            *bytes.get_mut(28)? = u8::from(v != 0);
+        }
+        match Self::from_bytes(&bytes) {
+            Err(DriveLinkError::Byte(_)) => None,
+            other => Some(other),
         }
     }
 

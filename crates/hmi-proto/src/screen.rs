@@ -1808,36 +1808,22 @@ pub(crate) fn component_instruction(
     settings: &Settings,
     version: ScreenText<'static>,
 ) -> Option<Instruction<'static>> {
-    Some(match comp.role {
-        Role::Input(f) => Instruction::SetValue(comp.obj(), f.current(settings)),
-        Role::GearLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(settings.gear.label()).unwrap_or(version),
-        ),
-        Role::CalibrationLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(settings.calibration_kind.label()).unwrap_or(version),
-        ),
-        Role::ProfileLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(settings.profile.label()).unwrap_or(version),
-        ),
-        Role::Version => Instruction::SetText(comp.obj(), version),
-        Role::EncoderDirectionLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
-                .unwrap_or(version),
-        ),
-        Role::WorkSwitchLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(work_switch_label(settings.work_switch_fitted)).unwrap_or(version),
-        ),
-        Role::PlacementLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(placement_label(settings.speed_following)).unwrap_or(version),
-        ),
+    // The labels share one text check and one instruction (smaller in flash).
+    let label = match comp.role {
+        Role::Input(f) => return Some(Instruction::SetValue(comp.obj(), f.current(settings))),
+        Role::Version => return Some(Instruction::SetText(comp.obj(), version)),
+        Role::GearLabel => settings.gear.label(),
+        Role::CalibrationLabel => settings.calibration_kind.label(),
+        Role::ProfileLabel => settings.profile.label(),
+        Role::EncoderDirectionLabel => encoder_direction_label(settings.drum_encoder_reversed),
+        Role::WorkSwitchLabel => work_switch_label(settings.work_switch_fitted),
+        Role::PlacementLabel => placement_label(settings.speed_following),
         _ => return None,
-    })
+    };
+    Some(Instruction::SetText(
+        comp.obj(),
+        ScreenText::new(label).unwrap_or(version),
+    ))
 }
 
 /// The instructions that show `status` on `page` (only its status

@@ -1000,8 +1000,9 @@ pub struct Component {
     /// [`Component::id`] in bits 4:0, [`Component::kind`]'s code
     /// ([`kind_code`]) in bits 7:5.
     id_kind: u8,
-    /// Object name (`objname`): `offset << 4 | length` in [`NAMES`].
-    name: u16,
+    /// Object name (`objname`): `offset << 4 | length` in [`NAMES`],
+    /// little-endian (bytes: 12 B less code on thumbv7m than a `u16`).
+    name: [u8; 2],
     /// What it does.
     pub role: Role,
 }
@@ -1043,8 +1044,9 @@ impl Component {
 
     /// Object name (`objname`).
     pub fn name(&self) -> &'static str {
-        let start = usize::from(self.name >> NAME_LEN_BITS);
-        let len = usize::from(self.name & NAME_LEN_MASK);
+        let name = u16::from_le_bytes(self.name);
+        let start = usize::from(name >> NAME_LEN_BITS);
+        let len = usize::from(name & NAME_LEN_MASK);
         // Always in the blob and on character boundaries (checked by the
         // test `packed_names_are_the_sources`); "" is never reached.
         NAMES.get(start..start.saturating_add(len)).unwrap_or("")
@@ -1184,7 +1186,7 @@ const fn pack_table() -> [Component; SOURCE.len()] {
     let mut out = [Component {
         page: Page::Boot,
         id_kind: 0,
-        name: 0,
+        name: [0; 2],
         role: Role::Message,
     }; SOURCE.len()];
     let mut row = 0;
@@ -1194,7 +1196,7 @@ const fn pack_table() -> [Component; SOURCE.len()] {
         out[row] = Component {
             page: s.page,
             id_kind: kind_code(s.kind) << ID_BITS | s.id,
-            name: PACKED_NAMES.2[row],
+            name: PACKED_NAMES.2[row].to_le_bytes(),
             role: s.role,
         };
         row += 1;

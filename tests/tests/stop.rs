@@ -55,7 +55,7 @@ fn touch(page: Page, name: &str, press: bool) -> Vec<u8> {
         .iter()
         .find(|c| c.page == page && c.name() == name)
         .expect("component in the contract");
-    vec![0x65, page.id(), c.id, u8::from(press), 0xFF, 0xFF, 0xFF]
+    vec![0x65, page.id(), c.id(), u8::from(press), 0xFF, 0xFF, 0xFF]
 }
 
 /// The firmware time of the first log line after `after_ms` containing

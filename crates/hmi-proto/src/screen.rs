@@ -1099,29 +1099,65 @@ pub enum Kind {
 
 /// One component of the contract.
 ///
-/// Eight bytes in flash: the name is an offset and length into one blob of
-/// every name ([`Component::name`]), built at compile time from the table's
-/// source (`docs/hmi.md`, "Flash").
+/// Six bytes in flash: the id and the kind share a byte, and the name is an
+/// offset and length into one blob of every name ([`Component::name`]),
+/// all built at compile time from the table's source (`docs/hmi.md`,
+/// "Flash").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Component {
     /// Page it sits on.
     pub page: Page,
-    /// Component id (creation order on the page, the page itself is 0).
-    pub id: u8,
-    /// Object name (`objname`): `offset << 4 | length` in [`NAMES`].
-    name: u16,
-    /// Type to create.
-    pub kind: Kind,
+    /// [`Component::id`] in bits 4:0, [`Component::kind`]'s code
+    /// ([`kind_code`]) in bits 7:5.
+    id_kind: u8,
+    /// Object name (`objname`): `offset << 4 | length` in [`NAMES`],
+    /// little-endian (bytes: 12 B less code on thumbv7m than a `u16`).
+    name: [u8; 2],
     /// What it does.
     pub role: Role,
 }
 
+/// Bits of `id_kind` holding the id (ids up to 31 a page).
+const ID_BITS: u32 = 5;
+const ID_MASK: u8 = (1 << ID_BITS) - 1;
+
+/// The 3-bit code of a kind: Button 0, Text 1, Number 2, Xfloat with `d`
+/// decimals 3 + d (d ≤ 4; more is a build error).
+#[allow(clippy::arithmetic_side_effects)]
+const fn kind_code(kind: Kind) -> u8 {
+    match kind {
+        Kind::Button => 0,
+        Kind::Text => 1,
+        Kind::Number => 2,
+        Kind::Xfloat(d) => {
+            assert!(d <= 4);
+            3 + d
+        }
+    }
+}
+
 impl Component {
+    /// Component id (creation order on the page, the page itself is 0).
+    pub fn id(&self) -> u8 {
+        self.id_kind & ID_MASK
+    }
+
+    /// Type to create.
+    pub fn kind(&self) -> Kind {
+        match self.id_kind >> ID_BITS {
+            0 => Kind::Button,
+            1 => Kind::Text,
+            2 => Kind::Number,
+            code => Kind::Xfloat(code.saturating_sub(3)),
+        }
+    }
+
     /// Object name (`objname`).
     pub fn name(&self) -> &'static str {
-        let start = usize::from(self.name >> NAME_LEN_BITS);
-        let len = usize::from(self.name & NAME_LEN_MASK);
+        let name = u16::from_le_bytes(self.name);
+        let start = usize::from(name >> NAME_LEN_BITS);
+        let len = usize::from(name & NAME_LEN_MASK);
         // Always in the blob and on character boundaries (checked by the
         // test `packed_names_are_the_sources`); "" is never reached.
         NAMES.get(start..start.saturating_add(len)).unwrap_or("")
@@ -1136,7 +1172,7 @@ impl Component {
     pub fn lookup(page: u8, id: u8) -> Option<&'static Component> {
         COMPONENTS
             .iter()
-            .find(|c| c.page.id() == page && c.id == id)
+            .find(|c| c.page.id() == page && c.id() == id)
     }
 
     /// The components of one page.
@@ -1251,24 +1287,27 @@ const NAMES: &str = match core::str::from_utf8(&NAME_BYTES) {
     Err(_) => panic!("component names are ASCII"),
 };
 
-/// The table packed for flash.
-#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+/// The table packed for flash (compile time only).
+#[allow(
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::panic
+)]
 const fn pack_table() -> [Component; SOURCE.len()] {
     let mut out = [Component {
         page: Page::Boot,
-        id: 0,
-        name: 0,
-        kind: Kind::Button,
+        id_kind: 0,
+        name: [0; 2],
         role: Role::Message,
     }; SOURCE.len()];
     let mut row = 0;
     while row < SOURCE.len() {
         let s = &SOURCE[row];
+        assert!(s.id <= ID_MASK);
         out[row] = Component {
             page: s.page,
-            id: s.id,
-            name: PACKED_NAMES.2[row],
-            kind: s.kind,
+            id_kind: kind_code(s.kind) << ID_BITS | s.id,
+            name: PACKED_NAMES.2[row].to_le_bytes(),
             role: s.role,
         };
         row += 1;
@@ -1951,40 +1990,23 @@ pub(crate) fn component_instruction(
     settings: &Settings,
     version: ScreenText<'static>,
 ) -> Option<Instruction<'static>> {
-    Some(match comp.role {
-        Role::Input(f) => Instruction::SetValue(comp.obj(), f.current(settings)),
-        Role::GearLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(settings.gear.label()).unwrap_or(version),
-        ),
-        Role::CalibrationLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(settings.calibration_kind.label()).unwrap_or(version),
-        ),
-        Role::ProfileLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(settings.profile.label()).unwrap_or(version),
-        ),
-        Role::Version => Instruction::SetText(comp.obj(), version),
-        Role::EncoderDirectionLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(encoder_direction_label(settings.drum_encoder_reversed))
-                .unwrap_or(version),
-        ),
-        Role::WorkSwitchLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(work_switch_label(settings.work_switch_fitted)).unwrap_or(version),
-        ),
-        Role::PlacementLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(placement_label(settings.speed_following)).unwrap_or(version),
-        ),
-        Role::LinkParameterLabel => Instruction::SetText(
-            comp.obj(),
-            ScreenText::new(settings.link_parameter.label()).unwrap_or(version),
-        ),
+    // The labels share one text check and one instruction (smaller in flash).
+    let label = match comp.role {
+        Role::Input(f) => return Some(Instruction::SetValue(comp.obj(), f.current(settings))),
+        Role::Version => return Some(Instruction::SetText(comp.obj(), version)),
+        Role::GearLabel => settings.gear.label(),
+        Role::CalibrationLabel => settings.calibration_kind.label(),
+        Role::ProfileLabel => settings.profile.label(),
+        Role::EncoderDirectionLabel => encoder_direction_label(settings.drum_encoder_reversed),
+        Role::WorkSwitchLabel => work_switch_label(settings.work_switch_fitted),
+        Role::PlacementLabel => placement_label(settings.speed_following),
+        Role::LinkParameterLabel => settings.link_parameter.label(),
         _ => return None,
-    })
+    };
+    Some(Instruction::SetText(
+        comp.obj(),
+        ScreenText::new(label).unwrap_or(version),
+    ))
 }
 
 /// The instructions that show `status` on `page` (only its status
@@ -2013,23 +2035,23 @@ mod tests {
             assert_eq!(packed.name(), source.name);
             assert_eq!(packed.obj(), ObjName::new(source.name).unwrap());
             assert_eq!(
-                (packed.page, packed.id, packed.kind, packed.role),
+                (packed.page, packed.id(), packed.kind(), packed.role),
                 (source.page, source.id, source.kind, source.role)
             );
         }
         // Duplicates are stored once: the blob is shorter than all names.
         let all: usize = SOURCE.iter().map(|s| s.name.len()).sum();
         assert!(NAMES.len() < all, "{} {all}", NAMES.len());
-        assert_eq!(core::mem::size_of::<Component>(), 8);
+        assert_eq!(core::mem::size_of::<Component>(), 6);
     }
 
     #[test]
     fn table_is_consistent() {
         for (i, a) in COMPONENTS.iter().enumerate() {
             assert!(ObjName::new(a.name()).is_ok(), "{}", a.name());
-            assert!(a.id >= 1);
+            assert!(a.id() >= 1);
             for b in COMPONENTS.get(i + 1..).unwrap() {
-                assert!(!(a.page == b.page && a.id == b.id), "{a:?} {b:?}");
+                assert!(!(a.page == b.page && a.id() == b.id()), "{a:?} {b:?}");
                 assert!(!(a.page == b.page && a.name() == b.name()), "{a:?} {b:?}");
             }
             if let Role::Action(Action::Apply(f)) = a.role {

@@ -133,11 +133,11 @@ impl VirtualScreen {
             .iter()
             .map(|c| VirtualComponent {
                 page: c.page.id(),
-                id: c.id,
+                id: c.id(),
                 name: c.name().to_string(),
-                is_text: c.kind == Kind::Text,
+                is_text: c.kind() == Kind::Text,
                 send_on_press: c.role == crate::screen::Role::Action(crate::screen::Action::Stop),
-                send_on_release: c.kind == Kind::Button,
+                send_on_release: c.kind() == Kind::Button,
                 val: 0,
                 txt: String::new(),
                 visible: true,

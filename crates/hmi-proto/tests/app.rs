@@ -910,7 +910,7 @@ fn docs_list_every_component() {
         assert!(doc.contains(&row), "missing {row}");
     }
     for c in COMPONENTS {
-        let row = format!("| {} | `{}` |", c.id, c.name());
+        let row = format!("| {} | `{}` |", c.id(), c.name());
         assert!(doc.contains(&row), "missing {row} ({:?})", c.page);
     }
 }

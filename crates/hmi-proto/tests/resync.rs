@@ -79,7 +79,7 @@ fn touch_events() -> Vec<(u8, u8, TouchEvent)> {
     let mut v = Vec::new();
     for c in COMPONENTS {
         for ev in [TouchEvent::Press, TouchEvent::Release] {
-            v.push((c.page.id(), c.id, ev));
+            v.push((c.page.id(), c.id(), ev));
         }
     }
     v
@@ -176,7 +176,7 @@ fn stop_is_never_lost_after_a_bad_frame_at_the_link() {
                 for ev in [TouchEvent::Press, TouchEvent::Release] {
                     let mut hmi = connected_hmi();
                     hmi.push_slice(&bad);
-                    hmi.push_slice(&framed(&[0x65, stop.page.id(), stop.id, ev.to_byte()]));
+                    hmi.push_slice(&framed(&[0x65, stop.page.id(), stop.id(), ev.to_byte()]));
                     let mut stopped = false;
                     while let Some(e) = hmi.poll_event() {
                         stopped |= e == Event::Command(Command::Stop);

@@ -50,7 +50,7 @@ fn stream(rng: &mut XorShift, out: &mut Vec<u8>) {
                 let c = &COMPONENTS[rng.below(COMPONENTS.len() as u64) as usize];
                 let f = Frame::Touch {
                     page: c.page.id(),
-                    component: c.id,
+                    component: c.id(),
                     event: if rng.below(4) == 0 {
                         TouchEvent::Press
                     } else {

@@ -408,7 +408,8 @@ impl Hmi {
 
     /// Shows `text` in the current page's message box (if it has one).
     pub fn show_message(&mut self, text: &str) -> Result<(), TxFull> {
-        let Some(comp) = Component::on_page(self.page).find(|c| c.role == Role::Message) else {
+        let Some(comp) = Component::on_page(self.page).find(|c| matches!(c.role, Role::Message))
+        else {
             return Ok(());
         };
         let t = ScreenText::new(text).or_else(|_| ScreenText::new("?"));
@@ -428,7 +429,7 @@ impl Hmi {
         let cut = crate::encoder::first_chars(text, crate::encoder::MAX_TEXT_LEN);
         if let (Ok(t), Some(comp)) = (
             ScreenText::new(cut),
-            Component::on_page(Page::Alarm).find(|c| c.role == Role::AlarmText),
+            Component::on_page(Page::Alarm).find(|c| matches!(c.role, Role::AlarmText)),
         ) {
             self.send(&Instruction::SetText(comp.obj(), t))?;
         }
@@ -520,7 +521,7 @@ impl Hmi {
             Frame::Touch {
                 page, component, ..
             } if Component::lookup(page, component)
-                .is_some_and(|c| c.role == Role::Action(Action::Stop)) =>
+                .is_some_and(|c| matches!(c.role, Role::Action(Action::Stop))) =>
             {
                 self.event(Event::Command(Command::Stop));
             }

@@ -376,13 +376,16 @@ impl Hmi {
     pub fn set_settings(&mut self, settings: Settings) -> Result<(), TxFull> {
         let old = self.settings;
         self.settings = settings;
-        if old != settings && self.is_connected() {
+        if self.is_connected() {
             // Only what changed: the rest is on the screen already (a page
             // change writes every value itself), and page 6's full set
             // twice plus two messages — the profile refusal — would not fit
             // the transmit queue. The version text never changes.
             // Component by component (no lists of both versions' page
             // instructions to compare: smaller in flash and on the stack).
+            // Equal settings send nothing (every instruction compares
+            // equal): no comparison of the settings first (its derived
+            // `PartialEq` cost 150 B of flash).
             for comp in Component::on_page(self.page) {
                 let ins = component_instruction(comp, &self.settings, self.version);
                 if let Some(ins) = ins {
@@ -579,7 +582,8 @@ impl Hmi {
             return;
         };
         // The actions that change a setting shown on the screen change this
-        // copy; it is written once below (one copy and one call in flash).
+        // copy; it is written once below (one copy and one call in flash;
+        // unchanged, it sends nothing).
         let mut s = self.settings;
         let cmd = match action {
             Action::ShowPage(p) => {
@@ -647,9 +651,7 @@ impl Hmi {
                 Some(Command::SetSpeedFollowing(!self.settings.speed_following))
             }
         };
-        if s != self.settings {
-            let _ = self.set_settings(s);
-        }
+        let _ = self.set_settings(s);
         if action == Action::NextProfile {
             let _ = self.show_message(if s.profile == self.active_profile {
                 ""

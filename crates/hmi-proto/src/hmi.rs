@@ -376,13 +376,16 @@ impl Hmi {
     pub fn set_settings(&mut self, settings: Settings) -> Result<(), TxFull> {
         let old = self.settings;
         self.settings = settings;
-        if old != settings && self.is_connected() {
+        if self.is_connected() {
             // Only what changed: the rest is on the screen already (a page
             // change writes every value itself), and page 6's full set
             // twice plus two messages — the profile refusal — would not fit
             // the transmit queue. The version text never changes.
             // Component by component (no lists of both versions' page
             // instructions to compare: smaller in flash and on the stack).
+            // Equal settings send nothing (every instruction compares
+            // equal): no comparison of the settings first (its derived
+            // `PartialEq` cost 150 B of flash).
             for comp in Component::on_page(self.page) {
                 let ins = component_instruction(comp, &self.settings, self.version);
                 if let Some(ins) = ins {
@@ -408,7 +411,8 @@ impl Hmi {
 
     /// Shows `text` in the current page's message box (if it has one).
     pub fn show_message(&mut self, text: &str) -> Result<(), TxFull> {
-        let Some(comp) = Component::on_page(self.page).find(|c| c.role == Role::Message) else {
+        let Some(comp) = Component::on_page(self.page).find(|c| matches!(c.role, Role::Message))
+        else {
             return Ok(());
         };
         let t = ScreenText::new(text).or_else(|_| ScreenText::new("?"));
@@ -428,7 +432,7 @@ impl Hmi {
         let cut = crate::encoder::first_chars(text, crate::encoder::MAX_TEXT_LEN);
         if let (Ok(t), Some(comp)) = (
             ScreenText::new(cut),
-            Component::on_page(Page::Alarm).find(|c| c.role == Role::AlarmText),
+            Component::on_page(Page::Alarm).find(|c| matches!(c.role, Role::AlarmText)),
         ) {
             self.send(&Instruction::SetText(comp.obj(), t))?;
         }
@@ -520,7 +524,7 @@ impl Hmi {
             Frame::Touch {
                 page, component, ..
             } if Component::lookup(page, component)
-                .is_some_and(|c| c.role == Role::Action(Action::Stop)) =>
+                .is_some_and(|c| matches!(c.role, Role::Action(Action::Stop))) =>
             {
                 self.event(Event::Command(Command::Stop));
             }
@@ -578,7 +582,8 @@ impl Hmi {
             return;
         };
         // The actions that change a setting shown on the screen change this
-        // copy; it is written once below (one copy and one call in flash).
+        // copy; it is written once below (one copy and one call in flash;
+        // unchanged, it sends nothing).
         let mut s = self.settings;
         let cmd = match action {
             Action::ShowPage(p) => {
@@ -651,9 +656,7 @@ impl Hmi {
                 Some(Command::SelectLinkParameter(s.link_parameter))
             }
         };
-        if s != self.settings {
-            let _ = self.set_settings(s);
-        }
+        let _ = self.set_settings(s);
         if action == Action::NextProfile {
             let _ = self.show_message(if s.profile == self.active_profile {
                 ""

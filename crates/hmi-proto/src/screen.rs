@@ -1182,7 +1182,9 @@ impl Component {
 
     /// The input component for `field` on `page`.
     pub fn input(page: Page, field: Field) -> Option<&'static Component> {
-        Self::on_page(page).find(|c| c.role == Role::Input(field))
+        // `matches!`, not `==`: the derived comparison of two roles is a
+        // function of its own in flash.
+        Self::on_page(page).find(|c| matches!(c.role, Role::Input(f) if f == field))
     }
 }
 

@@ -143,6 +143,26 @@ fn run_to_end(mut bench: Bench) -> (Vec<String>, Vec<qemu_tests::drive::Transact
     (logs, log)
 }
 
+/// At `at_ms` of firmware time: Speed-Adaptive and Start, then to the end
+/// of the run; the log (the flash file removed).
+fn start_adaptive_and_run(mut bench: Bench, at_ms: u32, flash: &std::path::Path) -> Vec<String> {
+    pump_to(&mut bench, at_ms);
+    bench.tap("badapt").unwrap();
+    bench.tap("bstart").unwrap();
+    let (logs, _) = run_to_end(bench);
+    let _ = std::fs::remove_file(flash);
+    logs
+}
+
+/// No alarm in the log.
+fn assert_no_alarm(logs: &[String]) {
+    assert!(
+        !logs.iter().any(|l| l.contains("alarm: ")),
+        "an alarm: {:?}",
+        logs.iter().find(|l| l.contains("alarm: "))
+    );
+}
+
 fn time_of(logs: &[String], needle: &str) -> u32 {
     logs.iter()
         .find(|l| l.contains(needle))
@@ -172,27 +192,19 @@ fn tracks_eq7(name: &str, command: CommandPath, baud: u32) -> f64 {
     // Noiseless machine at Low 2 whose chassis pulls away with a 2.5 s
     // time constant (as the encoder's test in profile_a.rs); the encoder
     // is cut at boot (`enc_loss=1`): the read-back is the only feedback.
-    let (mut bench, flash) = boot(
+    let (bench, flash) = boot(
         name,
         &s,
         baud,
         &["gear=2", "noise=0", "tau=2500", "enc_loss=1"],
         17_000,
     );
-    pump_to(&mut bench, 8_000);
-    bench.tap("badapt").unwrap();
-    bench.tap("bstart").unwrap();
-    let (logs, _) = run_to_end(bench);
-    let _ = std::fs::remove_file(&flash);
+    let logs = start_adaptive_and_run(bench, 8_000, &flash);
     assert!(logs
         .iter()
         .any(|l| l.contains("sim: encoder loss injected")));
     let start = time_of(&logs, "drum: Running");
-    assert!(
-        !logs.iter().any(|l| l.contains("alarm: ")),
-        "an alarm: {:?}",
-        logs.iter().find(|l| l.contains("alarm: "))
-    );
+    assert_no_alarm(&logs);
     let settle = if command == CommandPath::Modbus && baud == 9600 {
         3_000
     } else {
@@ -383,19 +395,11 @@ fn an_image_without_the_link_runs_saved_link_settings_on_its_encoder() {
             .pump_until(Duration::from_secs(20), |s| s.page() == page)
             .unwrap());
     }
-    pump_to(&mut bench, 2_000);
-    bench.tap("badapt").unwrap();
-    bench.tap("bstart").unwrap();
-    let (logs, _) = run_to_end(bench);
-    let _ = std::fs::remove_file(&flash);
+    let logs = start_adaptive_and_run(bench, 2_000, &flash);
     assert!(logs
         .iter()
         .any(|l| l.contains("settings: the drive link is not in this image")));
-    assert!(
-        !logs.iter().any(|l| l.contains("alarm: ")),
-        "an alarm: {:?}",
-        logs.iter().find(|l| l.contains("alarm: "))
-    );
+    assert_no_alarm(&logs);
     let start = time_of(&logs, "drum: Running");
     let (worst, at) = worst_tracking(&sim_samples(&logs), start + 2_000, start + 6_000);
     assert!(worst <= 0.01, "worst {:.2} % at {at} ms", worst * 100.0);

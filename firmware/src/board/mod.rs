@@ -121,3 +121,22 @@ pub fn check_flash_erase(from: u32, to: u32) -> Result<(), FlashError> {
     }
     Ok(())
 }
+
+/// Firmware time in µs: the monotonic's milliseconds and SysTick's count
+/// within the current one (a pending SysTick means a millisecond more).
+#[cfg(any(feature = "board-qemu", feature = "drive-link"))]
+pub fn now_us64() -> u64 {
+    use cortex_m::peripheral::{SCB, SYST};
+    loop {
+        let ms = crate::uptime_ms();
+        let reload = SYST::get_reload();
+        let current = SYST::get_current();
+        let pending = SCB::is_pendst_pending();
+        if crate::uptime_ms() != ms {
+            continue;
+        }
+        let into = reload.saturating_sub(current).saturating_mul(1000) / reload.saturating_add(1);
+        let ms = u64::from(ms) + u64::from(pending);
+        return ms * 1000 + u64::from(into);
+    }
+}

@@ -1000,25 +1000,7 @@ impl WorkSwitchInput {
 
 /// Firmware time in µs (32 bits, wrapping after 71 minutes).
 fn now_us() -> u32 {
-    now_us64() as u32
-}
-
-/// Firmware time in µs: the monotonic's milliseconds and SysTick's count
-/// within the current one (a pending SysTick means a millisecond more).
-pub fn now_us64() -> u64 {
-    use cortex_m::peripheral::{SCB, SYST};
-    loop {
-        let ms = crate::uptime_ms();
-        let reload = SYST::get_reload();
-        let current = SYST::get_current();
-        let pending = SCB::is_pendst_pending();
-        if crate::uptime_ms() != ms {
-            continue;
-        }
-        let into = reload.saturating_sub(current).saturating_mul(1000) / reload.saturating_add(1);
-        let ms = u64::from(ms) + u64::from(pending);
-        return ms * 1000 + u64::from(into);
-    }
+    super::now_us64() as u32
 }
 
 /// The stop input's response (see the real board's): zeroes the PWM and

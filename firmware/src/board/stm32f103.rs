@@ -248,25 +248,6 @@ impl DriveLine {
     }
 }
 
-/// Firmware time in µs: the monotonic's milliseconds and SysTick's count
-/// within the current one (a pending SysTick means a millisecond more).
-#[cfg(feature = "drive-link")]
-pub fn now_us64() -> u64 {
-    use cortex_m::peripheral::{SCB, SYST};
-    loop {
-        let ms = crate::uptime_ms();
-        let reload = SYST::get_reload();
-        let current = SYST::get_current();
-        let pending = SCB::is_pendst_pending();
-        if crate::uptime_ms() != ms {
-            continue;
-        }
-        let into = reload.saturating_sub(current).saturating_mul(1000) / reload.saturating_add(1);
-        let ms = u64::from(ms) + u64::from(pending);
-        return ms * 1000 + u64::from(into);
-    }
-}
-
 /// HSE start-up bound, in cycles of the 8 MHz HSI the core runs on until
 /// the PLL is up: 100 ms. The datasheet gives tSU(HSE) = 2 ms typical for an
 /// 8 MHz crystal (STM32F103xB, "High-speed external user clock generated from

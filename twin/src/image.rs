@@ -9,7 +9,8 @@ use std::sync::OnceLock;
 /// A real-board image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Image {
-    /// `cargo build -p firmware --release --target thumbv7m-none-eabi`.
+    /// `cargo build -p firmware --release --target thumbv7m-none-eabi`
+    /// (the default features: `board-stm32f103,profile-a,drive-link`).
     ProfileA,
     /// `… --no-default-features --features board-stm32f103,profile-b`.
     ProfileB,
@@ -27,7 +28,9 @@ impl Image {
     /// The firmware's cargo features.
     pub fn features(self) -> &'static str {
         match self {
-            Image::ProfileA => "board-stm32f103,profile-a",
+            // The default features, as `cargo xtask size` builds the image
+            // (with the drive link).
+            Image::ProfileA => "board-stm32f103,profile-a,drive-link",
             Image::ProfileB => "board-stm32f103,profile-b",
         }
     }

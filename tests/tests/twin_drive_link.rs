@@ -17,8 +17,8 @@
 //!   bits (M = 0). §27.6.1: TC is set when a stop bit ends with TXE = 1.
 //! - Modbus over Serial Line V1.02 §2.5.1.1: a character is 11 bits (the
 //!   spec's RTU character; an 8N1 frame is 10, so 11 is the stricter
-//!   figure for silences); frames are separated by ≥ 3.5 characters (at
-//!   > 19 200 baud a fixed 1.75 ms); characters within a frame by
+//!   figure for silences); frames are separated by ≥ 3.5 characters
+//!   (above 19 200 baud a fixed 1.75 ms); characters within a frame by
 //!   ≤ 1.5 characters.
 //! - The RS-485 direction rule (issue 17): DE high before the first start
 //!   bit, low only once the last stop bit has left (TC), no transmission
@@ -127,7 +127,7 @@ struct Transaction {
     de_fall: Ticks,
     /// (start bit, stop-bit end, byte) of each request byte.
     tx: Vec<(Ticks, Ticks, u8)>,
-    tc: Ticks,
+    tc: Option<Ticks>,
     /// (stop-bit end, byte) of each reply byte.
     rx: Vec<(Ticks, u8)>,
 }
@@ -226,15 +226,13 @@ fn run(baud: u32, ms: u64) -> Run {
                 _ => {}
             }
         }
-        if let Some(tc) = tc {
-            transactions.push(Transaction {
-                de_rise: rise,
-                de_fall: fall,
-                tx,
-                tc,
-                rx,
-            });
-        }
+        transactions.push(Transaction {
+            de_rise: rise,
+            de_fall: fall,
+            tx,
+            tc,
+            rx,
+        });
     }
     Run {
         twin,
@@ -271,15 +269,34 @@ fn check(baud: u32, ms: u64) {
     let silence = silence_s * TICKS_PER_S as f64;
     let within_frame = 1.5 * modbus_char_s * TICKS_PER_S as f64;
 
-    assert!(
-        transactions.len() >= 10,
-        "{} transactions in {ms} ms",
-        transactions.len()
-    );
     // No byte leaves while DE is low: each start bit and stop-bit end lies
     // in an interval where PA1 is high (the last one may still be open at
     // the run's end).
     let st = twin.state();
+    // From reset PA1 is a floating input (RM0008 §9.1.1) until `init`
+    // drives it low; from then on it is always driven (no reset here).
+    let de: Vec<_> = st
+        .bus
+        .pin_log
+        .iter()
+        .filter(|p| p.port == 0 && p.pin == 1)
+        .collect();
+    let driven = de
+        .iter()
+        .position(|p| p.level == Level::Low)
+        .expect("PA1 driven low by init");
+    assert!(
+        de[..driven].iter().all(|p| p.level == Level::HiZ),
+        "PA1 before init: {:?}",
+        &de[..driven]
+    );
+    assert!(
+        de[driven..]
+            .iter()
+            .all(|p| matches!(p.level, Level::High | Level::Low)),
+        "PA1 floated after init"
+    );
+    let de_driven_at = de[driven].at;
     let mut high: Vec<(Ticks, Ticks)> = Vec::new();
     for p in st.bus.pin_log.iter().filter(|p| p.port == 0 && p.pin == 1) {
         match p.level {
@@ -301,6 +318,11 @@ fn check(baud: u32, ms: u64) {
         }
     }
 
+    assert!(
+        transactions.len() >= 10,
+        "{} transactions in {ms} ms",
+        transactions.len()
+    );
     let mut lead = (f64::MAX, 0.0f64);
     let mut lag = (f64::MAX, 0.0f64);
     let mut gap_min = f64::MAX;
@@ -334,18 +356,16 @@ fn check(baud: u32, ms: u64) {
         // TC at the last stop bit's end; DE low only after it, within one
         // character.
         let last_end = t.tx[7].1;
-        assert_eq!(
-            t.tc, last_end,
-            "transaction {n}: TC not at the last stop bit"
-        );
-        assert!(t.de_fall >= t.tc, "transaction {n}: DE fell before TC");
-        let after = (t.de_fall - t.tc) as f64;
+        let tc = t.tc.expect("TC set while DE was high");
+        assert_eq!(tc, last_end, "transaction {n}: TC not at the last stop bit");
+        assert!(t.de_fall >= tc, "transaction {n}: DE fell before TC");
+        let after = (t.de_fall - tc) as f64;
         assert!(
             after < char_ticks,
             "transaction {n}: DE low {after} ticks after TC"
         );
-        lag.0 = lag.0.min(us(t.de_fall - t.tc));
-        lag.1 = lag.1.max(us(t.de_fall - t.tc));
+        lag.0 = lag.0.min(us(t.de_fall - tc));
+        lag.1 = lag.1.max(us(t.de_fall - tc));
         // The reply: every byte after DE fell (a full frame: 7 bytes for a
         // read of one register, 8 for a write's echo).
         let expect = if t.tx[1].2 == 0x03 { 7 } else { 8 };
@@ -386,7 +406,7 @@ fn check(baud: u32, ms: u64) {
             rel(e)
         );
     }
-    eprintln!("  {:>9.2}  TC set", rel(t.tc));
+    eprintln!("  {:>9.2}  TC set", rel(t.tc.unwrap()));
     eprintln!("  {:>9.2}  PA1 (DE) low", rel(t.de_fall));
     for &(e, b) in &t.rx {
         eprintln!(
@@ -395,6 +415,10 @@ fn check(baud: u32, ms: u64) {
             rel(e) - us(char_ticks as u64)
         );
     }
+    eprintln!(
+        "PA1 (DE) floats from reset (input, RM0008 §9.1.1) until init drives it low at {:.3} ms",
+        us(de_driven_at) / 1000.0
+    );
     eprintln!(
         "{} transactions in {ms} ms: DE lead before the first start bit {:.2}..{:.2} µs; DE low after TC {:.2}..{:.2} µs (bound < {:.2}); bytes back to back (largest gap {:.2} µs, bound {:.1}); silence before a request ≥ {:.1} µs (bound {:.1}); driver answered {}; {host_s:.2} s on the host",
         transactions.len(),

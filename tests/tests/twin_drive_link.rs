@@ -138,9 +138,13 @@ struct Run {
     driver: VirtualZlac,
 }
 
+/// The request (counted from 0) the virtual driver leaves unanswered: the
+/// link times out and sends it again.
+const UNANSWERED: usize = 20;
+
 /// Boots the image on the drive-link settings at `baud`, answers every
-/// request for `ms` of firmware time and cuts the recorded timeline into
-/// transactions.
+/// request but [`UNANSWERED`] for `ms` of firmware time and cuts the
+/// recorded timeline into transactions.
 fn run(baud: u32, ms: u64) -> Run {
     let elf = Image::ProfileA.elf().expect("build the profile A image");
     let mut twin = Twin::new(&elf, Options::default()).unwrap();
@@ -166,6 +170,7 @@ fn run(baud: u32, ms: u64) -> Run {
     let until = twin.now() + ms * TICKS_PER_S / 1000;
     let step = TICKS_PER_S / 20_000; // 50 µs
     let mut seen = 0; // line events handled
+    let mut requests = 0;
     while twin.now() < until {
         twin.run_ticks(step).unwrap();
         // A request is complete when TC is set (the firmware's requests are
@@ -181,6 +186,10 @@ fn run(baud: u32, ms: u64) -> Run {
         let end = log[seen + i].at();
         seen += i + 1;
         let request = twin.take_serial(1);
+        requests += 1;
+        if requests - 1 == UNANSWERED {
+            continue;
+        }
         let Some((reply, delay_us)) = driver.handle(&request) else {
             continue;
         };
@@ -327,6 +336,7 @@ fn check(baud: u32, ms: u64) {
     let mut lag = (f64::MAX, 0.0f64);
     let mut gap_min = f64::MAX;
     let mut inter_max = 0.0f64;
+    let mut retry_wait = 0.0f64;
     for (n, t) in transactions.iter().enumerate() {
         assert_eq!(t.tx.len(), 8, "transaction {n}: {t:?}");
         // DE high before the first start bit.
@@ -369,6 +379,27 @@ fn check(baud: u32, ms: u64) {
         // The reply: every byte after DE fell (a full frame: 7 bytes for a
         // read of one register, 8 for a write's echo).
         let expect = if t.tx[1].2 == 0x03 { 7 } else { 8 };
+        if n == UNANSWERED {
+            // No reply: the same request again once the reply timeout
+            // (the longest reply, 9 characters of 11 bits, + 20 ms for the
+            // driver: docs/drive-link.md) and the silent interval have
+            // passed after TC, within two periods of the 1 ms link task.
+            assert!(t.rx.is_empty(), "transaction {n}: {:?}", t.rx);
+            let next = &transactions[n + 1];
+            let bytes = |t: &Transaction| t.tx.iter().map(|b| b.2).collect::<Vec<_>>();
+            assert_eq!(bytes(next), bytes(t), "the same request again");
+            let timeout = (9.0 * modbus_char_s + 20e-3) * TICKS_PER_S as f64;
+            let wait = (next.tx[0].0 - tc) as f64;
+            retry_wait = wait / 72.0;
+            assert!(
+                wait >= timeout + silence && wait <= timeout + silence + 2.0 * 72_000.0,
+                "retry {:.1} µs after TC, expected {:.1}..{:.1}",
+                wait / 72.0,
+                (timeout + silence) / 72.0,
+                (timeout + silence) / 72.0 + 2000.0
+            );
+            continue;
+        }
         assert_eq!(t.rx.len(), expect, "transaction {n}: reply {:?}", t.rx);
         let reply_start = t.rx[0].0 as f64 - char_ticks;
         assert!(
@@ -419,6 +450,8 @@ fn check(baud: u32, ms: u64) {
         "PA1 (DE) floats from reset (input, RM0008 §9.1.1) until init drives it low at {:.3} ms",
         us(de_driven_at) / 1000.0
     );
+    eprintln!("request {UNANSWERED} unanswered: sent again {retry_wait:.1} µs after its TC");
+    assert_eq!(twin.state().bus.usart[1].overruns, 0, "USART2 overruns");
     eprintln!(
         "{} transactions in {ms} ms: DE lead before the first start bit {:.2}..{:.2} µs; DE low after TC {:.2}..{:.2} µs (bound < {:.2}); bytes back to back (largest gap {:.2} µs, bound {:.1}); silence before a request ≥ {:.1} µs (bound {:.1}); driver answered {}; {host_s:.2} s on the host",
         transactions.len(),
@@ -464,6 +497,8 @@ fn check(baud: u32, ms: u64) {
         twin.log_lines(&format!("at {baud} baud")).len() == 1,
         "the link runs at {baud} baud"
     );
+    // One timeout is within the retry budget: the link is not lost.
+    assert!(twin.log_lines("drive link: lost").is_empty());
 }
 
 #[test]

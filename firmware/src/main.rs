@@ -624,7 +624,10 @@ mod app {
                 }
                 None => {}
             }
-            Mono::delay(1.millis()).await;
+            // Until the next tick of the 1 kHz monotonic: every 1 ms.
+            // (`Mono::delay(1 ms)` waits a tick more, "at least" 1 ms: 2 ms
+            // here; seen on the twin, tests/tests/twin_drive_link.rs.)
+            Mono::delay_until(Mono::now() + 1.millis()).await;
         }
     }
 

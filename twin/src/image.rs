@@ -9,10 +9,14 @@ use std::sync::OnceLock;
 /// A real-board image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Image {
-    /// `cargo build -p firmware --release --target thumbv7m-none-eabi`.
+    /// `cargo build -p firmware --release --target thumbv7m-none-eabi`
+    /// (the default features: `board-stm32f103,profile-a`).
     ProfileA,
     /// `… --no-default-features --features board-stm32f103,profile-b`.
     ProfileB,
+    /// `… --features drive-link`: profile A with the drum driver's link,
+    /// linked for the 128 KB parts (firmware/memory-stm32f103-128k.x).
+    ProfileALink,
 }
 
 /// The workspace root (this crate lives in `<root>/twin`).
@@ -27,8 +31,10 @@ impl Image {
     /// The firmware's cargo features.
     pub fn features(self) -> &'static str {
         match self {
+            // The default features, as `cargo xtask size` builds the image.
             Image::ProfileA => "board-stm32f103,profile-a",
             Image::ProfileB => "board-stm32f103,profile-b",
+            Image::ProfileALink => "board-stm32f103,profile-a,drive-link",
         }
     }
 
@@ -38,6 +44,7 @@ impl Image {
         match self {
             Image::ProfileA => "TWIN_ELF_A",
             Image::ProfileB => "TWIN_ELF_B",
+            Image::ProfileALink => "TWIN_ELF_A_LINK",
         }
     }
 
@@ -46,14 +53,16 @@ impl Image {
         let name = match self {
             Image::ProfileA => "twin-a",
             Image::ProfileB => "twin-b",
+            Image::ProfileALink => "twin-a-link",
         };
         workspace_root().join("target").join(name)
     }
 
-    /// Builds the image once per process (or takes `TWIN_ELF_A`/`_B`) and
+    /// Builds the image once per process (or takes `TWIN_ELF_A`/`_B`/`_A_LINK`) and
     /// returns the ELF path.
     pub fn elf(self) -> io::Result<PathBuf> {
-        static BUILT: [OnceLock<Result<PathBuf, String>>; 2] = [OnceLock::new(), OnceLock::new()];
+        static BUILT: [OnceLock<Result<PathBuf, String>>; 3] =
+            [OnceLock::new(), OnceLock::new(), OnceLock::new()];
         if let Some(p) = std::env::var_os(self.env_var()) {
             return Ok(PathBuf::from(p));
         }

@@ -409,6 +409,16 @@ impl Twin {
         st.bus.pin_level(port_index(port), pin)
     }
 
+    /// Records the level changes of a pin (`port` 'A'..'E') from now on,
+    /// with their times, into `state().bus.pin_log` (see
+    /// [`periph::Bus::trace_pin`]).
+    pub fn trace_pin(&mut self, port: char, pin: u32) {
+        let now = self.now();
+        let st = self.uc.get_data_mut();
+        st.bus.advance(now);
+        st.bus.trace_pin(port_index(port), pin, now);
+    }
+
     /// Drives an input pin from outside.
     pub fn set_external(&mut self, port: char, pin: u32, e: External) {
         let now = self.now();

@@ -881,6 +881,52 @@ impl Timer {
 // USART (RM0008 §27)
 // ---------------------------------------------------------------------------
 
+/// One event on a USART's line, with its exact time (recorded when
+/// [`Usart::record`] is set; RM0008 §27.3.2 and §27.3.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineEvent {
+    /// A byte moved into the transmit shift register: its start bit
+    /// begins on TX.
+    TxStart {
+        /// When.
+        at: Ticks,
+        /// The byte.
+        byte: u8,
+    },
+    /// A byte's stop bit ended on TX (10 bit times after its start, 11
+    /// with M = 1).
+    TxEnd {
+        /// When.
+        at: Ticks,
+        /// The byte.
+        byte: u8,
+    },
+    /// TC set: a stop bit ended with TXE = 1 (nothing waiting in TDR).
+    TcSet {
+        /// When.
+        at: Ticks,
+    },
+    /// A received byte's stop bit ended: RXNE set (or ORE).
+    RxEnd {
+        /// When.
+        at: Ticks,
+        /// The byte.
+        byte: u8,
+    },
+}
+
+impl LineEvent {
+    /// The event's time.
+    pub fn at(&self) -> Ticks {
+        match *self {
+            LineEvent::TxStart { at, .. }
+            | LineEvent::TxEnd { at, .. }
+            | LineEvent::TcSet { at }
+            | LineEvent::RxEnd { at, .. } => at,
+        }
+    }
+}
+
 /// USART1 or USART2.
 #[derive(Clone, Debug)]
 pub struct Usart {
@@ -910,6 +956,11 @@ pub struct Usart {
     sr_read_ore: bool,
     /// Overruns seen on this USART (twin-side count).
     pub overruns: u64,
+    /// Record the line's events into [`Usart::line_log`] (off by default:
+    /// a long run would grow it).
+    pub record: bool,
+    /// The line's events, in time order per direction.
+    pub line_log: Vec<LineEvent>,
 }
 
 impl Usart {
@@ -928,15 +979,26 @@ impl Usart {
             tx_out: Vec::new(),
             sr_read_ore: false,
             overruns: 0,
+            record: false,
+            line_log: Vec::new(),
         }
     }
 
     fn reset(&mut self) {
         let out = std::mem::take(&mut self.tx_out);
-        let overruns = self.overruns;
+        let log = std::mem::take(&mut self.line_log);
+        let (overruns, record) = (self.overruns, self.record);
         *self = Self::new();
         self.tx_out = out;
         self.overruns = overruns;
+        self.record = record;
+        self.line_log = log;
+    }
+
+    fn log(&mut self, e: LineEvent) {
+        if self.record {
+            self.line_log.push(e);
+        }
     }
 
     /// One character (start, 8 data, stop) in ticks at this BRR and PCLK.
@@ -957,9 +1019,18 @@ impl Usart {
                 break;
             }
             self.tx_out.push(b);
+            self.log(LineEvent::TxEnd { at: done, byte: b });
+            // The next byte (if TDR holds one) starts as this stop bit
+            // ends; TXE is set as it moves into the shift register.
             self.tx_shift = self.tdr.take().map(|n| (n, done + self.char_ticks(pclk)));
-            if self.tx_shift.is_none() {
-                self.sr |= 1 << 6; // TC
+            match self.tx_shift {
+                Some((n, _)) => self.log(LineEvent::TxStart { at: done, byte: n }),
+                None => {
+                    // RM0008 §27.6.1: TC is set "if the transmission of a
+                    // frame containing data is complete and if TXE is set".
+                    self.sr |= 1 << 6;
+                    self.log(LineEvent::TcSet { at: done });
+                }
             }
             self.sr |= 1 << 7; // TXE
         }
@@ -976,6 +1047,10 @@ impl Usart {
                 self.rx_next = NEVER;
                 break;
             };
+            self.log(LineEvent::RxEnd {
+                at: self.rx_next,
+                byte: b,
+            });
             if self.sr & (1 << 5) != 0 {
                 // RXNE still set: the new byte is lost, ORE (RM0008 §27.6.1).
                 self.sr |= 1 << 3;
@@ -1043,6 +1118,7 @@ impl Usart {
                 let b = v as u8;
                 if self.tx_shift.is_none() {
                     self.tx_shift = Some((b, now + self.char_ticks(pclk)));
+                    self.log(LineEvent::TxStart { at: now, byte: b });
                 } else {
                     self.tdr = Some(b);
                     self.sr &= !(1 << 7);
@@ -1315,6 +1391,25 @@ pub struct Bus {
     /// The system clock is gone (its crystal failed without the clock
     /// security system): nothing clocked by it moves; the IWDG (LSI) runs.
     pub clock_stopped: bool,
+    /// Pins whose level changes are recorded (port 0 = A, pin, last level
+    /// seen); see [`Bus::trace_pin`].
+    traced: Vec<(usize, u32, Level)>,
+    /// The recorded level changes of the traced pins, in time order.
+    pub pin_log: Vec<PinEvent>,
+}
+
+/// A traced pin's level change (a GPIO register write or a reset changed
+/// it; [`Bus::trace_pin`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PinEvent {
+    /// When (the time of the write, see docs/twin.md: a block's end).
+    pub at: Ticks,
+    /// Port (0 = A).
+    pub port: usize,
+    /// Pin.
+    pub pin: u32,
+    /// The new level.
+    pub level: Level,
 }
 
 /// Base addresses.
@@ -1375,6 +1470,39 @@ impl Bus {
             unmodelled: Vec::new(),
             debug_halt: false,
             clock_stopped: false,
+            traced: Vec::new(),
+            pin_log: Vec::new(),
+        }
+    }
+
+    /// Records every change of the level of `pin` of `port` (0 = A) from
+    /// now on into [`Bus::pin_log`] (the level now is the first entry).
+    /// Only GPIO output pins are followed (their changes come from register
+    /// writes and resets), not AF outputs.
+    pub fn trace_pin(&mut self, port: usize, pin: u32, now: Ticks) {
+        let level = self.pin_level(port, pin);
+        self.traced.push((port, pin, level));
+        self.pin_log.push(PinEvent {
+            at: now,
+            port,
+            pin,
+            level,
+        });
+    }
+
+    fn check_traced(&mut self, now: Ticks) {
+        for i in 0..self.traced.len() {
+            let (port, pin, last) = self.traced[i];
+            let level = self.pin_level(port, pin);
+            if level != last {
+                self.traced[i].2 = level;
+                self.pin_log.push(PinEvent {
+                    at: now,
+                    port,
+                    pin,
+                    level,
+                });
+            }
         }
     }
 
@@ -1403,6 +1531,7 @@ impl Bus {
         self.dbgmcu_cr = 0;
         self.clock_stopped = false;
         self.flash_cmd = None;
+        self.check_traced(now);
     }
 
     /// The clock tree in force.
@@ -1749,6 +1878,7 @@ impl Bus {
                     0x18 => g.lckr = v,
                     _ => {}
                 }
+                self.check_traced(now);
             }
             addr::RCC => self.rcc.write(off, v, now),
             addr::FLASH => {

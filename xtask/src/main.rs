@@ -99,16 +99,26 @@ fn run(what: &str, cmd: &mut Command) -> Result {
 enum Board {
     Stm32f103,
     Stm32f103ProfileB,
+    /// Profile A with the drum driver's link (feature `drive-link`), linked
+    /// for the 128 KB parts: it does not fit the C8's 56 KB yet
+    /// (docs/drive-link.md, "Images").
+    Stm32f103DriveLink,
     Qemu,
 }
 
 impl Board {
-    const ALL: [Board; 3] = [Board::Stm32f103, Board::Stm32f103ProfileB, Board::Qemu];
+    const ALL: [Board; 4] = [
+        Board::Stm32f103,
+        Board::Stm32f103ProfileB,
+        Board::Stm32f103DriveLink,
+        Board::Qemu,
+    ];
 
     fn name(self) -> &'static str {
         match self {
             Board::Stm32f103 => "stm32f103",
             Board::Stm32f103ProfileB => "stm32f103-b",
+            Board::Stm32f103DriveLink => "stm32f103-link (128 KB parts)",
             Board::Qemu => "qemu",
         }
     }
@@ -121,6 +131,7 @@ impl Board {
                 "--features",
                 "board-stm32f103,profile-b",
             ],
+            Board::Stm32f103DriveLink => &["--features", "drive-link"],
             Board::Qemu => &[
                 "--no-default-features",
                 "--features",
@@ -135,6 +146,7 @@ impl Board {
         match self {
             Board::Stm32f103 => root().join("target").join("stm32f103"),
             Board::Stm32f103ProfileB => root().join("target").join("stm32f103-b"),
+            Board::Stm32f103DriveLink => root().join("target").join("stm32f103-link"),
             Board::Qemu => qemu_tests::qemu_target_dir(),
         }
     }
@@ -537,6 +549,7 @@ fn test() -> Result<Totals> {
     // images: the ones `cargo xtask size` checks, built once here.
     let twin_a = Board::Stm32f103.build()?;
     let twin_b = Board::Stm32f103ProfileB.build()?;
+    let twin_a_link = Board::Stm32f103DriveLink.build()?;
     run_tests(
         "QEMU and twin tests (tests/)",
         cargo()
@@ -547,7 +560,8 @@ fn test() -> Result<Totals> {
             .args(["test", "-p", "qemu-tests", "--", "--test-threads=2"])
             .env("FIRMWARE_QEMU_ELF", &elf)
             .env("TWIN_ELF_A", &twin_a)
-            .env("TWIN_ELF_B", &twin_b),
+            .env("TWIN_ELF_B", &twin_b)
+            .env("TWIN_ELF_A_LINK", &twin_a_link),
         &mut totals,
     )?;
     println!(
@@ -617,16 +631,6 @@ fn ci() -> Result {
     for board in Board::ALL {
         board.clippy()?;
     }
-    // The drum driver's link on the real board: not in a shipped image yet
-    // (flash, docs/drive-link.md "Images"), so type-checked here.
-    run(
-        "clippy firmware, board stm32f103 with the drive link",
-        cargo()
-            .args(["clippy", "-p", "firmware", "--release", "--target", TARGET])
-            .args(["--features", "drive-link", "--target-dir"])
-            .arg(Board::Stm32f103.target_dir())
-            .args(["--", "-D", "warnings"]),
-    )?;
     run(
         "rustdoc (warnings denied)",
         cargo()
@@ -782,6 +786,8 @@ fn size() -> Result {
             Board::Stm32f103 | Board::Stm32f103ProfileB => {
                 (STM32F103_FLASH_BUDGET, STM32F103_RAM_BUDGET)
             }
+            // The 128 KB parts' 120 KB (their last 8 KB hold the settings).
+            Board::Stm32f103DriveLink => (120 * 1024, STM32F103_RAM_BUDGET),
             Board::Qemu => (120 * 1024, QEMU_RAM_SIZE - QEMU_STACK_RESERVE),
         };
         println!(
@@ -802,7 +808,8 @@ fn size() -> Result {
         return Err(format!("over budget: {}", over.join("; ")));
     }
     check_forbidden_symbols(&Board::Stm32f103.elf())?;
-    check_forbidden_symbols(&Board::Stm32f103ProfileB.elf())
+    check_forbidden_symbols(&Board::Stm32f103ProfileB.elf())?;
+    check_forbidden_symbols(&Board::Stm32f103DriveLink.elf())
 }
 
 /// `cargo xtask flash`: a real board on a debug probe.

@@ -860,7 +860,19 @@ impl Watchdog {
 
 /// Offset of the settings pages from the start of flash (0x0800E000, see
 /// memory-stm32f103.x).
+#[cfg(not(feature = "drive-link"))]
 const SETTINGS_OFFSET: u32 = 0xE000;
+/// With the drive link, the 128 KB parts' layout: 0x0801E000, see
+/// memory-stm32f103-128k.x.
+#[cfg(feature = "drive-link")]
+const SETTINGS_OFFSET: u32 = 0x1_E000;
+/// The flash the HAL's writer may reach: the C8's 64 KB, or with the drive
+/// link the 128 KB parts'.
+#[cfg(not(feature = "drive-link"))]
+const FLASH_SIZE: FlashSize = FlashSize::Sz64K;
+/// See above.
+#[cfg(feature = "drive-link")]
+const FLASH_SIZE: FlashSize = FlashSize::Sz128K;
 /// The settings pages of the MCU's own flash as a NOR flash.
 pub struct SettingsFlash {
     flash: flash::Parts,
@@ -875,7 +887,7 @@ impl ReadNorFlash for SettingsFlash {
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
         check_flash_access(offset, bytes.len(), 1)?;
-        let writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz64K);
+        let writer = self.flash.writer(SectorSize::Sz1K, FLASH_SIZE);
         let data = writer
             .read(SETTINGS_OFFSET + offset, bytes.len())
             .map_err(|_| FlashError::Device)?;
@@ -894,7 +906,7 @@ impl NorFlash for SettingsFlash {
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         check_flash_erase(from, to)?;
-        let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz64K);
+        let mut writer = self.flash.writer(SectorSize::Sz1K, FLASH_SIZE);
         writer
             .erase(SETTINGS_OFFSET + from, (to - from) as usize)
             .map_err(|_| FlashError::Device)
@@ -902,7 +914,7 @@ impl NorFlash for SettingsFlash {
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
         check_flash_access(offset, bytes.len(), 2)?;
-        let mut writer = self.flash.writer(SectorSize::Sz1K, FlashSize::Sz64K);
+        let mut writer = self.flash.writer(SectorSize::Sz1K, FLASH_SIZE);
         writer
             .write(SETTINGS_OFFSET + offset, bytes)
             .map_err(|_| FlashError::Device)

@@ -99,21 +99,40 @@ fn the_poll_period_and_readback_age_match_the_line_at_both_bauds() {
 #[test]
 fn a_70_m_row_from_the_readback_alone_gets_its_1000_plants() {
     // The full noise model (terrain, slip variation, tooth errors,
-    // seedling load), read-back only, the encoder cut. Issue 17 asks
-    // ±0.5 %: met at 115 200 baud; at 9600 the drum runs on for the
-    // read-back's 35–90 ms at each of the terrain's stops and the row
-    // gets 1006 (+0.6 %), so 9600 is held to ±1 % here and the shortfall
-    // is in docs/drive-link.md ("Limits").
-    for (baud, bound) in [(115_200u32, 0.005), (9600, 0.01)] {
-        let (row, _) = row_70m(FeedbackSource::Driver, CommandPath::Pwm, baud);
-        assert_eq!(row.first_alarm, None, "{baud}");
-        let plants = row.plants as f64;
-        let error = (plants - ROW_PLANTS) / ROW_PLANTS;
-        eprintln!(
-            "{baud} baud, 70 m: {plants} plants ({:+.2} %)",
-            error * 100.0
-        );
-        assert!(error.abs() <= bound, "{baud}: {plants} plants");
+    // seedling load; seed 1), read-back only, the encoder cut, with PWM
+    // and with the Modbus speed command. Issue 17 asks ±0.5 % of the plant
+    // count at 9600 and at 115 200 baud; the true count is the row's
+    // length over the spacing, 70 m / 7 cm = 1000 (the plants the
+    // simulated belt dropped are counted, not the supervisor's count).
+    //
+    // The drum's true turns over the row against ∫ eq. 7 dt (f64, on the
+    // true travel speed) must not be off by more than 0.12 %: the
+    // encoder-fed loop on the same row is +0.06 % (bench §10 runs it:
+    // `cargo xtask bench --only link`), and the read-back may add as
+    // much again. Before the fix (the fuzzy tuner's Ki following the
+    // held read-back's error, docs/drive-link.md "The 70 m row at 9600
+    // baud") this failed: +0.40 % (9600, PWM, 1003 plants), +0.15 %
+    // (115 200), +0.59 % and +0.20 % with the Modbus command (1005 and
+    // 1002 plants).
+    for command in [CommandPath::Pwm, CommandPath::Modbus] {
+        for baud in [115_200u32, 9600] {
+            let (row, _) = row_70m(FeedbackSource::Driver, command, baud);
+            assert_eq!(row.first_alarm, None, "{baud} {command:?}");
+            let plants = row.plants as f64;
+            let error = (plants - ROW_PLANTS) / ROW_PLANTS;
+            let offset = row.drum_turns / row.eq7_turns - 1.0;
+            eprintln!(
+                "{baud} baud, {command:?}, 70 m: {plants} plants ({:+.2} %), drum turns vs eq. 7 {:+.3} %",
+                error * 100.0,
+                offset * 100.0
+            );
+            assert!(error.abs() <= 0.005, "{baud} {command:?}: {plants} plants");
+            assert!(
+                offset.abs() <= 0.0012,
+                "{baud} {command:?}: drum turns {:+.3} % vs eq. 7",
+                offset * 100.0
+            );
+        }
     }
 }
 
@@ -208,7 +227,7 @@ fn a_cut_link_is_lost_within_the_retry_budget_and_recovers_on_acknowledge() {
         rig.start();
         rig.run_ms(2_000);
         assert_eq!(rig.sup.run_state(), RunState::Running);
-        assert_eq!(rig.sup.alarm(), None);
+        assert_eq!(rig.sup.alarm(), None, "{baud} after the restart");
     }
 }
 

@@ -361,6 +361,11 @@ pub struct Row {
     pub plants: usize,
     /// The first alarm: (firmware ms, metres into the row, alarm).
     pub first_alarm: Option<(u64, f64, Alarm)>,
+    /// The drum's true turns over the row.
+    pub drum_turns: f64,
+    /// The turns eq. 7 asks over the row: ∫ eq. 7 (f64, on the true
+    /// travel speed at the end of each control period) dt.
+    pub eq7_turns: f64,
 }
 
 /// The row's length and its plants at 7 cm: 70 m / 0.07 m.
@@ -384,8 +389,11 @@ pub fn row_70m(feedback: FeedbackSource, command: CommandPath, baud: u32) -> (Ro
     rig.start();
     let g0 = rig.m.ground_position_m();
     let mut first_alarm = None;
+    let d0 = rig.m.drum_turns();
+    let mut eq7_turns = 0.0;
     while rig.m.ground_position_m() - g0 < ROW_M {
         rig.period();
+        eq7_turns += eq7_drum_speed(f64::from(rig.m.travel_speed_m_s()), 0.07) * 0.01 / 60.0;
         if let (None, Some(a)) = (first_alarm, rig.sup.alarm()) {
             first_alarm = Some((rig.t_us / 1000, rig.m.ground_position_m() - g0, a));
         }
@@ -396,6 +404,8 @@ pub fn row_70m(feedback: FeedbackSource, command: CommandPath, baud: u32) -> (Ro
         Row {
             plants,
             first_alarm,
+            drum_turns: rig.m.drum_turns() - d0,
+            eq7_turns,
         },
         rig,
     )

@@ -6,6 +6,7 @@ use std::process::Command;
 mod belt;
 mod drum;
 mod field;
+mod link;
 mod placement;
 mod speed;
 pub(crate) mod svg;
@@ -145,7 +146,7 @@ fn twin_section(doc: &mut String) -> Result {
     Ok(())
 }
 
-/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`) alone, printed
+/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`, `link`) alone, printed
 /// and written to target/bench-NAME.md (its plots to target/img/);
 /// docs/PERFORMANCE.md and docs/img/ are left as they are.
 fn only(name: &str) -> Result {
@@ -158,9 +159,12 @@ fn only(name: &str) -> Result {
         "placement" => {
             placement::section(&mut doc, &img)?;
         }
+        "link" => {
+            link::section(&mut doc)?;
+        }
         other => {
             return Err(format!(
-                "bench --only: unknown section `{other}` (known: tables, placement)"
+                "bench --only: unknown section `{other}` (known: tables, placement, link)"
             ))
         }
     }
@@ -183,7 +187,7 @@ pub fn run(args: &[String]) -> Result {
         [flag, name] if flag == "--only" => return only(name),
         _ => {
             return Err(format!(
-                "bench: unexpected arguments {args:?} (usage: bench [--only tables|placement])"
+                "bench: unexpected arguments {args:?} (usage: bench [--only tables|placement|link])"
             ))
         }
     }
@@ -302,6 +306,9 @@ pub fn run(args: &[String]) -> Result {
     eprintln!("xtask: bench 9 placement");
     let secs = placement::section(&mut doc, &img)?;
     eprintln!("xtask: bench 9 took {secs:.0} s");
+    eprintln!("xtask: bench 10 drive link");
+    let secs = link::section(&mut doc)?;
+    eprintln!("xtask: bench 10 took {secs:.1} s");
     let path = root().join("docs").join("PERFORMANCE.md");
     write_file(&path, &doc)?;
     eprintln!(

@@ -2019,7 +2019,17 @@ impl Supervisor {
         let config = if self.fallback {
             fallback_config(&model)
         } else {
-            scheduled_config(&model, self.hw.control_period_us)
+            let mut c = scheduled_config(&model, self.hw.control_period_us);
+            // Through the link: the integral gain is not tuned
+            // (`DriveLinkSettings::delays_control`).
+            if self.link_in_force.delays_control() {
+                if let fuzzy_pid::Schedule::Fuzzy(f) = &mut c.schedule {
+                    // The smallest range `FuzzyConfig` accepts (> 0):
+                    // ΔKi within ±1/65 536, Ki its base.
+                    f.range.ki = I16F16::DELTA;
+                }
+            }
+            c
         };
         if let Ok(c) = config.build() {
             self.drum = Drum::Control(c);

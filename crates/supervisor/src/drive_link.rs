@@ -297,6 +297,23 @@ impl DriveLinkSettings {
             .saturating_add(gap.saturating_mul(2))
     }
 
+    /// Whether the control loop runs through the link: the read-back as
+    /// the feedback or the bus speed command. The drum controller is then
+    /// the conventional PID (the fuzzy tuner's base gains, scaled by the
+    /// lengthened dead time), not the fuzzy self-tuning one: the tuner's
+    /// `Ki` follows the error and its change, and with a read-back held
+    /// for a poll period (or a command the driver takes every other
+    /// transaction) the error's change is a staircase; the integral then
+    /// settles where `Σ Ki(e, ec)·e = 0`, not where the mean error is 0.
+    /// Measured (70 m row, 9600 baud, read-back only, PWM): the read-back
+    /// held 0.41 % above the drum model's reference on average and the row
+    /// got 1003 plants; the conventional PID: mean error 0.00 %, 999
+    /// plants (docs/drive-link.md, "The 70 m row at 9600 baud").
+    #[must_use]
+    pub fn delays_control(&self) -> bool {
+        self.feedback == FeedbackSource::Driver || self.command == CommandPath::Modbus
+    }
+
     /// Little-endian bytes: feedback (0 encoder, 1 driver, 2 both), command
     /// (0 PWM, 1 Modbus), kind (0 none, 1 ZLAC8015D, 2 generic), slave,
     /// baud (u32), speed register, scale (i32, µr/min per count), fault register, six fault

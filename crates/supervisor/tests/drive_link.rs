@@ -21,298 +21,23 @@
     missing_docs
 )]
 
-use std::collections::VecDeque;
+#[path = "support/drive_rig.rs"]
+mod drive_rig;
 
-use drive_link::link::{ControlAction, Event as LinkEvent, Link, LinkConfig};
-use drive_link::timing::frame_time_us;
-use drive_link::virtual_driver::VirtualZlac;
+use drive_link::link::LinkConfig;
+use drive_rig::{row_70m, tracking, Rig, ROW_PLANTS};
 use hmi_proto::screen::Command;
 use kinematics::consts::Gear;
-use kinematics::units::Ticks;
-use machine_sim::reference::eq7_drum_speed;
-use machine_sim::{Config, Event, Fault, Inputs, Machine};
-use supervisor::control::{Actuation, Alarm, Hardware, RunState, Supervisor};
-use supervisor::drive_link::{
-    CommandPath, DriveLinkSettings, DriverKind, FeedbackSource, LinkSample, ReadBack,
-};
-use supervisor::settings::Settings;
+use machine_sim::{Config, Fault};
+use supervisor::control::{Actuation, Alarm, RunState};
+use supervisor::drive_link::{CommandPath, FeedbackSource};
 
-const HW: Hardware = Hardware::BOARD;
-/// The virtual driver's motor turns per drum turn. Not paper A's 118:1:
-/// behind 118:1 a ZLAC8015D's speed register (0.1 r/min, signed 16 bit)
-/// saturates at 3276.7 / 118 = 27.77 drum r/min, below the 28–29 r/min a
-/// 7 cm spacing needs at Low 2 with the paper's slip (docs/drive-link.md);
-/// 59:1 covers paper A's 44.7 r/min. The profile's scale folds it in:
-/// 100 000 / 59 = 1695 µr/min of the drum per count.
-const RATIO: f64 = 59.0;
-/// [`RATIO`] in the profile's scale.
-const SCALE: i32 = 1695;
-/// The line's time step, µs.
-const TICK_US: u64 = 50;
-
-struct Rig {
-    sup: Supervisor,
-    m: Machine,
-    act: Actuation,
-    link: Link,
-    drv: VirtualZlac,
-    baud: u32,
-    t_us: u64,
-    /// A request on the line: (end, bytes).
-    request: Option<(u64, Vec<u8>)>,
-    /// Replies on their way: (end of the last byte, bytes).
-    replies: VecDeque<(u64, Vec<u8>)>,
-    /// The drum's true speed each ms: (time µs, r/min).
-    speed_log: VecDeque<(u64, f64)>,
-    enabled: Option<bool>,
-    command_seen: bool,
-    /// Speed-read request ends, and (request end, reply end) of each answer.
-    speed_reads: Vec<u64>,
-    answers: Vec<(u64, u64)>,
-    /// Read-back ages at the control steps that used one, µs.
-    ages: Vec<u32>,
-    plants: Vec<f64>,
-    lost_at: Option<u64>,
-    last_request_end: u64,
-}
-
-impl Rig {
-    fn new(config: Config, feedback: FeedbackSource, command: CommandPath, baud: u32) -> Self {
-        // Speed-following placement: distance-locked placement's phase
-        // loop, fed the read-back's belt position 30–90 ms late, swings
-        // the target by ±12 % at 2.9 Hz (measured at 9600 baud with the
-        // full noise model; docs/drive-link.md, "Limits").
-        let mut settings = Settings {
-            gear: Gear::Low2,
-            placement: supervisor::settings::Placement::SpeedFollowing,
-            ..Settings::default()
-        };
-        settings.drive_link = DriveLinkSettings {
-            feedback,
-            command,
-            kind: DriverKind::Zlac8015d,
-            ..DriveLinkSettings::default()
-        };
-        settings.drive_link.generic.baud = baud;
-        settings.drive_link.generic.micro_rpm_per_count = SCALE;
-        let profile = settings.drive_link.build().unwrap().unwrap();
-        Self {
-            sup: Supervisor::new(HW, settings).unwrap(),
-            m: config.build().unwrap(),
-            act: Actuation::OFF,
-            link: Link::new(profile, LinkConfig::for_baud(baud).unwrap()),
-            drv: VirtualZlac::default(),
-            baud,
-            t_us: 0,
-            request: None,
-            replies: VecDeque::new(),
-            speed_log: VecDeque::new(),
-            enabled: None,
-            command_seen: false,
-            speed_reads: Vec::new(),
-            answers: Vec::new(),
-            ages: Vec::new(),
-            plants: Vec::new(),
-            lost_at: None,
-            last_request_end: 0,
-        }
-    }
-
-    /// The drum's true speed at `t` (r/min), linear between the ms samples.
-    fn drum_at(&self, t: u64) -> f64 {
-        let mut prev = (0, 0.0);
-        for &(ts, v) in &self.speed_log {
-            if ts >= t {
-                if ts == prev.0 {
-                    return v;
-                }
-                let f = (t - prev.0) as f64 / (ts - prev.0) as f64;
-                return prev.1 + (v - prev.1) * f;
-            }
-            prev = (ts, v);
-        }
-        prev.1
-    }
-
-    fn on_event(&mut self, e: Option<LinkEvent>, t: u64) {
-        match e {
-            Some(LinkEvent::Restored) => {
-                self.link.acknowledge();
-            }
-            Some(LinkEvent::Lost) => self.lost_at = Some(t),
-            _ => {}
-        }
-    }
-
-    /// The link task for one tick at `t` (what `app::drive_link` does every
-    /// ms, here every 50 µs so that the line's timing is kept).
-    fn line_tick(&mut self, t: u64) {
-        while self.replies.front().is_some_and(|r| r.0 <= t) {
-            let (_, frame) = self.replies.pop_front().unwrap();
-            let e = self.link.received(t, &frame);
-            self.on_event(e, t);
-        }
-        if let Some((end, bytes)) = self.request.clone().filter(|r| r.0 <= t) {
-            self.request = None;
-            self.link.sent(end);
-            self.last_request_end = end;
-            let sample_at = end + u64::from(self.drv.turnaround_us);
-            let decirpm = self.drum_at(sample_at) * RATIO * 10.0;
-            self.drv.actual_decirpm = decirpm.round().clamp(-32768.0, 32767.0) as i16;
-            if bytes[1] == 0x03 && bytes[2..4] == [0x20, 0xAB] {
-                self.speed_reads.push(end);
-            }
-            if bytes[1] == 0x06 && bytes[2..4] == [0x20, 0x88] {
-                self.command_seen = true;
-            }
-            if let Some((reply, delay)) = self.drv.handle(&bytes) {
-                // The master sees the frame end 3.5 characters after its
-                // last byte (the real board's silence timer).
-                let on_line = frame_time_us(self.baud, reply.len() as u32).unwrap();
-                let silence = drive_link::timing::silent_interval_us(self.baud).unwrap();
-                let due = end + u64::from(delay) + u64::from(on_line) + u64::from(silence);
-                self.answers.push((end, due));
-                self.replies.push_back((due, reply));
-            }
-        }
-        let e = self.link.tick(t);
-        self.on_event(e, t);
-        if self.request.is_none() && self.replies.is_empty() {
-            let mut buf = [0u8; 16];
-            if let Some(n) = self.link.next_frame(t, &mut buf) {
-                let end = t + u64::from(frame_time_us(self.baud, n as u32).unwrap());
-                self.request = Some((end, buf[..n].to_vec()));
-            }
-        }
-    }
-
-    /// The machine's inputs: PB12 and the driver's own enable; the PWM duty
-    /// or, in velocity mode with a bus command, the command over n_max.
-    fn inputs(&self) -> Inputs {
-        let on = self.act.driver_enabled && self.drv.enabled && self.drv.fault_bits == 0;
-        let duty = if self.drv.velocity_mode && self.command_seen {
-            (f64::from(self.drv.command_rpm) / RATIO / f64::from(self.m.config().n_max_rpm)) as f32
-        } else {
-            f32::from(self.act.ccr) / f32::from(HW.pwm_arr + 1)
-        };
-        Inputs {
-            drum_duty: duty,
-            driver_enabled: on,
-            ..Inputs::default()
-        }
-    }
-
-    /// One control period: 10 ms of machine and line, then the control step
-    /// with the link's sample, then the step's decisions to the link.
-    fn period(&mut self) {
-        for _ in 0..10 {
-            let inputs = self.inputs();
-            let sup = &mut self.sup;
-            let plants = &mut self.plants;
-            self.m.step_events(1000, &inputs, &mut |e| match e {
-                Event::HallEdge(t) => sup.hall_edge(Ticks(t)),
-                Event::Plant { ground_m, .. } => plants.push(ground_m),
-            });
-            for k in 0..(1000 / TICK_US) {
-                self.line_tick(self.t_us + k * TICK_US);
-            }
-            self.t_us += 1000;
-            self.speed_log
-                .push_back((self.t_us, f64::from(self.m.drum_speed_rpm())));
-            if self.speed_log.len() > 200 {
-                self.speed_log.pop_front();
-            }
-        }
-        let sample = LinkSample {
-            speed: self.link.speed().map(|s| ReadBack {
-                drum_milli_rpm: s.drum_milli_rpm,
-                age_us: (self.t_us - s.sampled_at_us) as u32,
-            }),
-            lost: self.link.is_lost(),
-            answering: self.link.is_answering(),
-            fault_word: self.link.fault_word(),
-            fault_reads: self.link.counters().fault_reads,
-        };
-        if let Some(r) = sample.speed {
-            self.ages.push(r.age_us);
-        }
-        self.sup.set_link_sample(sample);
-        self.act = self
-            .sup
-            .control_step(Ticks(self.m.capture_ticks()), self.m.drum_encoder_count());
-        // What the firmware's control task hands the link (main.rs
-        // `link_apply`).
-        let on = self.act.driver_enabled;
-        if self.sup.take_driver_clear() {
-            self.link.control(ControlAction::ClearAlarm);
-            self.enabled = None;
-        } else if self.enabled != Some(on) {
-            self.link.control(if on {
-                ControlAction::Enable
-            } else {
-                ControlAction::Disable
-            });
-            self.enabled = Some(on);
-        }
-        self.link.set_speed_command(if on {
-            self.sup.bus_speed_command()
-        } else {
-            None
-        });
-    }
-
-    fn run_ms(&mut self, ms: u32) {
-        for _ in 0..ms / 10 {
-            self.period();
-        }
-    }
-
-    fn start(&mut self) {
-        self.sup.command(Command::Start);
-    }
-
-    /// Worst |drum − eq. 7| / eq. 7 over `ms`, sampled every 100 ms.
-    fn worst_tracking(&mut self, ms: u32) -> f64 {
-        let mut worst: f64 = 0.0;
-        for i in 0..ms / 10 {
-            self.period();
-            if i % 10 == 0 {
-                let target = eq7_drum_speed(f64::from(self.m.travel_speed_m_s()), 0.07);
-                let err = (f64::from(self.m.drum_speed_rpm()) - target).abs() / target;
-                worst = worst.max(err);
-            }
-        }
-        worst
-    }
-}
-
-/// Noiseless Low 2 whose chassis pulls away with a 2.5 s time constant
-/// (as the encoder's QEMU test), the encoder cut from the start.
-fn smooth() -> Config {
-    let mut c = Config::noiseless();
-    c.initial_gear = Some(Gear::Low2);
-    c.track_tau_s = 2.5;
-    c
-}
-
-/// Read-back only, Start at 8 s; the worst error from `settle_ms` after
-/// Start for 6 s. With the Modbus command at 9600 baud the drum overshoots
-/// 5.5 % after Start (the integral winds up while the enable, velocity mode
-/// and first command go over the line, ≈ 70 ms) and is within 1 % 2.2 s
-/// later (docs/drive-link.md); with PWM, or at 115 200 baud, within 1 %
-/// from 2 s.
+/// Read-back only (the encoder cut), Start at 8 s; the worst error vs
+/// eq. 7 from `drive_rig::settle_ms` after Start for 6 s, sampled every
+/// 100 ms.
 fn tracks_eq7(command: CommandPath, baud: u32) -> (f64, Rig) {
-    let settle_ms = if command == CommandPath::Modbus && baud == 9600 {
-        3_000
-    } else {
-        2_000
-    };
-    let mut rig = Rig::new(smooth(), FeedbackSource::Driver, command, baud);
-    rig.m.inject_fault(Fault::EncoderLoss);
-    rig.run_ms(8_000);
-    rig.start();
-    rig.run_ms(settle_ms);
-    let worst = rig.worst_tracking(6_000);
+    let (errors, rig) = tracking(FeedbackSource::Driver, command, baud);
+    let worst = errors.iter().step_by(10).fold(0.0f64, |w, &e| w.max(e));
     assert_eq!(rig.sup.alarm(), None);
     assert_eq!(rig.sup.run_state(), RunState::Running);
     (worst, rig)
@@ -360,8 +85,8 @@ fn the_poll_period_and_readback_age_match_the_line_at_both_bauds() {
             "{baud} baud: speed poll period {:.2} ms (hand formula {:.2} ms), read-back age at use max {:.1} ms mean {:.1} ms",
             measured / 1000.0,
             expected / 1000.0,
-            *rig.ages.iter().max().unwrap() as f64 / 1000.0,
-            rig.ages.iter().map(|&a| f64::from(a)).sum::<f64>() / rig.ages.len() as f64 / 1000.0
+            rig.ages.iter().map(|a| a.1).max().unwrap() as f64 / 1000.0,
+            rig.ages.iter().map(|a| f64::from(a.1)).sum::<f64>() / rig.ages.len() as f64 / 1000.0
         );
         // Within 5 % (the 50 µs line step and the 1 ms link poll).
         assert!(
@@ -374,39 +99,40 @@ fn the_poll_period_and_readback_age_match_the_line_at_both_bauds() {
 #[test]
 fn a_70_m_row_from_the_readback_alone_gets_its_1000_plants() {
     // The full noise model (terrain, slip variation, tooth errors,
-    // seedling load), read-back only, the encoder cut. Issue 17 asks
-    // ±0.5 %: met at 115 200 baud; at 9600 the drum runs on for the
-    // read-back's 35–90 ms at each of the terrain's stops and the row
-    // gets 1006 (+0.6 %), so 9600 is held to ±1 % here and the shortfall
-    // is in docs/drive-link.md ("Limits").
-    for (baud, bound) in [(115_200u32, 0.005), (9600, 0.01)] {
-        let c = Config {
-            initial_gear: Some(Gear::Low2),
-            ..Config::default()
-        };
-        let mut rig = Rig::new(c, FeedbackSource::Driver, CommandPath::Pwm, baud);
-        rig.m.inject_fault(Fault::EncoderLoss);
-        rig.run_ms(3_000);
-        rig.start();
-        let g0 = rig.m.ground_position_m();
-        while rig.m.ground_position_m() - g0 < 70.0 {
-            rig.period();
-            assert_eq!(
-                rig.sup.alarm(),
-                None,
-                "at {} ms, {:.2} m",
-                rig.t_us / 1000,
-                rig.m.ground_position_m() - g0
+    // seedling load; seed 1), read-back only, the encoder cut, with PWM
+    // and with the Modbus speed command. Issue 17 asks ±0.5 % of the plant
+    // count at 9600 and at 115 200 baud; the true count is the row's
+    // length over the spacing, 70 m / 7 cm = 1000 (the plants the
+    // simulated belt dropped are counted, not the supervisor's count).
+    //
+    // The drum's true turns over the row against ∫ eq. 7 dt (f64, on the
+    // true travel speed) must not be off by more than 0.12 %: the
+    // encoder-fed loop on the same row is +0.06 % (bench §10 runs it:
+    // `cargo xtask bench --only link`), and the read-back may add as
+    // much again. Before the fix (the fuzzy tuner's Ki following the
+    // held read-back's error, docs/drive-link.md "The 70 m row at 9600
+    // baud") this failed: +0.40 % (9600, PWM, 1003 plants), +0.15 %
+    // (115 200), +0.59 % and +0.20 % with the Modbus command (1005 and
+    // 1002 plants).
+    for command in [CommandPath::Pwm, CommandPath::Modbus] {
+        for baud in [115_200u32, 9600] {
+            let (row, _) = row_70m(FeedbackSource::Driver, command, baud);
+            assert_eq!(row.first_alarm, None, "{baud} {command:?}");
+            let plants = row.plants as f64;
+            let error = (plants - ROW_PLANTS) / ROW_PLANTS;
+            let offset = row.drum_turns / row.eq7_turns - 1.0;
+            eprintln!(
+                "{baud} baud, {command:?}, 70 m: {plants} plants ({:+.2} %), drum turns vs eq. 7 {:+.3} %",
+                error * 100.0,
+                offset * 100.0
+            );
+            assert!(error.abs() <= 0.005, "{baud} {command:?}: {plants} plants");
+            assert!(
+                offset.abs() <= 0.0012,
+                "{baud} {command:?}: drum turns {:+.3} % vs eq. 7",
+                offset * 100.0
             );
         }
-        let g1 = rig.m.ground_position_m();
-        let plants = rig.plants.iter().filter(|&&p| p >= g0 && p < g1).count() as f64;
-        let error = (plants - 1000.0) / 1000.0;
-        eprintln!(
-            "{baud} baud, 70 m: {plants} plants ({:+.2} %)",
-            error * 100.0
-        );
-        assert!(error.abs() <= bound, "{baud}: {plants} plants");
     }
 }
 
@@ -501,7 +227,7 @@ fn a_cut_link_is_lost_within_the_retry_budget_and_recovers_on_acknowledge() {
         rig.start();
         rig.run_ms(2_000);
         assert_eq!(rig.sup.run_state(), RunState::Running);
-        assert_eq!(rig.sup.alarm(), None);
+        assert_eq!(rig.sup.alarm(), None, "{baud} after the restart");
     }
 }
 

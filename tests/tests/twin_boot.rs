@@ -288,6 +288,11 @@ fn profile_a_boots_to_idle_with_rm0008_registers() {
     // Outputs after init: drum stopped, PWM pin driven low, enable low.
     assert_eq!(twin.pin('A', 8), twin::Level::Low);
     assert_eq!(twin.pin('B', 12), twin::Level::Low);
+    // The RS-485 transceiver's driver-enable (PA1) driven low — receive,
+    // the bus released — also on this image without the drive link, where
+    // nothing else configures it (it floated: a transceiver with DE
+    // floating may drive the driver's bus).
+    assert_eq!(twin.pin('A', 1), twin::Level::Low, "PA1 (RS-485 DE)");
 }
 
 #[test]
@@ -309,6 +314,7 @@ fn profile_b_boots_to_idle_with_rm0008_registers() {
     assert_eq!(twin.pin('A', 8), twin::Level::Low);
     assert_eq!(twin.pin('B', 6), twin::Level::Low);
     assert_eq!(twin.pin('B', 12), twin::Level::Low);
+    assert_eq!(twin.pin('A', 1), twin::Level::Low, "PA1 (RS-485 DE)");
 }
 
 /// RM0008 §15.4.12: "the counter is blocked while the auto-reload value is

@@ -367,8 +367,10 @@ fn hse_never_ready_keeps_the_outputs_safe_and_the_watchdog_retries() {
         // From 1 ms after each reset (the pins float in the reset state
         // until the first instructions drive them).
         if since_reset >= TICKS_PER_S / 1000 {
-            let pins = (twin.pin('A', 8), twin.pin('B', 12));
-            if pins != (Level::Low, Level::Low) && unsafe_samples.len() < 5 {
+            // PWM, enable, and the RS-485 transceiver's driver-enable
+            // (PA1: low releases the driver's bus).
+            let pins = (twin.pin('A', 8), twin.pin('B', 12), twin.pin('A', 1));
+            if pins != (Level::Low, Level::Low, Level::Low) && unsafe_samples.len() < 5 {
                 unsafe_samples.push((ms, pins));
             }
         }

@@ -1005,8 +1005,11 @@ const APB2ENR_IOPA_IOPB: u32 = (1 << 2) | (1 << 3);
 /// clocks, panic, HardFault after a stack overflow, NMI, an unexpected
 /// interrupt):
 ///
-/// 1. PA8 (drum PWM / profile B planting STEP), PB12 (drivers' enable) and
-///    profile B's PB6 (feeding STEP) become general-purpose push-pull
+/// 1. PA8 (drum PWM / profile B planting STEP), PB12 (drivers' enable),
+///    profile B's PB6 (feeding STEP) and PA1 (the RS-485 transceiver's
+///    driver-enable: low receives and releases the motor driver's bus;
+///    it floated from reset until `init` when the clock never came up)
+///    become general-purpose push-pull
 ///    outputs driven low: ODR bits cleared through BRR (RM0008 §9.2.6), then
 ///    the pins' CRH/CRL nibbles = 0010 (§9.2.1, §9.2.2), the port clocks
 ///    switched on first (§7.3.7). This holds whatever state the timers are
@@ -1033,11 +1036,14 @@ pub fn safe_state() {
             .modify(|r, w| w.bits(r.bits() | APB2ENR_IOPA_IOPB));
         let gpioa = &*pac::GPIOA::ptr();
         let gpiob = &*pac::GPIOB::ptr();
-        gpioa.brr().write(|w| w.bits(1 << 8));
+        gpioa.brr().write(|w| w.bits((1 << 8) | (1 << 1)));
         gpiob.brr().write(|w| w.bits((1 << 12) | (1 << 6)));
         gpioa
             .crh()
             .modify(|r, w| w.bits((r.bits() & !0xF) | GPIO_OUT_PP_2MHZ));
+        gpioa
+            .crl()
+            .modify(|r, w| w.bits((r.bits() & !(0xF << 4)) | (GPIO_OUT_PP_2MHZ << 4)));
         gpiob
             .crh()
             .modify(|r, w| w.bits((r.bits() & !(0xF << 16)) | (GPIO_OUT_PP_2MHZ << 16)));

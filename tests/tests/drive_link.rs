@@ -17,53 +17,18 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
 use machine_sim::reference::eq7_drum_speed;
 use qemu_tests::{log_time_ms, sim_samples, Bench, BootOptions, Image, SimSample};
 use supervisor::drive_link::{CommandPath, DriveLinkSettings, DriverKind, FeedbackSource};
 use supervisor::settings::Settings;
-use supervisor::store::SettingsStore;
 
-/// The QEMU board's settings flash: two 1 KB pages in a host file.
-struct FileFlash(Vec<u8>);
-
-impl ErrorType for FileFlash {
-    type Error = NorFlashErrorKind;
-}
-
-impl ReadNorFlash for FileFlash {
-    const READ_SIZE: usize = 1;
-    fn read(&mut self, off: u32, buf: &mut [u8]) -> Result<(), Self::Error> {
-        let o = off as usize;
-        buf.copy_from_slice(&self.0[o..o + buf.len()]);
-        Ok(())
-    }
-    fn capacity(&self) -> usize {
-        self.0.len()
-    }
-}
-
-impl NorFlash for FileFlash {
-    const WRITE_SIZE: usize = 2;
-    const ERASE_SIZE: usize = 1024;
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        self.0[from as usize..to as usize].fill(0xFF);
-        Ok(())
-    }
-    fn write(&mut self, off: u32, data: &[u8]) -> Result<(), Self::Error> {
-        for (d, s) in self.0[off as usize..].iter_mut().zip(data) {
-            *d &= *s;
-        }
-        Ok(())
-    }
-}
+#[path = "support/pages.rs"]
+mod pages;
 
 /// A flash file holding `settings` (a saved format-5 record).
 fn flash_with(name: &str, settings: &Settings) -> PathBuf {
-    let mut store = SettingsStore::new(FileFlash(vec![0xFF; 2048]), 0).unwrap();
-    store.save(settings).unwrap();
     let path = std::env::temp_dir().join(format!("drive-link-{name}-{}.bin", std::process::id()));
-    std::fs::write(&path, &store.into_inner().0).unwrap();
+    std::fs::write(&path, pages::pages_with(settings)).unwrap();
     path
 }
 

@@ -33,48 +33,14 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 use drive_link::virtual_driver::VirtualZlac;
-use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
 use supervisor::drive_link::{CommandPath, DriveLinkSettings, DriverKind, FeedbackSource};
 use supervisor::settings::Settings;
-use supervisor::store::SettingsStore;
+
+#[path = "support/pages.rs"]
+mod pages;
 use twin::image::{workspace_root, Image};
 use twin::periph::{Level, LineEvent, Ticks};
 use twin::{Options, Twin, TICKS_PER_S};
-
-/// The settings pages as a NOR flash (2 KB, the board's
-/// `SETTINGS_FLASH_BYTES`) for the supervisor's own store.
-struct Pages(Vec<u8>);
-
-impl ErrorType for Pages {
-    type Error = NorFlashErrorKind;
-}
-
-impl ReadNorFlash for Pages {
-    const READ_SIZE: usize = 1;
-    fn read(&mut self, off: u32, buf: &mut [u8]) -> Result<(), Self::Error> {
-        let o = off as usize;
-        buf.copy_from_slice(&self.0[o..o + buf.len()]);
-        Ok(())
-    }
-    fn capacity(&self) -> usize {
-        self.0.len()
-    }
-}
-
-impl NorFlash for Pages {
-    const WRITE_SIZE: usize = 2;
-    const ERASE_SIZE: usize = 1024;
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        self.0[from as usize..to as usize].fill(0xFF);
-        Ok(())
-    }
-    fn write(&mut self, off: u32, data: &[u8]) -> Result<(), Self::Error> {
-        for (d, s) in self.0[off as usize..].iter_mut().zip(data) {
-            *d &= *s;
-        }
-        Ok(())
-    }
-}
 
 /// The settings pages' address: the `SETTINGS` region of the link image's
 /// linker script (firmware/memory-stm32f103-128k.x: the image with the link
@@ -154,9 +120,7 @@ fn run(baud: u32, ms: u64) -> Run {
     let mut twin = Twin::new(&elf, Options::default()).unwrap();
     // The settings record, written by the supervisor's own store into the
     // board's settings pages (as a previous Save would have).
-    let mut store = SettingsStore::new(Pages(vec![0xFF; 2048]), 0).unwrap();
-    store.save(&settings(baud)).unwrap();
-    let pages = store.into_inner().0;
+    let pages = pages::pages_with(&settings(baud));
     let at = settings_address();
     let flash = twin.flash();
     let off = (at - twin::periph::FLASH_BASE) as usize;

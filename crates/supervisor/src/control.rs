@@ -1776,9 +1776,11 @@ impl Supervisor {
         use crate::drive_link::FeedbackSource;
         match self.link_in_force.feedback {
             FeedbackSource::Encoder | FeedbackSource::Both => encoder_delta,
-            FeedbackSource::Driver => self
-                .link
-                .readback_counts(elapsed_us, self.hw.encoder_counts_per_drum_rev),
+            FeedbackSource::Driver => self.link.readback_counts(
+                elapsed_us,
+                self.hw.encoder_counts_per_drum_rev,
+                self.link_in_force.readback_max_age_us(),
+            ),
         }
     }
 
@@ -1840,7 +1842,7 @@ impl Supervisor {
         self.link_in_force.feedback == crate::drive_link::FeedbackSource::Both
             && self
                 .link
-                .readback_milli_rpm()
+                .readback_milli_rpm(self.link_in_force.readback_max_age_us())
                 .is_some_and(|n| i64::from(n) > drive_link::cross_check::MARGIN_FLOOR_MILLI_RPM)
     }
 
@@ -1873,7 +1875,9 @@ impl Supervisor {
             && self.run == RunState::Running
         {
             let encoder = milli(self.drum_speed_of(encoder_delta, elapsed_us));
-            let driver = self.link.readback_milli_rpm();
+            let driver = self
+                .link
+                .readback_milli_rpm(self.link_in_force.readback_max_age_us());
             let wrong = match driver {
                 Some(d) => self.link.cross.update(
                     elapsed_us,

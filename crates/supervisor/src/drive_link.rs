@@ -283,6 +283,21 @@ impl DriveLinkSettings {
         }
     }
 
+    /// How old a read-back may be and still be used, µs: five link
+    /// transactions ([`Self::readback_delay_us`]) — between two speed reads
+    /// the master may write the command and read the fault word, and the
+    /// read-back waits up to a control period more — and never less than
+    /// [`READBACK_MAX_AGE_US`]: 136 ms at 9600 baud, 100 ms at 115 200.
+    /// (A fixed 100 ms dropped the read-back at 9600 baud with the Modbus
+    /// command: the drum was measured at 0 for a period and the controller
+    /// commanded +51 %.)
+    #[must_use]
+    pub fn readback_max_age_us(&self) -> u32 {
+        self.readback_delay_us()
+            .saturating_mul(5)
+            .max(READBACK_MAX_AGE_US)
+    }
+
     /// The read-back's typical delay the controller allows for, µs: one
     /// speed transaction on the line — request (8 characters), the
     /// driver's 2 ms turnaround, reply (7 characters) and the two
@@ -439,8 +454,9 @@ pub struct LinkSample {
     pub fault_reads: u32,
 }
 
-/// The read-back older than this is not used (the link is failing; the
-/// link-lost alarm follows): three reply timeouts at 9600 baud.
+/// The read-back older than this is never used (the link is failing; the
+/// link-lost alarm follows): three reply timeouts at 9600 baud. At low
+/// baud rates the allowance is longer ([`DriveLinkSettings::readback_max_age_us`]).
 pub const READBACK_MAX_AGE_US: u32 = 100_000;
 
 /// The supervisor's side of the link: the newest sample, the encoder
@@ -477,12 +493,13 @@ impl Feedback {
     /// `elapsed_us` (what an encoder of `counts_per_rev` would have
     /// counted), the fractions carried to the next period. 0 with no
     /// usable read-back; never negative (the drum only runs forward).
-    pub fn readback_counts(&mut self, elapsed_us: u32, counts_per_rev: u32) -> u16 {
-        let Some(rb) = self
-            .sample
-            .speed
-            .filter(|r| r.age_us <= READBACK_MAX_AGE_US)
-        else {
+    pub fn readback_counts(
+        &mut self,
+        elapsed_us: u32,
+        counts_per_rev: u32,
+        max_age_us: u32,
+    ) -> u16 {
+        let Some(rb) = self.sample.speed.filter(|r| r.age_us <= max_age_us) else {
             self.remainder = 0;
             return 0;
         };
@@ -498,12 +515,12 @@ impl Feedback {
         u16::try_from(counts).unwrap_or(u16::MAX)
     }
 
-    /// The read-back if it is fresh enough to use, milli-r/min.
+    /// The read-back if it is no older than `max_age_us`, milli-r/min.
     #[must_use]
-    pub fn readback_milli_rpm(&self) -> Option<i32> {
+    pub fn readback_milli_rpm(&self, max_age_us: u32) -> Option<i32> {
         self.sample
             .speed
-            .filter(|r| r.age_us <= READBACK_MAX_AGE_US)
+            .filter(|r| r.age_us <= max_age_us)
             .map(|r| r.drum_milli_rpm)
     }
 }
@@ -528,7 +545,7 @@ mod tests {
             age_us: 20_000,
         });
         let total: u64 = (0..1000)
-            .map(|_| u64::from(f.readback_counts(10_000, 400 * 118)))
+            .map(|_| u64::from(f.readback_counts(10_000, 400 * 118, READBACK_MAX_AGE_US)))
             .sum();
         let exact: f64 = 20.0 / 60.0 * 10.0 * 47_200.0;
         assert_eq!(total as f64, exact.floor());
@@ -537,14 +554,36 @@ mod tests {
             drum_milli_rpm: 20_000,
             age_us: READBACK_MAX_AGE_US + 1,
         });
-        assert_eq!(f.readback_counts(10_000, 47_200), 0);
-        assert_eq!(f.readback_milli_rpm(), None);
+        assert_eq!(f.readback_counts(10_000, 47_200, READBACK_MAX_AGE_US), 0);
+        assert_eq!(f.readback_milli_rpm(READBACK_MAX_AGE_US), None);
         // Backwards reads as standstill (the drum only runs forward).
         f.sample.speed = Some(ReadBack {
             drum_milli_rpm: -5_000,
             age_us: 0,
         });
-        assert_eq!(f.readback_counts(10_000, 47_200), 0);
+        assert_eq!(f.readback_counts(10_000, 47_200, READBACK_MAX_AGE_US), 0);
+    }
+
+    #[test]
+    fn the_readback_allowance_covers_a_slow_line() {
+        // 9600 baud: 5 × 27 210 µs = 136 050 µs (27 210 µs: one speed
+        // transaction, link_settings_are_validated_and_round_trip); 115 200:
+        // 5 × 6 933 = 34 665 µs, so the 100 ms floor.
+        let mut s = DriveLinkSettings::default();
+        s.generic.baud = 9600;
+        assert_eq!(s.readback_max_age_us(), 136_050);
+        s.generic.baud = 115_200;
+        assert_eq!(s.readback_max_age_us(), READBACK_MAX_AGE_US);
+        // A read-back 110 ms old at 9600 baud still counts: 27 r/min for
+        // 10 ms at 47 200 counts per turn = 27 / 60 × 0.01 × 47 200 =
+        // 212.4 counts.
+        let mut f = Feedback::default();
+        f.sample.speed = Some(ReadBack {
+            drum_milli_rpm: 27_000,
+            age_us: 110_000,
+        });
+        assert_eq!(f.readback_counts(10_000, 47_200, 136_050), 212);
+        assert_eq!(f.readback_counts(10_000, 47_200, READBACK_MAX_AGE_US), 0);
     }
 
     #[test]

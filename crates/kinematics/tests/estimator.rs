@@ -493,19 +493,28 @@ fn position_errors(seed: u64) -> [f64; 25] {
 #[test]
 fn tooth_shares_are_learnt_while_the_speed_wanders() {
     for seed in [3u64, 17, 29] {
-        let pos_err = position_errors(seed);
-        let v0 = 0.5 / 3.6 / (std::f64::consts::PI * 0.2 / 25.0); // pitches/s
-        let speed = |t: f64| v0 * (1.0 + 0.03 * (2.0 * std::f64::consts::PI * t / 8.0).sin());
-        let est = learnt(&edges_of(&speed, &pos_err, 400.0));
-        let gear = gear_error(&pos_err);
-        let err = share_error(&est, &pos_err, 1);
-        println!(
-            "seed {seed}: learnt shares {:.3} % RMS off (the gear's own {:.3} %)",
-            err * 100.0,
-            gear * 100.0
-        );
+        let speed = |t: f64| V0 * (1.0 + 0.03 * (2.0 * std::f64::consts::PI * t / 8.0).sin());
+        let (err, _) = learnt_against_the_gear(seed, &speed);
         assert!(err <= 0.003, "seed {seed}: {:.3} % RMS", err * 100.0);
     }
+}
+
+/// 0.5 km/h in Hall tooth pitches per second (π · 0.20 m / 25 a pitch).
+const V0: f64 = 0.5 / 3.6 / (std::f64::consts::PI * 0.2 / 25.0);
+
+/// Learns the tooth shares of gear `seed` from 400 s of edges at `speed`
+/// (pitches/s): the learnt shares' RMS error and the gear's own.
+fn learnt_against_the_gear(seed: u64, speed: &dyn Fn(f64) -> f64) -> (f64, f64) {
+    let pos_err = position_errors(seed);
+    let est = learnt(&edges_of(speed, &pos_err, 400.0));
+    let gear = gear_error(&pos_err);
+    let err = share_error(&est, &pos_err, 1);
+    println!(
+        "seed {seed}: learnt shares {:.3} % RMS off (the gear's own {:.3} %)",
+        err * 100.0,
+        gear * 100.0
+    );
+    (err, gear)
 }
 
 /// On the hills profile's speed steps (±20 % through the chassis' 0.5 s time
@@ -517,8 +526,6 @@ fn tooth_shares_are_learnt_while_the_speed_wanders() {
 #[test]
 fn speed_steps_are_not_learnt_as_tooth_error() {
     for seed in [5u64, 23] {
-        let pos_err = position_errors(seed);
-        let v0 = 0.5 / 3.6 / (std::f64::consts::PI * 0.2 / 25.0);
         // Set points from a fixed sequence of ±20 % steps every 3 s.
         let mut rng = Rng(seed ^ 0x5eed);
         let sets: Vec<f64> = (0..200).map(|_| 1.0 + 0.2 * rng.sym()).collect();
@@ -526,16 +533,9 @@ fn speed_steps_are_not_learnt_as_tooth_error() {
             let i = (t / 3.0) as usize;
             let (prev, now) = (if i == 0 { 1.0 } else { sets[i - 1] }, sets[i]);
             let since = t - i as f64 * 3.0;
-            v0 * (now + (prev - now) * (-since / 0.5).exp())
+            V0 * (now + (prev - now) * (-since / 0.5).exp())
         };
-        let est = learnt(&edges_of(&speed, &pos_err, 400.0));
-        let gear = gear_error(&pos_err);
-        let err = share_error(&est, &pos_err, 1);
-        println!(
-            "seed {seed}: learnt shares {:.3} % RMS off (the gear's own {:.3} %)",
-            err * 100.0,
-            gear * 100.0
-        );
+        let (err, gear) = learnt_against_the_gear(seed, &speed);
         assert!(
             err <= gear,
             "seed {seed}: {:.3} % vs {:.3} %",

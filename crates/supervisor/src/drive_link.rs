@@ -564,6 +564,63 @@ mod tests {
         assert_eq!(f.readback_counts(10_000, 47_200, READBACK_MAX_AGE_US), 0);
     }
 
+    /// Page 10's offsets (`field`) restate the block's layout: each
+    /// setting written through `with` must land in its own struct field and
+    /// read back through `value`, the others unchanged. Values by hand,
+    /// each valid with a generic driver on a 59:1 gearbox.
+    #[test]
+    fn page_10_reaches_each_setting_through_the_bytes() {
+        let base = DriveLinkSettings {
+            kind: DriverKind::Generic,
+            generic: GenericSettings {
+                micro_rpm_per_count: 1695,
+                speed_command: Some(0x2088),
+                ..GENERIC_DEFAULT
+            },
+            ..DriveLinkSettings::default()
+        };
+        assert!(base.build().is_ok());
+        type Field = fn(&DriveLinkSettings) -> i32;
+        let cases: [(LinkParameter, i32, Field); 9] = [
+            (LinkParameter::Feedback, 2, |s| s.feedback as i32),
+            (LinkParameter::Command, 1, |s| s.command as i32),
+            (LinkParameter::Driver, 2, |s| s.kind as i32),
+            (LinkParameter::Slave, 247, |s| i32::from(s.generic.slave)),
+            (LinkParameter::Baud, 38_400, |s| {
+                s.generic.baud.cast_signed()
+            }),
+            (LinkParameter::Scale, -2_000, |s| {
+                s.generic.micro_rpm_per_count
+            }),
+            (LinkParameter::SpeedRegister, 0xFFFE, |s| {
+                i32::from(s.generic.speed_feedback)
+            }),
+            (LinkParameter::FaultRegister, 0x0102, |s| {
+                i32::from(s.generic.fault_register)
+            }),
+            (LinkParameter::CommandRegister, 0x0300, |s| {
+                i32::from(s.generic.speed_command.unwrap_or(0))
+            }),
+        ];
+        for (p, v, field) in cases {
+            let s = base.with(p, v).unwrap().unwrap();
+            assert_eq!(field(&s), v, "{p:?}");
+            assert_eq!(s.value(p), v, "{p:?}");
+            for (q, _, other) in cases {
+                if q != p {
+                    assert_eq!(other(&s), other(&base), "{p:?} moved {q:?}");
+                }
+            }
+        }
+        // 0 is "no command register" (its presence byte cleared).
+        let s = base
+            .with(LinkParameter::CommandRegister, 0x0300)
+            .unwrap()
+            .unwrap();
+        let s = s.with(LinkParameter::CommandRegister, 0).unwrap().unwrap();
+        assert_eq!(s.generic.speed_command, None);
+    }
+
     #[test]
     fn the_readback_allowance_covers_a_slow_line() {
         // 9600 baud: 5 × 27 210 µs = 136 050 µs (27 210 µs: one speed

@@ -1,10 +1,5 @@
 //! Issue 17 in QEMU: the drum driver's RS-485 link (docs/drive-link.md).
 //!
-//! PENDING (not compiled: Cargo runs `tests/tests/*.rs` only): the QEMU
-//! board's 8 KB of RAM has no room left for the link (docs/drive-link.md,
-//! "QEMU: blocked on RAM"); move this file back to `tests/tests/` once it
-//! has.
-//!
 //! The QEMU board's USART2 talks to a virtual ZLAC8015D on the host
 //! (`qemu_tests::drive`), which reads the simulated drum's true speed
 //! behind paper A's 118:1 gearbox and, on the Modbus command path, drives
@@ -206,6 +201,71 @@ fn readback_only_tracks_eq7_within_1_percent_at_9600_and_115200_and_with_the_mod
     ] {
         tracks_eq7(&format!("rb-{command:?}-{baud}"), command, baud);
     }
+}
+
+/// Row length, m: 70 m / 7 cm = 1000 plants.
+const ROW_M: f64 = 70.0;
+
+/// Issue 17's 70 m row with the read-back as the only drum feedback:
+/// Speed-Adaptive, 7 cm, Low 2, with the full noise model (terrain, slip
+/// variation, tooth errors, seedling load: profile_a.rs's 70 m row on the
+/// encoder) and the encoder cut at boot. Expected: 70 m / 7 cm = 1000
+/// plants within ±0.5 %, counted by the simulator (its true ground
+/// position and the plants its belt dropped, `sim:` lines every 100 ms, so
+/// ± one sample ≈ 14 mm) from the first sample after "drum: Running" to
+/// the one 70 m further on. About 510 s of machine time (Low 2 makes about
+/// 0.137 m/s on this terrain), about a minute here in lock-step.
+fn row_70m(name: &str, command: CommandPath, baud: u32) {
+    let s = settings(FeedbackSource::Driver, command, baud);
+    let (bench, flash) = boot(name, &s, baud, &["gear=2", "enc_loss=1"], 548_000);
+    let logs = start_adaptive_and_run(bench, 8_000, &flash);
+    assert!(logs
+        .iter()
+        .any(|l| l.contains("sim: encoder loss injected")));
+    assert_no_alarm(&logs);
+    let start = time_of(&logs, "drum: Running");
+    let samples = sim_samples(&logs);
+    let first = samples
+        .iter()
+        .find(|s| s.t_ms >= start)
+        .expect("samples after Start");
+    let end = samples
+        .iter()
+        .find(|s| s.ground_m - first.ground_m >= ROW_M)
+        .expect("the row reached 70 m");
+    let plants = f64::from(end.plants - first.plants);
+    let expected = (ROW_M / 0.07).round();
+    let error = (plants - expected) / expected;
+    eprintln!(
+        "{name}: {plants} plants of {expected} ({:+.2} %) in {:.0} s",
+        error * 100.0,
+        f64::from(end.t_ms - first.t_ms) / 1000.0
+    );
+    assert!(
+        error.abs() <= 0.005,
+        "{plants} plants of {expected} ({:+.2} %)",
+        error * 100.0
+    );
+}
+
+#[test]
+fn a_70_m_row_on_the_readback_with_pwm_at_9600_baud_gets_its_1000_plants() {
+    row_70m("row-pwm-9600", CommandPath::Pwm, 9600);
+}
+
+#[test]
+fn a_70_m_row_on_the_readback_with_pwm_at_115200_baud_gets_its_1000_plants() {
+    row_70m("row-pwm-115200", CommandPath::Pwm, 115_200);
+}
+
+#[test]
+fn a_70_m_row_on_the_readback_with_the_modbus_command_at_9600_baud_gets_its_1000_plants() {
+    row_70m("row-modbus-9600", CommandPath::Modbus, 9600);
+}
+
+#[test]
+fn a_70_m_row_on_the_readback_with_the_modbus_command_at_115200_baud_gets_its_1000_plants() {
+    row_70m("row-modbus-115200", CommandPath::Modbus, 115_200);
 }
 
 /// Runs read-back only at `baud` to 11 s (Start at 2 s), does `act` on the

@@ -36,7 +36,7 @@ use supervisor::control::{Actuation, Alarm, Hardware, Supervisor};
 use supervisor::drive_link::{
     CommandPath, DriveLinkSettings, DriverKind, FeedbackSource, LinkSample, ReadBack,
 };
-use supervisor::settings::Settings;
+use supervisor::settings::{Placement, Settings};
 
 pub const HW: Hardware = Hardware::BOARD;
 /// The virtual driver's motor turns per drum turn. Not paper A's 118:1:
@@ -98,14 +98,22 @@ pub struct Rig {
 }
 
 impl Rig {
+    /// Speed-following placement (the bench's rows compare the feedbacks
+    /// on the speed loop alone).
     pub fn new(config: Config, feedback: FeedbackSource, command: CommandPath, baud: u32) -> Self {
-        // Speed-following placement: distance-locked placement's phase
-        // loop, fed the read-back's belt position 30–90 ms late, swings
-        // the target by ±12 % at 2.9 Hz (measured at 9600 baud with the
-        // full noise model; docs/drive-link.md, "Limits").
+        Self::placed(config, feedback, command, baud, Placement::SpeedFollowing)
+    }
+
+    pub fn placed(
+        config: Config,
+        feedback: FeedbackSource,
+        command: CommandPath,
+        baud: u32,
+        placement: Placement,
+    ) -> Self {
         let mut settings = Settings {
             gear: Gear::Low2,
-            placement: supervisor::settings::Placement::SpeedFollowing,
+            placement,
             ..Settings::default()
         };
         settings.drive_link = DriveLinkSettings {
@@ -366,6 +374,9 @@ pub struct Row {
     /// The turns eq. 7 asks over the row: ∫ eq. 7 (f64, on the true
     /// travel speed at the end of each control period) dt.
     pub eq7_turns: f64,
+    /// The largest phase error (the supervisor's, µm of ground) from the
+    /// row's second plant on (the first is the start's sprint).
+    pub worst_phase_um: i64,
 }
 
 /// The row's length and its plants at 7 cm: 70 m / 0.07 m.
@@ -377,11 +388,23 @@ pub const ROW_PLANTS: f64 = 1000.0;
 /// load, seed 1): the encoder cut unless it is the feedback, Start at 3 s,
 /// the plants the simulated belt dropped between the row's start and end.
 pub fn row_70m(feedback: FeedbackSource, command: CommandPath, baud: u32) -> (Row, Rig) {
+    row_70m_placed(feedback, command, baud, Placement::SpeedFollowing, 1)
+}
+
+/// [`row_70m`] with the placement and the noise model's seed given.
+pub fn row_70m_placed(
+    feedback: FeedbackSource,
+    command: CommandPath,
+    baud: u32,
+    placement: Placement,
+    seed: u64,
+) -> (Row, Rig) {
     let c = Config {
         initial_gear: Some(Gear::Low2),
+        seed,
         ..Config::default()
     };
-    let mut rig = Rig::new(c, feedback, command, baud);
+    let mut rig = Rig::placed(c, feedback, command, baud, placement);
     if feedback == FeedbackSource::Driver {
         rig.m.inject_fault(Fault::EncoderLoss);
     }
@@ -391,8 +414,15 @@ pub fn row_70m(feedback: FeedbackSource, command: CommandPath, baud: u32) -> (Ro
     let mut first_alarm = None;
     let d0 = rig.m.drum_turns();
     let mut eq7_turns = 0.0;
+    let mut worst_phase_um = 0i64;
+    let plants_before = rig.plants.len();
     while rig.m.ground_position_m() - g0 < ROW_M {
         rig.period();
+        if rig.plants.len() >= plants_before + 2
+            && rig.sup.phase_error_um().abs() > worst_phase_um.abs()
+        {
+            worst_phase_um = rig.sup.phase_error_um();
+        }
         eq7_turns += eq7_drum_speed(f64::from(rig.m.travel_speed_m_s()), 0.07) * 0.01 / 60.0;
         if let (None, Some(a)) = (first_alarm, rig.sup.alarm()) {
             first_alarm = Some((rig.t_us / 1000, rig.m.ground_position_m() - g0, a));
@@ -406,6 +436,7 @@ pub fn row_70m(feedback: FeedbackSource, command: CommandPath, baud: u32) -> (Ro
             first_alarm,
             drum_turns: rig.m.drum_turns() - d0,
             eq7_turns,
+            worst_phase_um,
         },
         rig,
     )

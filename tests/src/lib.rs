@@ -8,6 +8,7 @@
 //! Used by the integration tests in `tests/tests/` and by `cargo xtask qemu`.
 
 pub mod drive;
+pub mod images;
 
 use std::io::{self, BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -42,12 +43,6 @@ pub fn workspace_root() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("."))
 }
 
-/// Where the QEMU board's release build is kept (its own target directory,
-/// so that it never fights a host build for cargo's lock).
-pub fn qemu_target_dir() -> PathBuf {
-    Image::BothMachines.target_dir()
-}
-
 /// The QEMU board's cargo features: the board and both machines (the real
 /// board takes one image per machine).
 pub const QEMU_FEATURES: &str = "board-qemu,profile-a,profile-b";
@@ -78,15 +73,15 @@ impl Image {
         }
     }
 
-    /// Its own target directory: switching images never rebuilds another.
-    pub fn target_dir(self) -> PathBuf {
-        let name = match self {
+    /// The name its ELF is kept under (`target/images/<name>/firmware`,
+    /// [`images`]).
+    pub fn name(self) -> &'static str {
+        match self {
             Image::BothMachines => "qemu",
             Image::ProfileAOnly => "qemu-a",
             Image::ProfileBOnly => "qemu-b",
             Image::DriveLink => "qemu-dl",
-        };
-        workspace_root().join("target").join(name)
+        }
     }
 
     /// Builds this image (release) once per process and returns the ELF
@@ -114,36 +109,13 @@ impl Image {
             .map_err(io::Error::other)
     }
 
-    /// Runs `cargo build` for this image and returns the ELF path.
+    /// Builds this image (release, in the one firmware target directory,
+    /// [`images`]) and returns the kept ELF's path.
     pub fn build(self) -> io::Result<PathBuf> {
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let status = Command::new(cargo)
-            .current_dir(workspace_root())
-            .args([
-                "build",
-                "--package",
-                "firmware",
-                "--release",
-                "--target",
-                "thumbv7m-none-eabi",
-                "--no-default-features",
-                "--features",
-                self.features(),
-                "--target-dir",
-            ])
-            .arg(self.target_dir())
-            .status()?;
-        if !status.success() {
-            return Err(io::Error::other(format!(
-                "building the QEMU firmware ({}) failed: {status}",
-                self.features()
-            )));
-        }
-        Ok(self
-            .target_dir()
-            .join("thumbv7m-none-eabi")
-            .join("release")
-            .join("firmware"))
+        images::build(
+            self.name(),
+            &["--no-default-features", "--features", self.features()],
+        )
     }
 }
 

@@ -74,7 +74,7 @@ mod app {
     #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     use ::drive_link::link::ControlAction;
     #[cfg(feature = "drive-link")]
-    use ::drive_link::link::{Event as LinkEvent, Link, LinkConfig};
+    use ::drive_link::link::{Event as LinkEvent, Link, LinkConfig, LossCause};
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
@@ -616,7 +616,11 @@ mod app {
             });
             match event {
                 Some(LinkEvent::Lost) => {
-                    defmt::warn!("drive link: lost (no reply after the retries)")
+                    let cause = cx
+                        .shared
+                        .drive
+                        .lock(|d| d.link.as_ref().and_then(Link::loss_cause));
+                    log_link_loss(cause);
                 }
                 Some(LinkEvent::Restored) => defmt::info!("drive link: the driver answers again"),
                 Some(LinkEvent::Faults(word)) => {
@@ -628,6 +632,30 @@ mod app {
             // (`Mono::delay(1 ms)` waits a tick more, "at least" 1 ms: 2 ms
             // here; seen on the twin, tests/tests/twin_drive_link.rs.)
             Mono::delay_until(Mono::now() + 1.millis()).await;
+        }
+    }
+
+    /// The log line of a lost link: what the last attempt met, so that a
+    /// technician knows whether to check the wiring or the profile.
+    #[cfg(feature = "drive-link")]
+    fn log_link_loss(cause: Option<LossCause>) {
+        match cause {
+            Some(LossCause::Refused {
+                function,
+                register,
+                code,
+            }) => defmt::warn!(
+                "drive link: lost: the driver refuses function {=u8} on register {=u16:#06x} (exception {=u8}): check the driver profile",
+                function,
+                register,
+                code
+            ),
+            Some(LossCause::Corrupt) => defmt::warn!(
+                "drive link: lost: corrupt replies after the retries (noise, termination, baud)"
+            ),
+            _ => defmt::warn!(
+                "drive link: lost: no reply after the retries (wiring, power, slave id, baud)"
+            ),
         }
     }
 
@@ -643,6 +671,7 @@ mod app {
                 age_us: u32::try_from(now_us.saturating_sub(s.sampled_at_us)).unwrap_or(u32::MAX),
             }),
             lost: link.is_lost(),
+            refused: matches!(link.loss_cause(), Some(LossCause::Refused { .. })),
             answering: link.is_answering(),
             fault_word: link.fault_word(),
             fault_reads: link.counters().fault_reads,

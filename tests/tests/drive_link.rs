@@ -328,7 +328,7 @@ fn an_injected_driver_fault_gives_its_named_alarm_and_safe_outputs() {
 #[test]
 fn a_cut_link_is_lost_within_the_retry_budget_with_safe_outputs() {
     let (logs, at) = fault_run("cut", 115_200, &[], |d| d.driver.inject.silent = true);
-    let lost = time_of(&logs, "drive link: lost");
+    let lost = time_of(&logs, "drive link: lost: no reply after the retries");
     let alarm = time_of(&logs, "alarm: LinkLost");
     eprintln!("cut at {at} ms, lost at {lost} ms, alarm at {alarm} ms");
     // Hand formula at 115 200 baud: 3 × (request 0.77 ms + timeout 20.86 ms
@@ -336,6 +336,45 @@ fn a_cut_link_is_lost_within_the_retry_budget_with_safe_outputs() {
     assert!(lost >= at && lost - at <= 90, "cut {at} -> lost {lost}");
     // Outputs safe at the next control step (≤ 100 ms required).
     assert!(alarm - lost <= 10, "lost {lost} -> alarm {alarm}");
+    let (t, ccr) = ccr_after(&logs, alarm + 1);
+    assert_eq!(ccr, 0, "PWM at {t} ms");
+}
+
+/// A generic profile naming a speed register the driver does not have
+/// (0x2AB0 typed for the ZLAC8015D's 0x20AB): the virtual driver refuses
+/// each read with exception 2. From power-up the log names the request
+/// and the exception, and the screen's alarm page says to check the
+/// profile, not the wiring; within the retry budget, outputs off.
+#[test]
+fn a_refused_register_is_named_on_the_screen_and_in_the_log() {
+    let mut s = settings(FeedbackSource::Driver, CommandPath::Pwm, 115_200);
+    s.drive_link.kind = DriverKind::Generic;
+    s.drive_link.generic.speed_feedback = 0x2AB0;
+    let (mut bench, flash) = boot("refused", &s, 115_200, &["gear=2", "noise=0"], 3_000);
+    pump_to(&mut bench, 2_000);
+    let text = bench.screen.text("talarm").map(str::to_owned);
+    let page = bench.screen.page();
+    let (logs, _) = run_to_end(bench);
+    let _ = std::fs::remove_file(&flash);
+    let lost = time_of(
+        &logs,
+        "drive link: lost: the driver refuses function 3 on register 0x2ab0 (exception 2)",
+    );
+    let alarm = time_of(&logs, "alarm: LinkRefused");
+    eprintln!("refused: lost at {lost} ms, alarm at {alarm} ms");
+    // Three attempts at 115 200 baud (each < 4 ms: request, 2 ms turnaround,
+    // exception reply, gap) after the first poll.
+    assert!(lost <= 1_000, "{lost}");
+    assert!(
+        alarm >= lost && alarm - lost <= 10,
+        "lost {lost} -> alarm {alarm}"
+    );
+    assert_eq!(page, hmi_proto::screen::Page::Alarm.id());
+    assert_eq!(
+        text.as_deref(),
+        Some("Driver refuses register: check profile")
+    );
+    assert!(!logs.iter().any(|l| l.contains("alarm: LinkLost")));
     let (t, ccr) = ccr_after(&logs, alarm + 1);
     assert_eq!(ccr, 0, "PWM at {t} ms");
 }

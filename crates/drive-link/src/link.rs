@@ -84,6 +84,28 @@ pub enum Event {
     Faults(u16),
 }
 
+/// Why the link was lost: how the last attempt of the retry budget failed
+/// ([`Link::loss_cause`]), so that the screen and the log can say what to
+/// check.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LossCause {
+    /// No reply within the reply timeout: wiring, power, slave id or baud.
+    NoReply,
+    /// Replies failed their CRC or length: noise, termination, baud.
+    Corrupt,
+    /// The driver refused the request with a Modbus exception: its profile
+    /// names a register (or function) this driver does not have.
+    Refused {
+        /// The request's function code (3 read, 6 write).
+        function: u8,
+        /// The request's register.
+        register: u16,
+        /// The exception code (1 function, 2 register, 3 value, 4 device).
+        code: u8,
+    },
+}
+
 /// Counters since start (wrapping at u32::MAX, never panicking).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -171,6 +193,7 @@ pub struct Link {
     counters: Counters,
     speed: Option<SpeedSample>,
     faults: u16,
+    loss: Option<LossCause>,
 }
 
 impl Link {
@@ -193,6 +216,7 @@ impl Link {
             counters: Counters::default(),
             speed: None,
             faults: 0,
+            loss: None,
         }
     }
 
@@ -314,11 +338,22 @@ impl Link {
             Ok(reply) => self.answered(now_us, job, sent_at, reply),
             Err(ReplyError::Crc | ReplyError::Length(_)) => {
                 self.counters.crc_errors = self.counters.crc_errors.wrapping_add(1);
-                self.failed(now_us)
+                self.failed(now_us, LossCause::Corrupt)
             }
-            Err(ReplyError::Exception(_)) => {
+            Err(ReplyError::Exception(code)) => {
                 self.counters.exceptions = self.counters.exceptions.wrapping_add(1);
-                self.failed(now_us)
+                let (function, register) = match request {
+                    Request::Read { address, .. } => (0x03, address),
+                    Request::Write { address, .. } => (0x06, address),
+                };
+                self.failed(
+                    now_us,
+                    LossCause::Refused {
+                        function,
+                        register,
+                        code,
+                    },
+                )
             }
             Err(ReplyError::Slave(_) | ReplyError::Mismatch) => {
                 // A late reply to an earlier request: keep waiting.
@@ -333,7 +368,7 @@ impl Link {
         match self.state {
             State::Awaiting { deadline, .. } if now_us >= deadline => {
                 self.counters.timeouts = self.counters.timeouts.wrapping_add(1);
-                self.failed(now_us)
+                self.failed(now_us, LossCause::NoReply)
             }
             _ => None,
         }
@@ -379,7 +414,7 @@ impl Link {
         event
     }
 
-    fn failed(&mut self, now_us: u64) -> Option<Event> {
+    fn failed(&mut self, now_us: u64, cause: LossCause) -> Option<Event> {
         let State::Awaiting { job, request, .. } = self.state else {
             return None;
         };
@@ -397,6 +432,7 @@ impl Link {
             return None;
         }
         self.lost = true;
+        self.loss = Some(cause);
         self.counters.losses = self.counters.losses.wrapping_add(1);
         Some(Event::Lost)
     }
@@ -406,6 +442,7 @@ impl Link {
     pub fn acknowledge(&mut self) -> bool {
         if self.answering {
             self.lost = false;
+            self.loss = None;
         }
         !self.lost
     }
@@ -414,6 +451,17 @@ impl Link {
     #[must_use]
     pub fn is_lost(&self) -> bool {
         self.lost
+    }
+
+    /// Why the link was lost (none while it is not): how the last attempt
+    /// of the retry budget failed.
+    #[must_use]
+    pub fn loss_cause(&self) -> Option<LossCause> {
+        if self.lost {
+            self.loss
+        } else {
+            None
+        }
     }
 
     /// Whether the last transaction was answered.

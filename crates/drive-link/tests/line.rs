@@ -15,7 +15,7 @@
     clippy::cast_possible_wrap
 )]
 
-use drive_link::link::{ControlAction, Event, Link, LinkConfig};
+use drive_link::link::{ControlAction, Event, Link, LinkConfig, LossCause};
 use drive_link::profile::{DriverFault, DriverProfile, ZLAC8015D};
 use drive_link::rtu::MAX_FRAME;
 use drive_link::timing::{frame_time_us, silent_interval_us};
@@ -214,9 +214,47 @@ fn crc_errors_within_the_retry_budget_are_counted_and_survived() {
     b.run_for(500_000);
     assert_eq!(b.link.counters().crc_errors, 5);
     assert!(matches!(b.events.first(), Some((_, Event::Lost))));
+    assert_eq!(b.link.loss_cause(), Some(LossCause::Corrupt));
     // It answers again at once: restored, and the operator's ack clears it.
     assert!(matches!(b.events.get(1), Some((_, Event::Restored))));
     assert!(b.link.acknowledge());
+    assert_eq!(b.link.loss_cause(), None);
+}
+
+/// A profile naming a register the driver does not have (a generic
+/// profile's speed register mistyped): the virtual ZLAC8015D answers
+/// exception 2, "illegal data address" (Modbus application protocol
+/// v1.1b3 §7). The loss says which request was refused and how, where a
+/// silent driver says no reply.
+#[test]
+fn a_refused_register_is_named_as_the_cause_of_the_loss() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        let profile = DriverProfile {
+            baud,
+            speed_feedback: 0x2AB0,
+            ..ZLAC8015D
+        };
+        b.link = Link::new(profile, LinkConfig::for_baud(baud).unwrap());
+        b.run_for(500_000);
+        assert!(matches!(b.events.first(), Some((_, Event::Lost))));
+        assert_eq!(
+            b.link.loss_cause(),
+            Some(LossCause::Refused {
+                function: 0x03,
+                register: 0x2AB0,
+                code: 2
+            })
+        );
+        assert!(b.link.counters().exceptions >= 3);
+        assert!(!b.link.acknowledge(), "refused requests are no answer");
+    }
+    // A silent driver: no reply.
+    let mut b = Bench::new(9600);
+    b.run_for(300_000);
+    b.driver.inject.silent = true;
+    b.run_for(1_000_000);
+    assert_eq!(b.link.loss_cause(), Some(LossCause::NoReply));
 }
 
 #[test]

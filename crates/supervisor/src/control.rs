@@ -119,6 +119,11 @@ pub enum Alarm {
     /// No valid reply from the drum driver within the link's retry budget.
     /// Latched; acknowledged only once the driver answers again.
     LinkLost,
+    /// The link is lost because the driver answers with Modbus exceptions:
+    /// its profile names a register or function this driver does not have
+    /// (a generic profile's registers, most often). As [`Alarm::LinkLost`]
+    /// otherwise.
+    LinkRefused,
     /// Encoder and driver read-back disagree beyond the cross-check's
     /// margin for its hold time ([`drive_link::cross_check`]): a lost
     /// encoder, or a driver reporting wrong. Latched.
@@ -134,6 +139,7 @@ impl Alarm {
                 | Self::HallLost
                 | Self::DriverFault(_)
                 | Self::LinkLost
+                | Self::LinkRefused
                 | Self::SpeedMismatch
         )
     }
@@ -158,6 +164,7 @@ impl Alarm {
                 })
             }
             Self::LinkLost => w.write_str("Drum driver link lost"),
+            Self::LinkRefused => w.write_str("Driver refuses register: check profile"),
             Self::SpeedMismatch => w.write_str("Encoder or driver speed wrong"),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
@@ -1774,6 +1781,7 @@ impl Supervisor {
             age_us: age,
         });
         s.lost = sample.lost;
+        s.refused = sample.refused;
         s.answering = sample.answering;
         s.fault_word = sample.fault_word;
         s.fault_reads = sample.fault_reads;
@@ -1880,7 +1888,11 @@ impl Supervisor {
         }
         let sample = self.link.sample;
         if sample.lost {
-            self.latch(Alarm::LinkLost);
+            self.latch(if sample.refused {
+                Alarm::LinkRefused
+            } else {
+                Alarm::LinkLost
+            });
             return;
         }
         if sample.fault_word != 0
@@ -1926,7 +1938,9 @@ impl Supervisor {
     /// alarm (a fault still there comes back with the next fault read).
     fn acknowledge_link_alarm(&mut self) -> Option<Effect> {
         match self.alarm {
-            Some(Alarm::LinkLost) if !self.link.sample.answering || self.link.sample.lost => {
+            Some(Alarm::LinkLost | Alarm::LinkRefused)
+                if !self.link.sample.answering || self.link.sample.lost =>
+            {
                 Some(Effect::Message("Drum driver still not answering"))
             }
             Some(Alarm::DriverFault(_)) => {

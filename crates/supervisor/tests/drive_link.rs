@@ -274,6 +274,52 @@ fn a_cut_link_is_lost_within_the_retry_budget_and_recovers_on_acknowledge() {
     }
 }
 
+/// A generic profile whose speed register the driver does not have (a
+/// typo on the link page: 0x2AB0 for the ZLAC8015D's 0x20AB). The virtual
+/// driver refuses each read with exception 2; after the retry budget the
+/// alarm names the profile, not the wiring ("link lost" sent technicians
+/// to the cable), and the outputs are safe.
+#[test]
+fn a_refused_speed_register_is_its_own_alarm_with_safe_outputs() {
+    for baud in [9600u32, 115_200] {
+        let mut rig = Rig::new(
+            Config::noiseless(),
+            FeedbackSource::Driver,
+            CommandPath::Pwm,
+            baud,
+        );
+        let mut settings = rig.sup.settings().clone();
+        settings.drive_link.kind = supervisor::drive_link::DriverKind::Generic;
+        settings.drive_link.generic.speed_feedback = 0x2AB0;
+        let profile = settings.drive_link.build().unwrap().unwrap();
+        rig.sup = supervisor::control::Supervisor::new(drive_rig::HW, settings).unwrap();
+        rig.link = drive_link::link::Link::new(profile, LinkConfig::for_baud(baud).unwrap());
+        // From power-up (the commissioning case: the profile just saved).
+        let alarm = until(&mut rig, 1_000, |r| r.sup.alarm().is_some()).expect("no alarm");
+        assert_eq!(rig.sup.alarm(), Some(Alarm::LinkRefused), "{baud}");
+        let mut text = String::new();
+        rig.sup.alarm().unwrap().write_text(&mut text).unwrap();
+        assert_eq!(text, "Driver refuses register: check profile");
+        assert!(text.len() <= 40);
+        assert_eq!(rig.act, Actuation::OFF, "outputs safe at the alarm");
+        let lost = rig.lost_at.unwrap();
+        assert!(alarm - lost <= 10_000, "{} us", alarm - lost);
+        // Not acknowledged while the driver refuses.
+        let effect = rig.sup.command(Command::AcknowledgeAlarm);
+        assert_eq!(
+            effect,
+            supervisor::control::Effect::Message("Drum driver still not answering")
+        );
+        assert_eq!(rig.sup.alarm(), Some(Alarm::LinkRefused));
+        assert!(rig.link.counters().exceptions >= 3);
+        // Start is refused while the alarm is latched.
+        rig.start();
+        rig.run_ms(100);
+        assert_eq!(rig.act, Actuation::OFF);
+        assert_eq!(rig.sup.run_state(), RunState::Stopped);
+    }
+}
+
 #[test]
 fn with_both_feedbacks_a_stall_and_a_lost_encoder_are_told_apart() {
     // A lost encoder: the driver still sees the drum turn → "encoder or

@@ -266,6 +266,10 @@ impl Rig {
                 age_us: (self.t_us - s.sampled_at_us) as u32,
             }),
             lost: self.link.is_lost(),
+            refused: matches!(
+                self.link.loss_cause(),
+                Some(drive_link::link::LossCause::Refused { .. })
+            ),
             answering: self.link.is_answering(),
             fault_word: self.link.fault_word(),
             fault_reads: self.link.counters().fault_reads,

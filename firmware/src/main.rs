@@ -340,10 +340,10 @@ mod app {
         "This firmware runs profile B only"
     };
 
-    /// The screen's message when the saved settings name a drum driver on
-    /// an image without the link.
+    // The screen's message when the saved settings name a drum driver on
+    // an image without the link.
     #[cfg(not(feature = "drive-link"))]
-    const NO_DRIVE_LINK: &str = "Drive link not in this image";
+    use supervisor::control::NO_DRIVE_LINK;
 
     /// Builds the machine of the saved profile in its static slot; the
     /// notice says why it is not the saved one.
@@ -1026,7 +1026,8 @@ mod app {
                         refresh_settings(cx);
                         Effect::Message(NOT_BUILT_IN)
                     }
-                    // Page 10 is read-only on an image without the link.
+                    // Page 10 is read-only on an image without the link
+                    // (either machine).
                     #[cfg(not(feature = "drive-link"))]
                     Command::SetLinkValue(_) => Effect::Message(NO_DRIVE_LINK),
                     _ => {

@@ -522,7 +522,8 @@ fn test() -> Result<Totals> {
     )?;
     // The real board's images carry one machine each: the supervisor's
     // tests run in those configurations too (a profile B build once started
-    // on profile A's defaults; the workspace run enables both).
+    // on profile A's defaults; the workspace run enables both), without the
+    // drive link like the default images (its tests need the feature).
     for machine in ["profile-a", "profile-b"] {
         run_tests(
             &format!("supervisor tests, {machine} only"),
@@ -533,14 +534,6 @@ fn test() -> Result<Totals> {
                 "--no-default-features",
                 "--features",
                 machine,
-                // The long sweeps of 70 m rows through the drive link (10 s)
-                // ran in the workspace run above: the machine features do
-                // not change the drive link's code.
-                "--",
-                "--skip",
-                "a_70_m_row_from_the_readback_alone",
-                "--skip",
-                "distance_locked_rows_on_the_readback",
             ]),
             &mut totals,
         )?;

@@ -97,6 +97,11 @@ pub enum Alarm {
     /// Commanded drum with no encoder motion: jammed drum, or encoder lost.
     /// Latched.
     DrumStall,
+    /// Commanded drum whose feedback turned backwards for the whole stall
+    /// time (encoder: ≥ 2 counts a period the wrong way; driver read-back:
+    /// below −1 r/min): the motor's wiring or direction, the encoder's A/B
+    /// (the encoder direction setting) or the driver scale's sign. Latched.
+    DrumBackwards,
     /// The next Hall edge is later than any stop of the chassis allows
     /// (module docs) while the drum was running. Latched.
     HallLost,
@@ -136,6 +141,7 @@ impl Alarm {
         matches!(
             self,
             Self::DrumStall
+                | Self::DrumBackwards
                 | Self::HallLost
                 | Self::DriverFault(_)
                 | Self::LinkLost
@@ -148,6 +154,7 @@ impl Alarm {
     pub fn write_text(&self, w: &mut impl core::fmt::Write) -> core::fmt::Result {
         match self {
             Self::DrumStall => w.write_str("Drum stalled or encoder lost"),
+            Self::DrumBackwards => w.write_str("Drum turns backwards: check direction"),
             Self::HallLost => w.write_str("Hall speed signal lost"),
             Self::DrumUnstable => w.write_str(DRUM_UNSTABLE_TEXT),
             Self::IdentifyFailed(e) => w.write_str(e.text()),
@@ -320,6 +327,10 @@ pub enum CalibrationRun {
 const STALL_MIN_COMMAND: I16F16 = I16F16::lit("1");
 /// Stall: time without encoder motion, µs.
 const STALL_TIME_US: u32 = 200_000;
+/// Backwards: encoder counts a period against the drum's direction that
+/// count as turning backwards (the drum at the stall command of 1 r/min
+/// makes 7.9 a period, 47 200 counts a turn; a still drum's jitter is ±1).
+const BACKWARD_MIN_COUNTS: u16 = 2;
 /// Hall silence: the fastest the Hall gear's speed can fall when the
 /// tractor stops, mm/s² of monitored track speed: the chassis limit of 1 g
 /// ([`consts::CHASSIS_DECEL_LIMIT_MM_S2`]) seen through a k1 down to 0.934
@@ -377,6 +388,11 @@ pub struct Supervisor {
     /// The Hall timer's time at the last control step.
     last_step_at: Option<Ticks>,
     stall_us: u32,
+    /// The part of the stall time so far in which the drum turned
+    /// backwards, µs.
+    stall_back_us: u32,
+    /// Encoder counts of the last period against the drum's direction.
+    encoder_back: u16,
     /// The reported (smoothed) drum speed, r/min.
     reported: I16F16,
     /// The phase loop's correction, smoothed when the link delays the
@@ -864,6 +880,8 @@ impl Supervisor {
             last_encoder: None,
             last_step_at: None,
             stall_us: 0,
+            stall_back_us: 0,
+            encoder_back: 0,
             reported: I16F16::ZERO,
             phase_smoothed: I16F16::ZERO,
             edges: 0,
@@ -1541,8 +1559,10 @@ impl Supervisor {
                     drum_encoder.wrapping_sub(prev)
                 };
                 if d > u16::MAX / 2 {
+                    self.encoder_back = d.wrapping_neg();
                     0
                 } else {
+                    self.encoder_back = 0;
                     d
                 }
             }
@@ -1675,11 +1695,10 @@ impl Supervisor {
         if self.run == RunState::Running {
             // Fault: drum commanded but not turning (with both feedbacks:
             // neither turning; the encoder alone still is the cross-check's).
-            if target >= STALL_MIN_COMMAND && delta == 0 && !self.driver_turning() {
-                self.stall_us = self.stall_us.saturating_add(elapsed_us);
-            } else {
-                self.stall_us = 0;
-            }
+            let stalled = self.stall_watch(
+                target >= STALL_MIN_COMMAND && delta == 0 && !self.driver_turning(),
+                elapsed_us,
+            );
             // Fault: in Speed-Adaptive mode, the next Hall edge is later
             // than any stop the chassis can make allows. Without such
             // evidence the silence is a stop: the estimator's speed decays
@@ -1688,8 +1707,8 @@ impl Supervisor {
                 && self
                     .estimator
                     .next_edge_overdue(m.since_edge_ticks, &self.hall_silence);
-            if self.stall_us > STALL_TIME_US {
-                self.latch(Alarm::DrumStall);
+            if let Some(alarm) = stalled {
+                self.latch(alarm);
             } else if hall_lost {
                 self.latch(Alarm::HallLost);
             } else {
@@ -1887,6 +1906,45 @@ impl Supervisor {
     /// With both feedbacks: the driver's read-back says the drum turns (at
     /// least the cross-check's floor, 1 r/min), so a still encoder is the
     /// cross-check's alarm, not a stall.
+    /// One period of the stall watch: `still`, the drum commanded shows no
+    /// forward motion. The alarm once the stall time is over: turning
+    /// backwards if it did for more than half of it
+    /// ([`Alarm::DrumBackwards`]; the first period after Start has no
+    /// encoder difference yet), else [`Alarm::DrumStall`].
+    fn stall_watch(&mut self, still: bool, elapsed_us: u32) -> Option<Alarm> {
+        if !still {
+            self.stall_us = 0;
+            return None;
+        }
+        if self.stall_us == 0 {
+            self.stall_back_us = 0;
+        }
+        if self.turning_backwards() {
+            self.stall_back_us = self.stall_back_us.saturating_add(elapsed_us);
+        }
+        self.stall_us = self.stall_us.saturating_add(elapsed_us);
+        (self.stall_us > STALL_TIME_US).then_some(if self.stall_back_us > self.stall_us / 2 {
+            Alarm::DrumBackwards
+        } else {
+            Alarm::DrumStall
+        })
+    }
+
+    /// The feedback in force moved against the drum's direction this
+    /// period: the encoder (alone or with the driver) by
+    /// [`BACKWARD_MIN_COUNTS`], the driver's read-back below −1 r/min.
+    fn turning_backwards(&self) -> bool {
+        if self.link_in_force.feedback == crate::drive_link::FeedbackSource::Driver
+            && self.link_in_use()
+        {
+            self.link
+                .readback_milli_rpm(self.link_in_force.readback_max_age_us())
+                .is_some_and(|n| i64::from(n) < -drive_link::cross_check::MARGIN_FLOOR_MILLI_RPM)
+        } else {
+            self.encoder_back >= BACKWARD_MIN_COUNTS
+        }
+    }
+
     fn driver_turning(&self) -> bool {
         self.link_in_force.feedback == crate::drive_link::FeedbackSource::Both
             && self
@@ -2111,13 +2169,8 @@ impl Supervisor {
         match duty {
             Some(permille) => {
                 // Stall: the drum does not move under a 25 % or 75 % duty.
-                if delta == 0 {
-                    self.stall_us = self.stall_us.saturating_add(elapsed_us);
-                } else {
-                    self.stall_us = 0;
-                }
-                if self.stall_us > STALL_TIME_US {
-                    self.latch(Alarm::DrumStall);
+                if let Some(alarm) = self.stall_watch(delta == 0, elapsed_us) {
+                    self.latch(alarm);
                     return Actuation::OFF;
                 }
                 let arr1 = u32::from(self.hw.pwm_arr).saturating_add(1);
@@ -2454,6 +2507,56 @@ mod tests {
         assert_eq!(sup.run_state(), RunState::Running);
         assert!(last.ccr > 0 && last.driver_enabled, "{last:?}");
         assert_eq!(sup.bus_speed_command(), None);
+    }
+
+    /// A commissioning error: the drum turns (20 r/min fixed: 157 counts a
+    /// period) but the encoder counts backwards (A/B swapped, or the motor
+    /// wired the wrong way). Before, this latched "Drum stalled or encoder
+    /// lost" and sent the technician looking for a jam; now the alarm says
+    /// backwards, after the same 200 ms, outputs off. With the encoder
+    /// direction setting reversed the same counts run the drum; a still
+    /// drum whose encoder jitters one count back is a stall.
+    #[test]
+    fn an_encoder_counting_backwards_is_named_not_a_stall() {
+        use hmi_proto::screen::Mode;
+        let run = |reversed: bool, per_period: i32| {
+            let settings = Settings {
+                mode: Mode::Fixed,
+                fixed_drum_speed: DrumSpeed::new(2000).unwrap(),
+                drum_encoder_reversed: reversed,
+                ..Settings::default()
+            };
+            let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+            sup.command(Command::Start);
+            let mut encoder: u16 = 30_000;
+            let mut alarm_at = None;
+            let mut act = Actuation::OFF;
+            for period in 0..50u32 {
+                act = sup.control_step(Ticks(period * 10_000), encoder);
+                if alarm_at.is_none() && sup.alarm().is_some() {
+                    alarm_at = Some(period);
+                }
+                // A jitter of one count back every other period.
+                let step = if per_period == -1 && period % 2 == 1 {
+                    0
+                } else {
+                    per_period
+                };
+                encoder = encoder.wrapping_add_signed(step as i16);
+            }
+            (sup.alarm(), alarm_at, act)
+        };
+        let (alarm, at, act) = run(false, -157);
+        assert_eq!(alarm, Some(Alarm::DrumBackwards));
+        // 200 ms of stall time, counted from the first step: 21 periods.
+        assert_eq!(at, Some(20));
+        assert_eq!(act, Actuation::OFF);
+        let mut text = heapless::String::<40>::new();
+        Alarm::DrumBackwards.write_text(&mut text).unwrap();
+        assert_eq!(text.as_str(), "Drum turns backwards: check direction");
+        assert_eq!(run(true, -157).0, None);
+        assert_eq!(run(false, -1).0, Some(Alarm::DrumStall));
+        assert_eq!(run(false, 0).0, Some(Alarm::DrumStall));
     }
 
     #[test]

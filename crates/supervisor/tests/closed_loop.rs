@@ -694,21 +694,29 @@ fn a_drum_encoder_wired_backwards_runs_once_reversed_on_the_screen() {
                 .step(10_000, &inputs, &mut |t| sup.hall_edge(Ticks(t)));
             let swapped = 0u16.wrapping_sub(rig.m.drum_encoder_count());
             rig.act = rig.sup.control_step(Ticks(rig.m.capture_ticks()), swapped);
-            if stalled_at.is_none() && rig.sup.alarm() == Some(Alarm::DrumStall) {
+            if stalled_at.is_none() && rig.sup.alarm().is_some() {
                 stalled_at = Some(step * 10);
             }
         }
-        (stalled_at, rig.m.drum_speed_rpm(), rig.sup.snapshot())
+        (
+            stalled_at,
+            rig.m.drum_speed_rpm(),
+            rig.sup.snapshot(),
+            rig.sup.alarm(),
+        )
     };
     // Before (the setting off, as every machine was before it existed): the
-    // drum turns, the supervisor reads standstill, stall alarm after the
-    // documented 200 ms (the first period past it: 210 ms).
-    let (stalled_at, _, _) = run(false);
+    // drum turns, the supervisor reads no forward motion and stops it after
+    // the documented 200 ms (the first period past it: 210 ms), with the
+    // alarm that names the cause (since 2026-11-24; "Drum stalled or
+    // encoder lost" before, which sent technicians looking for a jam).
+    let (stalled_at, _, _, alarm) = run(false);
     assert_eq!(stalled_at, Some(210));
+    assert_eq!(alarm, Some(Alarm::DrumBackwards));
     // Reversed on the screen: the drum runs and holds 20 r/min (±0.5 %,
     // the simulator's true speed) and the screen shows it after 4 s (the
     // shown speed is smoothed with τ = 0.5 s: e^-8 of the step is left).
-    let (stalled_at, drum, snap) = run(true);
+    let (stalled_at, drum, snap, _) = run(true);
     assert_eq!(stalled_at, None);
     assert!((f64::from(drum) - 20.0).abs() <= 0.1, "{drum} r/min");
     assert!(

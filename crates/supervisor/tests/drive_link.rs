@@ -320,6 +320,37 @@ fn a_refused_speed_register_is_its_own_alarm_with_safe_outputs() {
     }
 }
 
+/// The driver's speed read back with the wrong sign (its scale entered
+/// negative, or the motor turning the other way): the drum turns forward
+/// under the PWM while the read-back, the only feedback, says −n. Before,
+/// the negative read-back counted as standstill and latched "Drum stalled
+/// or encoder lost"; now "Drum turns backwards: check direction", after
+/// the same stall time, outputs off.
+#[test]
+fn a_readback_of_the_wrong_sign_is_named_backwards() {
+    for baud in [9600u32, 115_200] {
+        let mut c = Config::noiseless();
+        c.initial_gear = Some(Gear::Low2);
+        let mut rig = Rig::new(c, FeedbackSource::Driver, CommandPath::Pwm, baud);
+        let mut settings = rig.sup.settings().clone();
+        settings.drive_link.generic.micro_rpm_per_count = -drive_rig::SCALE;
+        let profile = settings.drive_link.build().unwrap().unwrap();
+        rig.sup = supervisor::control::Supervisor::new(drive_rig::HW, settings).unwrap();
+        rig.link = drive_link::link::Link::new(profile, LinkConfig::for_baud(baud).unwrap());
+        rig.run_ms(1_000);
+        rig.start();
+        let started = rig.t_us;
+        let alarm = until(&mut rig, 2_000, |r| r.sup.alarm().is_some()).expect("no alarm");
+        assert_eq!(rig.sup.alarm(), Some(Alarm::DrumBackwards), "{baud}");
+        assert_eq!(rig.act, Actuation::OFF);
+        // The stall time (200 ms) after the first negative read-back, which
+        // takes a poll and the drum's start (≤ 300 ms at 9600 baud).
+        let took = alarm - started;
+        eprintln!("{baud} baud: backwards {} ms after Start", took / 1000);
+        assert!((200_000..=500_000).contains(&took), "{took} us");
+    }
+}
+
 #[test]
 fn with_both_feedbacks_a_stall_and_a_lost_encoder_are_told_apart() {
     // A lost encoder: the driver still sees the drum turn → "encoder or

@@ -1,9 +1,9 @@
-//! The real board's release images, built for the twin in their own target
-//! directories (so that they never fight a host build for cargo's lock).
+//! The real board's release images, built for the twin in the firmware's
+//! one target directory (`target/firmware`, `qemu_tests::images`: never a
+//! host build's, so they never fight it for cargo's lock).
 
 use std::io;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 /// A real-board image.
@@ -48,14 +48,14 @@ impl Image {
         }
     }
 
-    /// Its own target directory.
-    pub fn target_dir(self) -> PathBuf {
-        let name = match self {
+    /// The name its ELF is kept under (`target/images/<name>/firmware`,
+    /// built in the one firmware target directory: `qemu_tests::images`).
+    pub fn name(self) -> &'static str {
+        match self {
             Image::ProfileA => "twin-a",
             Image::ProfileB => "twin-b",
             Image::ProfileALink => "twin-a-link",
-        };
-        workspace_root().join("target").join(name)
+        }
     }
 
     /// Builds the image once per process (or takes `TWIN_ELF_A`/`_B`/`_A_LINK`) and
@@ -72,35 +72,11 @@ impl Image {
             .map_err(io::Error::other)
     }
 
-    /// Runs the release build.
+    /// Runs the release build (`qemu_tests::images::build`).
     pub fn build(self) -> io::Result<PathBuf> {
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let status = Command::new(cargo)
-            .current_dir(workspace_root())
-            .args([
-                "build",
-                "--package",
-                "firmware",
-                "--release",
-                "--target",
-                "thumbv7m-none-eabi",
-                "--no-default-features",
-                "--features",
-                self.features(),
-                "--target-dir",
-            ])
-            .arg(self.target_dir())
-            .status()?;
-        if !status.success() {
-            return Err(io::Error::other(format!(
-                "building the real-board image ({}) failed: {status}",
-                self.features()
-            )));
-        }
-        Ok(self
-            .target_dir()
-            .join("thumbv7m-none-eabi")
-            .join("release")
-            .join("firmware"))
+        qemu_tests::images::build(
+            self.name(),
+            &["--no-default-features", "--features", self.features()],
+        )
     }
 }

@@ -148,7 +148,10 @@ impl DriverProfile {
         // µ → milli rounded half away from zero.
         let micro = counts.saturating_mul(i64::from(self.micro_rpm_per_count));
         let half = if micro < 0 { -500 } else { 500 };
-        i32::try_from(micro.saturating_add(half) / 1000).unwrap_or(0)
+        let milli = micro.saturating_add(half) / 1000;
+        // Beyond ±2 147 483 r/min (a scale near MAX_SCALE): the limit of
+        // the sign, never 0 (a drum read as still would be driven harder).
+        i32::try_from(milli).unwrap_or(if milli < 0 { i32::MIN } else { i32::MAX })
     }
 
     /// The speed command register's value for a drum speed, rounded to the
@@ -313,6 +316,24 @@ mod tests {
             fault_masks: [1, 2, 4, 8, 16, 32],
             speed_command: Some(0x0020),
         }
+    }
+
+    /// The largest scale on the largest register values: 32 767 counts ×
+    /// 100 r/min = 3 276 700 r/min, beyond i32 milli-r/min (2 147 483 r/min):
+    /// the read-back is the limit of its sign. It was 0 before: a drum
+    /// racing read as still.
+    #[test]
+    fn a_read_back_beyond_i32_is_its_limit_not_zero() {
+        let p = GenericSettings {
+            micro_rpm_per_count: MAX_SCALE,
+            ..generic()
+        }
+        .build()
+        .unwrap();
+        assert_eq!(p.speed_from_register(0x7FFF), i32::MAX);
+        assert_eq!(p.speed_from_register(0x8000), i32::MIN);
+        // 21 474 counts × 100 r/min = 2 147 400 r/min: still exact.
+        assert_eq!(p.speed_from_register(21_474), 2_147_400_000);
     }
 
     #[test]

@@ -77,6 +77,8 @@ impl LinkConfig {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Event {
     /// No valid reply within the retry budget: the link is lost (latched).
+    /// Reported again while lost when the cause changes
+    /// ([`Link::loss_cause`]).
     Lost,
     /// The driver answers again (the alarm stays until acknowledged).
     Restored,
@@ -429,7 +431,13 @@ impl Link {
         self.speed = None;
         self.command_sent = None;
         if self.lost {
-            return None;
+            // Still lost: a new cause (a driver powered up with a profile it
+            // refuses, after silence) is reported again.
+            if self.loss == Some(cause) {
+                return None;
+            }
+            self.loss = Some(cause);
+            return Some(Event::Lost);
         }
         self.lost = true;
         self.loss = Some(cause);

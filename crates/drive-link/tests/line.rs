@@ -255,6 +255,16 @@ fn a_refused_register_is_named_as_the_cause_of_the_loss() {
     b.driver.inject.silent = true;
     b.run_for(1_000_000);
     assert_eq!(b.link.loss_cause(), Some(LossCause::NoReply));
+    let losses = b.events.len();
+    // Still lost, the driver back but every reply corrupted: the cause
+    // follows, reported once more; no second loss is counted.
+    b.driver.inject.silent = false;
+    b.driver.inject.corrupt_replies = u32::MAX;
+    b.run_for(500_000);
+    assert_eq!(b.link.loss_cause(), Some(LossCause::Corrupt));
+    assert_eq!(b.events.len(), losses + 1);
+    assert!(matches!(b.events.last(), Some((_, Event::Lost))));
+    assert_eq!(b.link.counters().losses, 1);
 }
 
 #[test]

@@ -10,10 +10,11 @@
 //! The two PDUs this master uses (function 03 with one or two registers,
 //! function 06) are written and checked here, byte by byte (Modbus
 //! Application Protocol V1.1b3, §6.3 and §6.6). They were first encoded and
-//! parsed by `modbus-core` 0.2; in the STM32F103 image its generic
-//! `Request::encode` and `Response::try_from` (every function code) cost
-//! ≈ 5 KB of flash that the 56 KB budget does not have (measured with the
-//! link task, docs/drive-link.md). modbus-core stays the tests' independent
+//! parsed by `modbus-core` 0.2, whose `ExceptionResponse::try_from` panics
+//! on a one-byte exception PDU (a four-byte frame with a valid CRC; test
+//! `modbus_core_panics_on_a_one_byte_exception_pdu_and_this_parser_does_not`,
+//! docs/drive-link.md); in the link image it would cost 764 B (measured
+//! 2026-11-24, not the 5 KB first put down). modbus-core stays the tests' independent
 //! reference: every frame [`encode`] writes decodes with it to the same
 //! request, and every reply it encodes parses here to the same values
 //! (proptests below). Its own `rtu::client::decode_response` was never
@@ -407,6 +408,38 @@ mod tests {
         );
         assert_eq!(
             parse_reply(1, read, &frame(&[1, 0x83, 2, 9])),
+            Err(ReplyError::Mismatch)
+        );
+    }
+
+    /// Why the PDUs are parsed here and not by modbus-core 0.2 (kept as the
+    /// tests' reference): its `ExceptionResponse::try_from` reads the
+    /// exception code at index 1 without checking the length, so a one-byte
+    /// exception PDU — four bytes on the line with a valid CRC, which noise
+    /// or a confused driver can send — panics (codec/mod.rs:65), and a panic
+    /// in the link task is a fault stop of the machine. Found when the
+    /// crate was tried again in `parse_reply` (2026-11-24; it would cost
+    /// 764 B of the link image, not the 5 KB first measured): the proptest
+    /// `parse_never_panics` failed at once. When a modbus-core release
+    /// fixes it, this test fails: then build on the crate again.
+    #[test]
+    fn modbus_core_panics_on_a_one_byte_exception_pdu_and_this_parser_does_not() {
+        let pdu: &[u8] = &[0x83];
+        let upstream = std::panic::catch_unwind(|| {
+            let _ = modbus_core::ExceptionResponse::try_from(pdu);
+        });
+        assert!(upstream.is_err(), "modbus-core no longer panics here");
+        let line = frame(&[0x01, 0x83]);
+        assert_eq!(line.len(), 4);
+        assert_eq!(
+            parse_reply(
+                1,
+                Request::Read {
+                    address: 0x20AB,
+                    count: 1
+                },
+                &line
+            ),
             Err(ReplyError::Mismatch)
         );
     }

@@ -242,6 +242,14 @@ fn check_common(twin: &mut Twin, image: Image) {
         0,
         "EXTI FTSR10 (contact closes)"
     );
+    // The two receive lines (USART1 RX on PA10 from the screen, USART2 RX
+    // on PA3 from the RS-485 transceiver's RO) with the internal pull-up
+    // (RM0008 §9.1.11 Table 24 "USARTx_RX: input floating / input pull-up";
+    // §9.2.1 CNF = 10 with ODR = 1): an unplugged screen or a transceiver
+    // whose RO is released while it sends (DE and /RE tied) reads as an
+    // idle line, not as noise framed into bytes.
+    assert_eq!(twin.pin('A', 10), twin::Level::PullUp, "PA10 (USART1 RX)");
+    assert_eq!(twin.pin('A', 3), twin::Level::PullUp, "PA3 (USART2 RX)");
     // SysTick: 1 kHz monotonic from the core clock (PM0056 §4.5).
     assert_eq!(
         twin.peek(0xE000_E014) + 1,
@@ -329,5 +337,74 @@ fn profile_b_step_timers_are_not_blocked_after_init() {
             t.arr_act, 0,
             "{name}: ARR in force is 0 after init: the counter is blocked and preloaded rates never load"
         );
+    }
+}
+
+/// The outputs are driven safe before anything else at boot, before the
+/// watchdog is started too: starting it waits for the LSI to take the new
+/// prescaler and reload (RM0008 §19.4.4 PVU/RVU), up to the firmware's
+/// poll limit when the LSI does not run, and until the outputs are driven
+/// the drum PWM, the drivers' enable and the RS-485 DE float (at reset
+/// every pin is a floating input, RM0008 §9.1.1). Traced from power-on on
+/// every image: the first level each output takes is Low, and it takes it
+/// no later than the watchdog's start (the order was the other way round).
+#[test]
+fn the_outputs_are_driven_low_before_the_watchdog_starts() {
+    for image in [Image::ProfileA, Image::ProfileB] {
+        let elf = image.elf().expect("build the real-board image");
+        let mut twin = Twin::new(
+            &elf,
+            Options {
+                decode_logs: false,
+                ..Options::default()
+            },
+        )
+        .expect("load the ELF");
+        let mut outputs = vec![('A', 8), ('B', 12), ('A', 1)];
+        if image == Image::ProfileB {
+            outputs.push(('B', 6));
+        }
+        for &(port, pin) in &outputs {
+            twin.trace_pin(port, pin);
+        }
+        let slept = twin
+            .run_until(50, |t| t.core == CoreState::Sleeping)
+            .expect("run");
+        assert!(slept, "{image:?} never reached the idle loop");
+        let started = twin
+            .state()
+            .bus
+            .iwdg
+            .started_at
+            .expect("the watchdog started");
+        for (port, pin) in outputs {
+            let port_index = (port as u8 - b'A') as usize;
+            let log: Vec<_> = twin
+                .state()
+                .bus
+                .pin_log
+                .iter()
+                .filter(|e| e.port == port_index && e.pin == pin)
+                .collect();
+            assert_eq!(
+                log[0].level,
+                twin::Level::HiZ,
+                "{image:?} P{port}{pin} at reset"
+            );
+            let driven = log
+                .iter()
+                .find(|e| e.level != twin::Level::HiZ)
+                .unwrap_or_else(|| panic!("{image:?} P{port}{pin} never driven: {log:?}"));
+            assert_eq!(
+                driven.level,
+                twin::Level::Low,
+                "{image:?} P{port}{pin}: first level {log:?}"
+            );
+            assert!(
+                driven.at <= started,
+                "{image:?} P{port}{pin} driven low at tick {} after the watchdog's start at tick {started}",
+                driven.at
+            );
+        }
     }
 }

@@ -1146,6 +1146,8 @@ pub struct Iwdg {
     pub rlr: u32,
     /// Started (0xCCCC), cannot be stopped.
     pub running: bool,
+    /// When it was started (the first 0xCCCC key).
+    pub started_at: Option<Ticks>,
     unlocked: bool,
     /// When the counter was last reloaded.
     reloaded_at: Ticks,
@@ -1159,6 +1161,7 @@ impl Iwdg {
             pr: 0,
             rlr: 0xFFF,
             running: false,
+            started_at: None,
             unlocked: false,
             reloaded_at: 0,
             lsi_hz,
@@ -1191,6 +1194,7 @@ impl Iwdg {
                 0xCCCC => {
                     if !self.running {
                         self.running = true;
+                        self.started_at = Some(now);
                         self.reloaded_at = now;
                     }
                     self.unlocked = false;

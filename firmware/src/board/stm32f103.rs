@@ -260,17 +260,20 @@ const HSE_POLL_CYCLES: u32 = 1_000;
 
 /// Brings up clocks and peripherals. Called once from `init`, interrupts off.
 ///
-/// Order (docs/firmware.md, "Boards"): the watchdog first, the outputs
-/// driven safe (PA8, PB12 and profile B's PB6 push-pull low) before any
-/// clock work, then the HSE with a bounded wait; a crystal that never
+/// Order (docs/firmware.md, "Boards"): the outputs driven safe (PA8, PB12,
+/// PA1 and profile B's PB6 push-pull low), then the watchdog, both before
+/// any clock work, then the HSE with a bounded wait; a crystal that never
 /// starts ends in [`fatal`] (outputs safe, the watchdog resets and the boot
 /// tries again). Then the PLL, the clock security system and the
 /// peripherals, each output pin switched to its timer only after the timer
 /// drives it low.
 #[inline(never)]
 pub fn init(dp: pac::Peripherals) -> Board {
-    let mut watchdog = Watchdog::start(dp.IWDG);
+    // The outputs first: starting the watchdog waits for the LSI
+    // (RM0008 §19.4.4, up to `IWDG_UPDATE_POLLS` when it does not run), and
+    // until then PA8, PB12 and PA1 would float (reset state, §9.1.1).
     safe_state();
+    let mut watchdog = Watchdog::start(dp.IWDG);
     // RM0008 §7.3.10 RCC_CSR: IWDGRSTF (bit 29) says the last reset came
     // from the watchdog; RMVF (bit 24) clears the reset flags.
     if dp.RCC.csr().read().iwdgrstf().bit_is_set() {
@@ -316,7 +319,9 @@ pub fn init(dp: pac::Peripherals) -> Board {
 
     // Touchscreen, USART1 on PA9/PA10.
     let tx_pin = gpioa.pa9.into_alternate_push_pull(&mut gpioa.crh);
-    let rx_pin = gpioa.pa10;
+    // RX with the pull-up (RM0008 §9.1.11, Table 24): an unplugged screen
+    // reads as an idle line, not as noise.
+    let rx_pin = gpioa.pa10.into_pull_up_input(&mut gpioa.crh);
     let hmi = dp.USART1.serial(
         (tx_pin, rx_pin),
         serial::Config::default()
@@ -329,7 +334,9 @@ pub fn init(dp: pac::Peripherals) -> Board {
 
     // RS-485, USART2 on PA2/PA3, DE on PA1.
     let tx2 = gpioa.pa2.into_alternate_push_pull(&mut gpioa.crl);
-    let rx2 = gpioa.pa3;
+    // RX with the pull-up: the transceiver releases RO while it sends (DE
+    // and /RE tied), and a floating PA3 would frame noise into bytes.
+    let rx2 = gpioa.pa3.into_pull_up_input(&mut gpioa.crl);
     let rs = dp.USART2.serial(
         (tx2, rx2),
         serial::Config::default()

@@ -196,6 +196,11 @@ pub struct Link {
     speed: Option<SpeedSample>,
     faults: u16,
     loss: Option<LossCause>,
+    /// An attempt of the current request timed out: its reply may still
+    /// come, late.
+    timed_out: bool,
+    /// When the current request's first attempt ended (µs).
+    first_sent_at: u64,
 }
 
 impl Link {
@@ -219,6 +224,8 @@ impl Link {
             speed: None,
             faults: 0,
             loss: None,
+            timed_out: false,
+            first_sent_at: 0,
         }
     }
 
@@ -313,6 +320,9 @@ impl Link {
     /// The request's last bit has left (TC).
     pub fn sent(&mut self, now_us: u64) {
         if let State::Sending { job, request } = self.state {
+            if self.retry.is_none() {
+                self.first_sent_at = now_us;
+            }
             let deadline = now_us.saturating_add(u64::from(self.config.reply_timeout_us));
             self.state = State::Awaiting {
                 job,
@@ -370,6 +380,7 @@ impl Link {
         match self.state {
             State::Awaiting { deadline, .. } if now_us >= deadline => {
                 self.counters.timeouts = self.counters.timeouts.wrapping_add(1);
+                self.timed_out = true;
                 self.failed(now_us, LossCause::NoReply)
             }
             _ => None,
@@ -382,8 +393,35 @@ impl Link {
         };
     }
 
-    fn answered(&mut self, now_us: u64, job: Job, sent_at: u64, reply: Reply) -> Option<Event> {
+    /// The request is done (answered or given up) after `sent_at`, its
+    /// last attempt's end. When an attempt of it timed out, a reply to it
+    /// may still be on its way, and a reply to function 03 does not name
+    /// its register: the next request (another register) waits until that
+    /// reply is over due, one more reply timeout (the libmodbus recovery:
+    /// wait a response timeout and flush), and what comes meanwhile is
+    /// counted late. Retries of the same request go out at once: a late
+    /// reply to an earlier attempt answers them with the same register.
+    fn request_done(&mut self, now_us: u64, sent_at: u64) {
         self.line_free(now_us);
+        if core::mem::take(&mut self.timed_out) {
+            let drained = sent_at
+                .saturating_add(2 * u64::from(self.config.reply_timeout_us))
+                .saturating_add(u64::from(self.config.silent_interval_us));
+            if let State::Idle { at } = &mut self.state {
+                *at = (*at).max(drained);
+            }
+        }
+    }
+
+    fn answered(&mut self, now_us: u64, job: Job, sent_at: u64, reply: Reply) -> Option<Event> {
+        // After a timeout the reply may be a late one to an earlier
+        // attempt: the driver sampled after the first attempt's end.
+        let sampled_at = if self.timed_out {
+            self.first_sent_at
+        } else {
+            sent_at
+        };
+        self.request_done(now_us, sent_at);
         self.retry = None;
         self.counters.replies = self.counters.replies.wrapping_add(1);
         let mut event = None;
@@ -391,7 +429,7 @@ impl Link {
             (Job::Speed, Reply::Registers { first, .. }) => {
                 self.speed = Some(SpeedSample {
                     drum_milli_rpm: self.profile.speed_from_register(first),
-                    sampled_at_us: sent_at,
+                    sampled_at_us: sampled_at,
                 });
             }
             (Job::Faults, Reply::Registers { first, .. }) => {
@@ -417,7 +455,13 @@ impl Link {
     }
 
     fn failed(&mut self, now_us: u64, cause: LossCause) -> Option<Event> {
-        let State::Awaiting { job, request, .. } = self.state else {
+        let State::Awaiting {
+            job,
+            request,
+            sent_at,
+            ..
+        } = self.state
+        else {
             return None;
         };
         self.line_free(now_us);
@@ -426,6 +470,7 @@ impl Link {
             self.retry = Some((job, request, failures));
             return None;
         }
+        self.request_done(now_us, sent_at);
         self.retry = None;
         self.answering = false;
         self.speed = None;

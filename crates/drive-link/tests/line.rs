@@ -348,3 +348,51 @@ fn driver_faults_are_read_and_named() {
     );
     assert_eq!(names[0].to_string(), "driver over-current");
 }
+
+/// A reply that comes after its request's timeout must not be taken as the
+/// answer to a later request (Modbus over Serial Line V1.02 §2.4.1: a
+/// reply that comes after the response timeout is an error, and the
+/// master's next request is a new transaction). A function-03 reply names
+/// no register, so a late speed reply landing while the fault register is
+/// being read would be taken as the fault word (here 252 counts = 0x00FC:
+/// over-current and overload bits), and a late fault reply (0) as the
+/// speed. One slow reply (the driver busy, e.g. writing its EEPROM) in
+/// normal running, delayed by anything from just past the timeout to one
+/// more timeout, and started at every phase of the poll cycle.
+#[test]
+fn a_reply_after_its_timeout_is_never_the_answer_to_the_next_request() {
+    let mut bad = Vec::new();
+    for baud in [115_200, 9600] {
+        // From just past the timeout to a reply that ends one more reply
+        // timeout after its request's deadline (the bound the master
+        // drains for; a driver later than that answers no request).
+        let timeout = LinkConfig::for_baud(baud).unwrap().reply_timeout_us;
+        let turnaround = VirtualZlac::default().turnaround_us;
+        let first = (timeout - turnaround) / 1000;
+        let last = (2 * timeout - turnaround - frame_time_us(baud, 7).unwrap()) / 1000;
+        for extra_ms in first..=last {
+            for phase_us in (0..40_000u64).step_by(2_500) {
+                let mut b = Bench::new(baud);
+                b.driver.actual_decirpm = 252;
+                b.run_for(100_000 + phase_us);
+                let start = b.samples.len();
+                b.driver.inject.late_replies = 1;
+                b.driver.inject.extra_delay_us = extra_ms * 1000;
+                b.run_for(400_000);
+                let faults: Vec<_> = b
+                    .events
+                    .iter()
+                    .filter(|(_, e)| matches!(e, Event::Faults(_)))
+                    .collect();
+                let wrong_speed = b.samples[start..].iter().any(|s| s.2 != 25_200);
+                if !faults.is_empty() || wrong_speed {
+                    bad.push((baud, extra_ms, phase_us, faults.len(), wrong_speed));
+                }
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "late replies taken as the next request's answer (extra ms, phase µs, fault events, wrong speed): {bad:?}"
+    );
+}

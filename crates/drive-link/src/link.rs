@@ -49,25 +49,30 @@ pub struct LinkConfig {
 pub const DRIVER_TURNAROUND_US: u32 = 20_000;
 
 impl LinkConfig {
-    /// The timing for a profile's baud rate: the reply timeout is the
-    /// longest reply's time on the line (9 characters) plus
-    /// [`DRIVER_TURNAROUND_US`]; two retries; faults every 4th poll.
+    /// The timing for a profile's baud rate: the reply timeout is
+    /// [`DRIVER_TURNAROUND_US`] plus the longest reply's time on the line
+    /// (9 characters) plus the 3.5-character silence after it, without
+    /// which the reply's end is not seen (§2.5.1.1); two retries; faults
+    /// every 4th poll.
     ///
     /// ```
     /// use drive_link::{link::LinkConfig, profile::ZLAC8015D};
     /// let c = LinkConfig::for_baud(9600).unwrap();
-    /// // 9 × 1145.8 µs = 10 313 µs on the line + 20 ms.
-    /// assert_eq!(c.reply_timeout_us, 30_313);
-    /// assert_eq!(LinkConfig::for_baud(ZLAC8015D.baud).unwrap().reply_timeout_us, 20_860);
+    /// // 20 ms + 9 × 1145.8 µs = 10 313 µs on the line + 4011 µs of silence.
+    /// assert_eq!(c.reply_timeout_us, 34_324);
+    /// assert_eq!(LinkConfig::for_baud(ZLAC8015D.baud).unwrap().reply_timeout_us, 22_610);
     /// ```
     #[must_use]
     pub fn for_baud(baud: u32) -> Option<Self> {
         let reply = timing::frame_time_us(baud, 9)?;
+        let silent = timing::silent_interval_us(baud)?;
         Some(Self {
-            reply_timeout_us: reply.checked_add(DRIVER_TURNAROUND_US)?,
+            reply_timeout_us: reply
+                .checked_add(silent)?
+                .checked_add(DRIVER_TURNAROUND_US)?,
             retries: 2,
             fault_poll_every: 4,
-            silent_interval_us: timing::silent_interval_us(baud)?,
+            silent_interval_us: silent,
         })
     }
 }

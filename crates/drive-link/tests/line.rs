@@ -15,7 +15,7 @@
     clippy::cast_possible_wrap
 )]
 
-use drive_link::link::{ControlAction, Event, Link, LinkConfig, LossCause};
+use drive_link::link::{ControlAction, Event, Link, LinkConfig, LossCause, DRIVER_TURNAROUND_US};
 use drive_link::profile::{DriverFault, DriverProfile, ZLAC8015D};
 use drive_link::rtu::MAX_FRAME;
 use drive_link::timing::{frame_time_us, silent_interval_us};
@@ -395,4 +395,24 @@ fn a_reply_after_its_timeout_is_never_the_answer_to_the_next_request() {
         bad.is_empty(),
         "late replies taken as the next request's answer (extra ms, phase µs, fault events, wrong speed): {bad:?}"
     );
+}
+
+/// The reply timeout promises the driver [`DRIVER_TURNAROUND_US`] (20 ms)
+/// to start its reply (docs/drive-link.md). But a reply is only seen once
+/// the 3.5-character silence after its last byte has passed (Modbus over
+/// Serial Line V1.02 §2.5.1.1: the frame ends there), so the deadline must
+/// cover that silence too, or a driver answering in 18.3–20 ms (115 200
+/// baud; 18.3–20 at 9600 too) times out on every request and the link is
+/// lost for good.
+#[test]
+fn a_driver_within_the_promised_turnaround_is_never_timed_out() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        b.driver.actual_decirpm = 100;
+        b.driver.turnaround_us = DRIVER_TURNAROUND_US - 500;
+        b.run_for(1_000_000);
+        let c = b.link.counters();
+        assert_eq!((c.timeouts, c.losses), (0, 0), "{baud}: {c:?}");
+        assert_eq!(b.samples.last().map(|s| s.2), Some(10_000), "{baud}");
+    }
 }

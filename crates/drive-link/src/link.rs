@@ -353,6 +353,13 @@ impl Link {
         };
         match rtu::parse_reply(self.profile.slave, request, frame) {
             Ok(reply) => self.answered(now_us, job, sent_at, reply),
+            // Under 4 bytes is no RTU frame (address, function, CRC): noise
+            // (e.g. the bus heard while DE drops), not the reply; the reply
+            // may still follow, so the wait goes on.
+            Err(ReplyError::Length(n)) if n < 4 => {
+                self.counters.crc_errors = self.counters.crc_errors.wrapping_add(1);
+                None
+            }
             Err(ReplyError::Crc | ReplyError::Length(_)) => {
                 self.counters.crc_errors = self.counters.crc_errors.wrapping_add(1);
                 self.failed(now_us, LossCause::Corrupt)

@@ -416,3 +416,52 @@ fn a_driver_within_the_promised_turnaround_is_never_timed_out() {
         assert_eq!(b.samples.last().map(|s| s.2), Some(10_000), "{baud}");
     }
 }
+
+/// Noise before a valid reply: a transceiver whose bus is not fail-safe
+/// biased may hear a byte or two of garbage when DE drops after TC, ended
+/// by silence as a frame of its own, and the driver's valid reply follows
+/// a few ms later. A fragment under 4 bytes is no Modbus RTU frame
+/// (address, function and the two CRC bytes at least: Modbus over Serial
+/// Line V1.02 §2.5.1): it must not end the wait. Before, it failed the
+/// attempt at once, the retry went out on top of the reply in flight, and
+/// noise at every turnaround lost the link for good.
+#[test]
+fn a_noise_fragment_before_the_reply_does_not_end_the_wait() {
+    let profile = drive_link::profile::GenericSettings {
+        slave: 1,
+        baud: 115_200,
+        speed_feedback: 0x20AB,
+        micro_rpm_per_count: 100_000,
+        fault_register: 0x20A5,
+        fault_masks: [0; 6],
+        speed_command: None,
+    }
+    .build()
+    .unwrap();
+    let mut link = Link::new(profile, LinkConfig::for_baud(115_200).unwrap());
+    let mut t = 0u64;
+    for _ in 0..10 {
+        let mut buf = [0u8; MAX_FRAME];
+        let n = link.next_frame(t, &mut buf).unwrap();
+        assert_eq!(n, 8);
+        // Speed reads, every 4th the fault register (word 0).
+        let value: u8 = if buf[3] == 0xA5 { 0 } else { 0xFA };
+        t += 760;
+        link.sent(t);
+        // DE drops: one garbage byte, seen 1.75 ms later.
+        for noise in [&[0x00u8][..], &[0xFF, 0xFE], &[0x01, 0x03, 0x02]] {
+            assert_eq!(link.received(t + 1_900, noise), None);
+            assert_eq!(link.tick(t + 1_900), None);
+        }
+        // The reply (25.0 r/min = 250 counts), 2 ms after the request.
+        let mut reply = vec![0x01, 0x03, 0x02, 0x00, value];
+        reply.extend_from_slice(&drive_link::rtu::crc16(&reply).to_le_bytes());
+        t += 4_500;
+        assert_eq!(link.received(t, &reply), None);
+        assert_eq!(link.speed().map(|s| s.drum_milli_rpm), Some(25_000));
+        t += 2_000;
+    }
+    let c = link.counters();
+    assert_eq!((c.replies, c.timeouts, c.losses), (10, 0, 0), "{c:?}");
+    assert!(!link.is_lost());
+}

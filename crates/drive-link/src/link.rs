@@ -352,7 +352,7 @@ impl Link {
             return None;
         };
         match rtu::parse_reply(self.profile.slave, request, frame) {
-            Ok(reply) => self.answered(now_us, job, sent_at, reply),
+            Ok(reply) => self.answered(now_us, job, request, sent_at, reply),
             // Under 4 bytes is no RTU frame (address, function, CRC): noise
             // (e.g. the bus heard while DE drops), not the reply; the reply
             // may still follow, so the wait goes on.
@@ -425,7 +425,14 @@ impl Link {
         }
     }
 
-    fn answered(&mut self, now_us: u64, job: Job, sent_at: u64, reply: Reply) -> Option<Event> {
+    fn answered(
+        &mut self,
+        now_us: u64,
+        job: Job,
+        request: Request,
+        sent_at: u64,
+        reply: Reply,
+    ) -> Option<Event> {
         // After a timeout the reply may be a late one to an earlier
         // attempt: the driver sampled after the first attempt's end.
         let sampled_at = if self.timed_out {
@@ -451,9 +458,21 @@ impl Link {
                 }
                 self.faults = first;
             }
-            (Job::Control, _) => self.control = None,
+            // What the driver now has is the value written: a control word
+            // or a command queued while it was on its way is still due.
+            (Job::Control, _) => {
+                if let Request::Write { value, .. } = request {
+                    if self.control == Some(value) {
+                        self.control = None;
+                    }
+                }
+            }
             (Job::Mode, _) => self.mode_due = false,
-            (Job::Command, Reply::Written) => self.command_sent = self.command,
+            (Job::Command, Reply::Written) => {
+                if let Request::Write { value, .. } = request {
+                    self.command_sent = Some(value);
+                }
+            }
             _ => {}
         }
         let was_answering = self.answering;

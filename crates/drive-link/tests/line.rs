@@ -465,3 +465,50 @@ fn a_noise_fragment_before_the_reply_does_not_end_the_wait() {
     assert_eq!((c.replies, c.timeouts, c.losses), (10, 0, 0), "{c:?}");
     assert!(!link.is_lost());
 }
+
+/// "The latest request wins" (`Link::control`): a control word queued
+/// while another is on its way must still be written. Before, the reply to
+/// the write in flight cleared the queue: Start (Enable on the wire) and a
+/// stop within the transaction (Disable queued) left the driver enabled
+/// through its control word for good, and with the bus speed command the
+/// command stops being written, so the motor ran on at its last command.
+/// Every moment of the Enable's transaction is tried.
+#[test]
+fn a_control_word_queued_during_a_write_is_still_written() {
+    for baud in [9600, 115_200] {
+        let window = poll_cycle_us(baud, 2000) as u64;
+        for at in (0..window).step_by(250) {
+            let mut b = Bench::new(baud);
+            b.run_for(300_000);
+            b.link.control(ControlAction::Enable);
+            b.run_for(at);
+            b.link.control(ControlAction::Disable);
+            b.run_for(200_000);
+            assert!(
+                !b.driver.enabled,
+                "{baud}: Disable {at} µs after Enable lost"
+            );
+        }
+    }
+}
+
+/// The speed command written is the one the driver has: a command changed
+/// while the previous one is on its way is written at the next chance (the
+/// poll after the speed read that follows), not only at the refresh every
+/// 4th poll, which is when it came otherwise.
+#[test]
+fn a_speed_command_changed_during_its_write_is_written_next() {
+    let baud = 115_200;
+    let cycle = poll_cycle_us(baud, 2000) as u64;
+    for at in (0..cycle).step_by(250) {
+        let mut b = Bench::new(baud);
+        b.run_for(300_000);
+        b.link.set_speed_command(Some(20_000));
+        b.run_for(at);
+        b.link.set_speed_command(Some(10_000));
+        // The write in flight, a speed read, the new command: 3 cycles
+        // (and one for the 50 µs steps).
+        b.run_for(4 * cycle);
+        assert_eq!(b.driver.command_rpm, 10, "changed {at} µs after the first");
+    }
+}

@@ -244,11 +244,12 @@ impl Link {
             ..
         }) = self.profile.control
         {
-            self.control = Some(match action {
+            let value = match action {
                 ControlAction::Enable => enable,
                 ControlAction::Disable => disable,
                 ControlAction::ClearAlarm => clear_alarm,
-            });
+            };
+            self.control = Some(value);
         }
     }
 
@@ -268,6 +269,15 @@ impl Link {
             return None;
         }
         let (job, request) = match self.retry {
+            // A control write is retried with the newest value queued (an
+            // Enable retried after a Disable was queued would re-enable).
+            Some((Job::Control, Request::Write { address, value }, _)) => (
+                Job::Control,
+                Request::Write {
+                    address,
+                    value: self.control.unwrap_or(value),
+                },
+            ),
             Some((job, request, _)) => (job, request),
             None => self.choose(),
         };

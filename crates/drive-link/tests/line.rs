@@ -512,3 +512,26 @@ fn a_speed_command_changed_during_its_write_is_written_next() {
         assert_eq!(b.driver.command_rpm, 10, "changed {at} µs after the first");
     }
 }
+
+/// A control word changed while the previous one waits for its retry: the
+/// retry carries the newest one. Before, an Enable that timed out was sent
+/// again after the operator's stop had queued Disable, and the driver was
+/// enabled through its control word for a transaction after the stop.
+#[test]
+fn a_retried_enable_is_not_sent_after_a_disable() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        b.run_for(300_000);
+        // The Enable's first attempt goes unanswered.
+        b.driver.inject.silent = true;
+        b.link.control(ControlAction::Enable);
+        b.run_for(15_000);
+        b.link.control(ControlAction::Disable);
+        b.driver.inject.silent = false;
+        for ms in 0..300 {
+            b.run_for(1_000);
+            assert!(!b.driver.enabled, "{baud}: enabled {ms} ms after Disable");
+        }
+        assert_eq!(b.link.counters().losses, 0);
+    }
+}

@@ -331,9 +331,9 @@ fn a_cut_link_is_lost_within_the_retry_budget_with_safe_outputs() {
     let lost = time_of(&logs, "drive link: lost: no reply after the retries");
     let alarm = time_of(&logs, "alarm: LinkLost");
     eprintln!("cut at {at} ms, lost at {lost} ms, alarm at {alarm} ms");
-    // Hand formula at 115 200 baud: 3 × (request 0.77 ms + timeout 20.86 ms
-    // + gap 1.75 ms) + one poll cycle 9.3 ms = 79.4 ms, + 10 ms of the gate.
-    assert!(lost >= at && lost - at <= 90, "cut {at} -> lost {lost}");
+    // Hand formula at 115 200 baud: 3 × (request 0.77 ms + timeout 22.61 ms
+    // + gap 1.75 ms) + one poll cycle 9.3 ms = 84.7 ms, + 10 ms of the gate.
+    assert!(lost >= at && lost - at <= 95, "cut {at} -> lost {lost}");
     // Outputs safe at the next control step (≤ 100 ms required).
     assert!(alarm - lost <= 10, "lost {lost} -> alarm {alarm}");
     let (t, ccr) = ccr_after(&logs, alarm + 1);

@@ -349,14 +349,15 @@ fn check(baud: u32, ms: u64) {
         let expect = if t.tx[1].2 == 0x03 { 7 } else { 8 };
         if n == UNANSWERED {
             // No reply: the same request again once the reply timeout
-            // (the longest reply, 9 characters of 11 bits, + 20 ms for the
-            // driver: docs/drive-link.md) and the silent interval have
-            // passed after TC, within two periods of the 1 ms link task.
+            // (the longest reply, 9 characters of 11 bits, the silence
+            // that ends it, + 20 ms for the driver: docs/drive-link.md)
+            // and the silent interval have passed after TC, within two
+            // periods of the 1 ms link task.
             assert!(t.rx.is_empty(), "transaction {n}: {:?}", t.rx);
             let next = &transactions[n + 1];
             let bytes = |t: &Transaction| t.tx.iter().map(|b| b.2).collect::<Vec<_>>();
             assert_eq!(bytes(next), bytes(t), "the same request again");
-            let timeout = (9.0 * modbus_char_s + 20e-3) * TICKS_PER_S as f64;
+            let timeout = (9.0 * modbus_char_s + 20e-3) * TICKS_PER_S as f64 + silence;
             let wait = (next.tx[0].0 - tc) as f64;
             retry_wait = wait / 72.0;
             assert!(

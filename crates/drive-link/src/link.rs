@@ -49,25 +49,30 @@ pub struct LinkConfig {
 pub const DRIVER_TURNAROUND_US: u32 = 20_000;
 
 impl LinkConfig {
-    /// The timing for a profile's baud rate: the reply timeout is the
-    /// longest reply's time on the line (9 characters) plus
-    /// [`DRIVER_TURNAROUND_US`]; two retries; faults every 4th poll.
+    /// The timing for a profile's baud rate: the reply timeout is
+    /// [`DRIVER_TURNAROUND_US`] plus the longest reply's time on the line
+    /// (9 characters) plus the 3.5-character silence after it, without
+    /// which the reply's end is not seen (§2.5.1.1); two retries; faults
+    /// every 4th poll.
     ///
     /// ```
     /// use drive_link::{link::LinkConfig, profile::ZLAC8015D};
     /// let c = LinkConfig::for_baud(9600).unwrap();
-    /// // 9 × 1145.8 µs = 10 313 µs on the line + 20 ms.
-    /// assert_eq!(c.reply_timeout_us, 30_313);
-    /// assert_eq!(LinkConfig::for_baud(ZLAC8015D.baud).unwrap().reply_timeout_us, 20_860);
+    /// // 20 ms + 9 × 1145.8 µs = 10 313 µs on the line + 4011 µs of silence.
+    /// assert_eq!(c.reply_timeout_us, 34_324);
+    /// assert_eq!(LinkConfig::for_baud(ZLAC8015D.baud).unwrap().reply_timeout_us, 22_610);
     /// ```
     #[must_use]
     pub fn for_baud(baud: u32) -> Option<Self> {
         let reply = timing::frame_time_us(baud, 9)?;
+        let silent = timing::silent_interval_us(baud)?;
         Some(Self {
-            reply_timeout_us: reply.checked_add(DRIVER_TURNAROUND_US)?,
+            reply_timeout_us: reply
+                .checked_add(silent)?
+                .checked_add(DRIVER_TURNAROUND_US)?,
             retries: 2,
             fault_poll_every: 4,
-            silent_interval_us: timing::silent_interval_us(baud)?,
+            silent_interval_us: silent,
         })
     }
 }
@@ -196,6 +201,11 @@ pub struct Link {
     speed: Option<SpeedSample>,
     faults: u16,
     loss: Option<LossCause>,
+    /// An attempt of the current request timed out: its reply may still
+    /// come, late.
+    timed_out: bool,
+    /// When the current request's first attempt ended (µs).
+    first_sent_at: u64,
 }
 
 impl Link {
@@ -219,6 +229,8 @@ impl Link {
             speed: None,
             faults: 0,
             loss: None,
+            timed_out: false,
+            first_sent_at: 0,
         }
     }
 
@@ -232,11 +244,12 @@ impl Link {
             ..
         }) = self.profile.control
         {
-            self.control = Some(match action {
+            let value = match action {
                 ControlAction::Enable => enable,
                 ControlAction::Disable => disable,
                 ControlAction::ClearAlarm => clear_alarm,
-            });
+            };
+            self.control = Some(value);
         }
     }
 
@@ -256,6 +269,15 @@ impl Link {
             return None;
         }
         let (job, request) = match self.retry {
+            // A control write is retried with the newest value queued (an
+            // Enable retried after a Disable was queued would re-enable).
+            Some((Job::Control, Request::Write { address, value }, _)) => (
+                Job::Control,
+                Request::Write {
+                    address,
+                    value: self.control.unwrap_or(value),
+                },
+            ),
             Some((job, request, _)) => (job, request),
             None => self.choose(),
         };
@@ -313,6 +335,9 @@ impl Link {
     /// The request's last bit has left (TC).
     pub fn sent(&mut self, now_us: u64) {
         if let State::Sending { job, request } = self.state {
+            if self.retry.is_none() {
+                self.first_sent_at = now_us;
+            }
             let deadline = now_us.saturating_add(u64::from(self.config.reply_timeout_us));
             self.state = State::Awaiting {
                 job,
@@ -337,7 +362,14 @@ impl Link {
             return None;
         };
         match rtu::parse_reply(self.profile.slave, request, frame) {
-            Ok(reply) => self.answered(now_us, job, sent_at, reply),
+            Ok(reply) => self.answered(now_us, job, request, sent_at, reply),
+            // Under 4 bytes is no RTU frame (address, function, CRC): noise
+            // (e.g. the bus heard while DE drops), not the reply; the reply
+            // may still follow, so the wait goes on.
+            Err(ReplyError::Length(n)) if n < 4 => {
+                self.counters.crc_errors = self.counters.crc_errors.wrapping_add(1);
+                None
+            }
             Err(ReplyError::Crc | ReplyError::Length(_)) => {
                 self.counters.crc_errors = self.counters.crc_errors.wrapping_add(1);
                 self.failed(now_us, LossCause::Corrupt)
@@ -370,6 +402,7 @@ impl Link {
         match self.state {
             State::Awaiting { deadline, .. } if now_us >= deadline => {
                 self.counters.timeouts = self.counters.timeouts.wrapping_add(1);
+                self.timed_out = true;
                 self.failed(now_us, LossCause::NoReply)
             }
             _ => None,
@@ -382,8 +415,42 @@ impl Link {
         };
     }
 
-    fn answered(&mut self, now_us: u64, job: Job, sent_at: u64, reply: Reply) -> Option<Event> {
+    /// The request is done (answered or given up) after `sent_at`, its
+    /// last attempt's end. When an attempt of it timed out, a reply to it
+    /// may still be on its way, and a reply to function 03 does not name
+    /// its register: the next request (another register) waits until that
+    /// reply is over due, one more reply timeout (the libmodbus recovery:
+    /// wait a response timeout and flush), and what comes meanwhile is
+    /// counted late. Retries of the same request go out at once: a late
+    /// reply to an earlier attempt answers them with the same register.
+    fn request_done(&mut self, now_us: u64, sent_at: u64) {
         self.line_free(now_us);
+        if core::mem::take(&mut self.timed_out) {
+            let drained = sent_at
+                .saturating_add(2 * u64::from(self.config.reply_timeout_us))
+                .saturating_add(u64::from(self.config.silent_interval_us));
+            if let State::Idle { at } = &mut self.state {
+                *at = (*at).max(drained);
+            }
+        }
+    }
+
+    fn answered(
+        &mut self,
+        now_us: u64,
+        job: Job,
+        request: Request,
+        sent_at: u64,
+        reply: Reply,
+    ) -> Option<Event> {
+        // After a timeout the reply may be a late one to an earlier
+        // attempt: the driver sampled after the first attempt's end.
+        let sampled_at = if self.timed_out {
+            self.first_sent_at
+        } else {
+            sent_at
+        };
+        self.request_done(now_us, sent_at);
         self.retry = None;
         self.counters.replies = self.counters.replies.wrapping_add(1);
         let mut event = None;
@@ -391,7 +458,7 @@ impl Link {
             (Job::Speed, Reply::Registers { first, .. }) => {
                 self.speed = Some(SpeedSample {
                     drum_milli_rpm: self.profile.speed_from_register(first),
-                    sampled_at_us: sent_at,
+                    sampled_at_us: sampled_at,
                 });
             }
             (Job::Faults, Reply::Registers { first, .. }) => {
@@ -401,9 +468,21 @@ impl Link {
                 }
                 self.faults = first;
             }
-            (Job::Control, _) => self.control = None,
+            // What the driver now has is the value written: a control word
+            // or a command queued while it was on its way is still due.
+            (Job::Control, _) => {
+                if let Request::Write { value, .. } = request {
+                    if self.control == Some(value) {
+                        self.control = None;
+                    }
+                }
+            }
             (Job::Mode, _) => self.mode_due = false,
-            (Job::Command, Reply::Written) => self.command_sent = self.command,
+            (Job::Command, Reply::Written) => {
+                if let Request::Write { value, .. } = request {
+                    self.command_sent = Some(value);
+                }
+            }
             _ => {}
         }
         let was_answering = self.answering;
@@ -417,7 +496,13 @@ impl Link {
     }
 
     fn failed(&mut self, now_us: u64, cause: LossCause) -> Option<Event> {
-        let State::Awaiting { job, request, .. } = self.state else {
+        let State::Awaiting {
+            job,
+            request,
+            sent_at,
+            ..
+        } = self.state
+        else {
             return None;
         };
         self.line_free(now_us);
@@ -426,6 +511,7 @@ impl Link {
             self.retry = Some((job, request, failures));
             return None;
         }
+        self.request_done(now_us, sent_at);
         self.retry = None;
         self.answering = false;
         self.speed = None;

@@ -185,10 +185,17 @@ pub fn parse_reply(slave: u8, request: Request, frame: &[u8]) -> Result<Reply, R
     // Exceptions decoded here, not by modbus-core: its
     // `ExceptionResponse::try_from` indexes past a 1-byte PDU with bit 7 set
     // (`01 80` + CRC panicked; found by `parse_never_panics`).
+    // An exception answers this request only with its function code + 0x80
+    // (Modbus Application Protocol V1.1b3 §7); another one is a late reply
+    // to an earlier request.
+    let asked = match request {
+        Request::Read { .. } => 0x83,
+        Request::Write { .. } => 0x86,
+    };
     if let Some((&function, rest)) = pdu.split_first() {
         if function & 0x80 != 0 {
             return match rest {
-                [code] => Err(ReplyError::Exception(*code)),
+                [code] if function == asked => Err(ReplyError::Exception(*code)),
                 _ => Err(ReplyError::Mismatch),
             };
         }
@@ -409,6 +416,26 @@ mod tests {
         assert_eq!(
             parse_reply(1, read, &frame(&[1, 0x83, 2, 9])),
             Err(ReplyError::Mismatch)
+        );
+        // An exception to another function (a write's, late) is not this
+        // read's refusal: the exception's function is the request's + 0x80
+        // (Modbus Application Protocol V1.1b3 §7). It was taken as the
+        // read's, naming the wrong register as refused.
+        assert_eq!(
+            parse_reply(1, read, &frame(&[1, 0x86, 2])),
+            Err(ReplyError::Mismatch)
+        );
+        let write = Request::Write {
+            address: 0x200E,
+            value: 8,
+        };
+        assert_eq!(
+            parse_reply(1, write, &frame(&[1, 0x83, 2])),
+            Err(ReplyError::Mismatch)
+        );
+        assert_eq!(
+            parse_reply(1, write, &frame(&[1, 0x86, 3])),
+            Err(ReplyError::Exception(3))
         );
     }
 

@@ -15,7 +15,7 @@
     clippy::cast_possible_wrap
 )]
 
-use drive_link::link::{ControlAction, Event, Link, LinkConfig, LossCause};
+use drive_link::link::{ControlAction, Event, Link, LinkConfig, LossCause, DRIVER_TURNAROUND_US};
 use drive_link::profile::{DriverFault, DriverProfile, ZLAC8015D};
 use drive_link::rtu::MAX_FRAME;
 use drive_link::timing::{frame_time_us, silent_interval_us};
@@ -347,4 +347,191 @@ fn driver_faults_are_read_and_named() {
         [DriverFault::OverCurrent, DriverFault::OverTemperature]
     );
     assert_eq!(names[0].to_string(), "driver over-current");
+}
+
+/// A reply that comes after its request's timeout must not be taken as the
+/// answer to a later request (Modbus over Serial Line V1.02 §2.4.1: a
+/// reply that comes after the response timeout is an error, and the
+/// master's next request is a new transaction). A function-03 reply names
+/// no register, so a late speed reply landing while the fault register is
+/// being read would be taken as the fault word (here 252 counts = 0x00FC:
+/// over-current and overload bits), and a late fault reply (0) as the
+/// speed. One slow reply (the driver busy, e.g. writing its EEPROM) in
+/// normal running, delayed by anything from just past the timeout to one
+/// more timeout, and started at every phase of the poll cycle.
+#[test]
+fn a_reply_after_its_timeout_is_never_the_answer_to_the_next_request() {
+    let mut bad = Vec::new();
+    for baud in [115_200, 9600] {
+        // From just past the timeout to a reply that ends one more reply
+        // timeout after its request's deadline (the bound the master
+        // drains for; a driver later than that answers no request).
+        let timeout = LinkConfig::for_baud(baud).unwrap().reply_timeout_us;
+        let turnaround = VirtualZlac::default().turnaround_us;
+        let first = (timeout - turnaround) / 1000;
+        let last = (2 * timeout - turnaround - frame_time_us(baud, 7).unwrap()) / 1000;
+        for extra_ms in first..=last {
+            for phase_us in (0..40_000u64).step_by(2_500) {
+                let mut b = Bench::new(baud);
+                b.driver.actual_decirpm = 252;
+                b.run_for(100_000 + phase_us);
+                let start = b.samples.len();
+                b.driver.inject.late_replies = 1;
+                b.driver.inject.extra_delay_us = extra_ms * 1000;
+                b.run_for(400_000);
+                let faults: Vec<_> = b
+                    .events
+                    .iter()
+                    .filter(|(_, e)| matches!(e, Event::Faults(_)))
+                    .collect();
+                let wrong_speed = b.samples[start..].iter().any(|s| s.2 != 25_200);
+                if !faults.is_empty() || wrong_speed {
+                    bad.push((baud, extra_ms, phase_us, faults.len(), wrong_speed));
+                }
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "late replies taken as the next request's answer (extra ms, phase µs, fault events, wrong speed): {bad:?}"
+    );
+}
+
+/// The reply timeout promises the driver [`DRIVER_TURNAROUND_US`] (20 ms)
+/// to start its reply (docs/drive-link.md). But a reply is only seen once
+/// the 3.5-character silence after its last byte has passed (Modbus over
+/// Serial Line V1.02 §2.5.1.1: the frame ends there), so the deadline must
+/// cover that silence too, or a driver answering in 18.3–20 ms (115 200
+/// baud; 18.3–20 at 9600 too) times out on every request and the link is
+/// lost for good.
+#[test]
+fn a_driver_within_the_promised_turnaround_is_never_timed_out() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        b.driver.actual_decirpm = 100;
+        b.driver.turnaround_us = DRIVER_TURNAROUND_US - 500;
+        b.run_for(1_000_000);
+        let c = b.link.counters();
+        assert_eq!((c.timeouts, c.losses), (0, 0), "{baud}: {c:?}");
+        assert_eq!(b.samples.last().map(|s| s.2), Some(10_000), "{baud}");
+    }
+}
+
+/// Noise before a valid reply: a transceiver whose bus is not fail-safe
+/// biased may hear a byte or two of garbage when DE drops after TC, ended
+/// by silence as a frame of its own, and the driver's valid reply follows
+/// a few ms later. A fragment under 4 bytes is no Modbus RTU frame
+/// (address, function and the two CRC bytes at least: Modbus over Serial
+/// Line V1.02 §2.5.1): it must not end the wait. Before, it failed the
+/// attempt at once, the retry went out on top of the reply in flight, and
+/// noise at every turnaround lost the link for good.
+#[test]
+fn a_noise_fragment_before_the_reply_does_not_end_the_wait() {
+    let profile = drive_link::profile::GenericSettings {
+        slave: 1,
+        baud: 115_200,
+        speed_feedback: 0x20AB,
+        micro_rpm_per_count: 100_000,
+        fault_register: 0x20A5,
+        fault_masks: [0; 6],
+        speed_command: None,
+    }
+    .build()
+    .unwrap();
+    let mut link = Link::new(profile, LinkConfig::for_baud(115_200).unwrap());
+    let mut t = 0u64;
+    for _ in 0..10 {
+        let mut buf = [0u8; MAX_FRAME];
+        let n = link.next_frame(t, &mut buf).unwrap();
+        assert_eq!(n, 8);
+        // Speed reads, every 4th the fault register (word 0).
+        let value: u8 = if buf[3] == 0xA5 { 0 } else { 0xFA };
+        t += 760;
+        link.sent(t);
+        // DE drops: one garbage byte, seen 1.75 ms later.
+        for noise in [&[0x00u8][..], &[0xFF, 0xFE], &[0x01, 0x03, 0x02]] {
+            assert_eq!(link.received(t + 1_900, noise), None);
+            assert_eq!(link.tick(t + 1_900), None);
+        }
+        // The reply (25.0 r/min = 250 counts), 2 ms after the request.
+        let mut reply = vec![0x01, 0x03, 0x02, 0x00, value];
+        reply.extend_from_slice(&drive_link::rtu::crc16(&reply).to_le_bytes());
+        t += 4_500;
+        assert_eq!(link.received(t, &reply), None);
+        assert_eq!(link.speed().map(|s| s.drum_milli_rpm), Some(25_000));
+        t += 2_000;
+    }
+    let c = link.counters();
+    assert_eq!((c.replies, c.timeouts, c.losses), (10, 0, 0), "{c:?}");
+    assert!(!link.is_lost());
+}
+
+/// "The latest request wins" (`Link::control`): a control word queued
+/// while another is on its way must still be written. Before, the reply to
+/// the write in flight cleared the queue: Start (Enable on the wire) and a
+/// stop within the transaction (Disable queued) left the driver enabled
+/// through its control word for good, and with the bus speed command the
+/// command stops being written, so the motor ran on at its last command.
+/// Every moment of the Enable's transaction is tried.
+#[test]
+fn a_control_word_queued_during_a_write_is_still_written() {
+    for baud in [9600, 115_200] {
+        let window = poll_cycle_us(baud, 2000) as u64;
+        for at in (0..window).step_by(250) {
+            let mut b = Bench::new(baud);
+            b.run_for(300_000);
+            b.link.control(ControlAction::Enable);
+            b.run_for(at);
+            b.link.control(ControlAction::Disable);
+            b.run_for(200_000);
+            assert!(
+                !b.driver.enabled,
+                "{baud}: Disable {at} µs after Enable lost"
+            );
+        }
+    }
+}
+
+/// The speed command written is the one the driver has: a command changed
+/// while the previous one is on its way is written at the next chance (the
+/// poll after the speed read that follows), not only at the refresh every
+/// 4th poll, which is when it came otherwise.
+#[test]
+fn a_speed_command_changed_during_its_write_is_written_next() {
+    let baud = 115_200;
+    let cycle = poll_cycle_us(baud, 2000) as u64;
+    for at in (0..cycle).step_by(250) {
+        let mut b = Bench::new(baud);
+        b.run_for(300_000);
+        b.link.set_speed_command(Some(20_000));
+        b.run_for(at);
+        b.link.set_speed_command(Some(10_000));
+        // The write in flight, a speed read, the new command: 3 cycles
+        // (and one for the 50 µs steps).
+        b.run_for(4 * cycle);
+        assert_eq!(b.driver.command_rpm, 10, "changed {at} µs after the first");
+    }
+}
+
+/// A control word changed while the previous one waits for its retry: the
+/// retry carries the newest one. Before, an Enable that timed out was sent
+/// again after the operator's stop had queued Disable, and the driver was
+/// enabled through its control word for a transaction after the stop.
+#[test]
+fn a_retried_enable_is_not_sent_after_a_disable() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        b.run_for(300_000);
+        // The Enable's first attempt goes unanswered.
+        b.driver.inject.silent = true;
+        b.link.control(ControlAction::Enable);
+        b.run_for(15_000);
+        b.link.control(ControlAction::Disable);
+        b.driver.inject.silent = false;
+        for ms in 0..300 {
+            b.run_for(1_000);
+            assert!(!b.driver.enabled, "{baud}: enabled {ms} ms after Disable");
+        }
+        assert_eq!(b.link.counters().losses, 0);
+    }
 }

@@ -391,7 +391,7 @@ fn crc_errors_and_late_replies_are_counted_and_survived() {
         rig.run_ms(500);
         // A reply 25 ms late: beyond the reply timeout at both rates
         // (2 + 25 ms + the reply's 7 characters + 3.5 characters of
-        // silence: 38.7 ms > 30.3 ms at 9600, 27.6 > 20.9 at 115 200), so
+        // silence: 38.7 ms > 34.3 ms at 9600, 27.6 > 22.6 at 115 200), so
         // the request is retried and the late frame counted.
         rig.drv.inject.late_replies = 1;
         rig.drv.inject.extra_delay_us = 25_000;

@@ -959,12 +959,35 @@ impl Supervisor {
         self.snapshot
     }
 
-    /// The highest travel speed the current spacing allows, km/h × 100.
+    /// The highest travel speed the current spacing allows, km/h × 100:
+    /// the plan's (eq. 7 at the paper's `n_max`) scaled to the drum's
+    /// limit in force (a drive identified slower) and divided by the motor
+    /// coefficient (the target is eq. 7 times it).
     pub fn max_travel_kmh_x100(&self) -> u16 {
+        let cal = &self.settings.calibration;
+        let cap = self.drum_cap();
+        let rpm_milli = |n: I16F16| {
+            let m = milli(n);
+            let k3 = cal
+                .k3_at(RevPerMin::from_ratio(m, 1000).unwrap_or(RevPerMin::ZERO))
+                .to_milli();
+            u64::from(m).saturating_mul(u64::from(k3))
+        };
+        // V_max ∝ n·k3(n) (eq. 7 solved for the travel speed).
+        let num = rpm_milli(cap).saturating_mul(100);
+        let den = rpm_milli(rpm_to_fix(consts::N_MAX))
+            .saturating_mul(u64::from(self.settings.motor_coefficient.raw()));
         self.plan
-            .max_travel_speed(&self.settings.calibration)
-            .map(|v| u16::try_from(v.to_milli() / 10).unwrap_or(u16::MAX))
-            .unwrap_or(0)
+            .max_travel_speed(cal)
+            .ok()
+            .and_then(|v| u64::from(v.to_milli()).saturating_mul(num).checked_div(den))
+            .map_or(0, |v| u16::try_from(v / 10).unwrap_or(u16::MAX))
+    }
+
+    /// The drum speed the target is held at: the paper's `n_max`, or a
+    /// drive identified slower its own.
+    fn drum_cap(&self) -> I16F16 {
+        rpm_to_fix(kinematics::consts::N_MAX).min(self.law.n_max)
     }
 
     /// Takes one Hall edge (1 MHz capture ticks, extended to 32 bits).
@@ -1633,19 +1656,22 @@ impl Supervisor {
             Mode::SpeedAdaptive => {
                 match travel.map(|t| self.plan.target(&t, &self.settings.calibration)) {
                     Some(Ok(target)) => {
-                        if let DrumTarget::Saturated { .. } = target {
-                            too_fast = Some(Alarm::TooFast {
-                                max_kmh_x100: self.max_travel_kmh_x100(),
-                            });
-                        }
-                        let n = rpm_to_fix(target.command().drum_speed)
+                        // Eq. 7 as asked (also beyond the plan's n_max)
+                        // times the motor coefficient, then held at the
+                        // drum's limit: the paper's 44.7 r/min, or a drive
+                        // identified slower its own. (Holding eq. 7 at
+                        // n_max before the coefficient ran the drum slow
+                        // under a coefficient below 1.)
+                        let asked = match target {
+                            DrumTarget::Follow(c) => c.drum_speed,
+                            DrumTarget::Saturated { requested, .. } => requested,
+                        };
+                        let n = rpm_to_fix(asked)
                             .saturating_mul_int(i32::from(self.settings.motor_coefficient.raw()))
                             .checked_div_int(100)
                             .unwrap_or(I16F16::ZERO);
-                        // The plan saturates at the paper's 44.7 r/min; a
-                        // drive identified slower saturates at its own.
-                        let cap = rpm_to_fix(kinematics::consts::N_MAX).min(self.law.n_max);
-                        if n > cap && too_fast.is_none() {
+                        let cap = self.drum_cap();
+                        if n > cap {
                             too_fast = Some(Alarm::TooFast {
                                 max_kmh_x100: self.max_travel_kmh_x100(),
                             });
@@ -2557,6 +2583,82 @@ mod tests {
         assert_eq!(run(true, -157).0, None);
         assert_eq!(run(false, -1).0, Some(Alarm::DrumStall));
         assert_eq!(run(false, 0).0, Some(Alarm::DrumStall));
+    }
+
+    /// Speed-Adaptive at a constant travel speed (one Hall edge every
+    /// 90 ms: ≈ 26.7 r/min at the gear, ≈ 1 km/h), speed-following
+    /// placement; returns the drum target of the last step (r/min) and the
+    /// alarm.
+    #[allow(clippy::arithmetic_side_effects)]
+    fn adaptive_target(spacing_mm: i32, coefficient: i32) -> (f64, Option<Alarm>) {
+        use hmi_proto::screen::{MotorCoefficient, Spacing};
+        let settings = Settings {
+            mode: Mode::SpeedAdaptive,
+            spacing: Spacing::new(spacing_mm).unwrap(),
+            motor_coefficient: MotorCoefficient::new(coefficient).unwrap(),
+            placement: Placement::SpeedFollowing,
+            ..Settings::default()
+        };
+        let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+        sup.command(Command::Start);
+        let mut encoder: u16 = 0;
+        let mut next_edge = 5_000u32;
+        for period in 0..300u32 {
+            let now = period * 10_000;
+            while next_edge <= now {
+                sup.hall_edge(Ticks(next_edge));
+                next_edge += 90_000;
+            }
+            // The drum follows its target (no stall alarm).
+            let n = f64::from(sup.snapshot().target_drum_rpm_x1000) / 1000.0;
+            encoder = encoder.wrapping_add((n / 60.0 * 47_200.0 * 0.01).round() as u16);
+            sup.control_step(Ticks(now), encoder);
+        }
+        (
+            f64::from(sup.snapshot().target_drum_rpm_x1000) / 1000.0,
+            sup.alarm(),
+        )
+    }
+
+    /// docs/firmware.md, control step 3: the target is eq. 7 *times the
+    /// motor coefficient*, held at `n_max` (with the warning) only when that
+    /// product exceeds it. Eq. 7 is inversely proportional to the spacing,
+    /// so eq. 7 at 7 cm is twice eq. 7 at 14 cm (k3 is flat at 0.980 above
+    /// 25 r/min, Table 13 clamped): at ≈ 26 r/min for 14 cm, eq. 7 at 7 cm
+    /// asks ≈ 52 r/min, beyond 44.7; with a coefficient of 0.80 the drum
+    /// must run at 0.80 × 52 ≈ 41.6 r/min, within `n_max`, without a
+    /// warning. Before: eq. 7 was held at 44.7 first, then × 0.80 = 35.76
+    /// r/min (14 % slow: plants 16 % too far apart) under a *Too fast*
+    /// warning.
+    #[test]
+    fn the_motor_coefficient_applies_before_the_n_max_limit() {
+        let (n14, alarm) = adaptive_target(140, 100);
+        assert_eq!(alarm, None);
+        assert!(n14 > 25.0 && n14 < 27.0, "{n14}");
+        let (n7, alarm) = adaptive_target(70, 80);
+        let expected = 0.8 * 2.0 * n14;
+        assert!((n7 - expected).abs() < 0.02, "{n7} vs {expected}");
+        assert_eq!(alarm, None);
+        // A coefficient of 1.20 at 14 cm (≈ 31 r/min) still follows …
+        let (n, alarm) = adaptive_target(140, 120);
+        assert!((n - 1.2 * n14).abs() < 0.02, "{n}");
+        assert_eq!(alarm, None);
+        // … and at 7 cm (≈ 62 r/min) is held at n_max with the warning.
+        let (n, alarm) = adaptive_target(70, 120);
+        assert!((n - 44.7).abs() < 0.01, "{n}");
+        // The maximum shown is the speed at which 1.20 × eq. 7 reaches
+        // 44.7 r/min: V = k3·n_max·π·0.070 m/60 · X/Lclap / 1.20 =
+        // 0.980 · 44.7 · 0.219 911 / 60 · 1.4 / 1.2 = 0.1873 m/s =
+        // 0.674 km/h (hand-computed; Table 13's k3 clamped at 0.980).
+        assert!(
+            matches!(
+                alarm,
+                Some(Alarm::TooFast {
+                    max_kmh_x100: 66..=68
+                })
+            ),
+            "{alarm:?}"
+        );
     }
 
     #[test]

@@ -2265,7 +2265,7 @@ impl Supervisor {
                 (u32::try_from(um / 10_000).unwrap_or(u32::MAX), 0)
             }
             CalibrationRun::Computed { k, .. } => {
-                (0, u16::try_from(k.to_milli()).unwrap_or(u16::MAX))
+                (0, u16::try_from(coefficient_milli(k)).unwrap_or(u16::MAX))
             }
             _ => (0, 0),
         };
@@ -2304,6 +2304,18 @@ impl Supervisor {
     }
 }
 
+/// A coefficient in thousandths, rounded to the nearest (the screen's
+/// unit): `Coefficient::to_milli` rounds down, and a value set from a
+/// decimal (0.800 is 0.799 999 999 8 in 2⁻³⁰ steps) read one less.
+fn coefficient_milli(k: kinematics::units::Coefficient) -> u32 {
+    // bits < 2³², × 1000 < 2⁴².
+    let m = (u64::from(k.to_bits())
+        .saturating_mul(1000)
+        .saturating_add(1 << 29))
+        >> 30;
+    u32::try_from(m).unwrap_or(u32::MAX)
+}
+
 /// Track per Hall edge: π·0.20 m / 25 = 25 133 µm.
 const EDGE_UM: u64 = 25_133;
 /// Belt per drum turn: π·(D2 + 2·H2) = π·0.070 m = 219 911 µm.
@@ -2321,7 +2333,7 @@ impl Supervisor {
             CalibrationKind::SlipK2 => &settings.calibration.k2,
             CalibrationKind::BeltK3 => &settings.calibration.k3,
         };
-        let k_x1000 = i32::try_from(table.eval(at).to_milli()).unwrap_or(i32::MAX);
+        let k_x1000 = i32::try_from(coefficient_milli(table.eval(at))).unwrap_or(i32::MAX);
         screen::Settings {
             spacing: settings.spacing,
             fixed_drum_speed: settings.fixed_drum_speed,
@@ -2659,6 +2671,37 @@ mod tests {
             ),
             "{alarm:?}"
         );
+    }
+
+    /// A coefficient typed on page 4 is shown back as typed, over the
+    /// whole range the screen accepts (0.800–1.200, docs/hmi.md), for each
+    /// table. Before: `Coefficient` holds 0.800 as 0.799 999 99… (2⁻³⁰
+    /// steps) and the screen value was its thousandths rounded *down*:
+    /// 1.200 showed 1.199, 0.980 showed 0.979, and 0.800 read 799, outside
+    /// the screen's range, so the screen showed the default 1.000.
+    #[test]
+    fn a_coefficient_set_on_the_screen_is_shown_as_set() {
+        use hmi_proto::screen::CalibrationCoefficient;
+        let mut sup = Supervisor::new(Hardware::BOARD, Settings::default()).unwrap();
+        for kind in [
+            CalibrationKind::SpeedK1,
+            CalibrationKind::SlipK2,
+            CalibrationKind::BeltK3,
+        ] {
+            sup.command(Command::SelectCalibration(kind));
+            for v in [800, 801, 980, 993, 1000, 1031, 1199, 1200] {
+                let k = CalibrationCoefficient::new(v).unwrap();
+                assert_eq!(
+                    sup.command(Command::SetCalibrationCoefficient(k)),
+                    Effect::SettingsChanged
+                );
+                assert_eq!(
+                    sup.screen_settings().calibration_coefficient.raw(),
+                    v as u16,
+                    "{kind:?}"
+                );
+            }
+        }
     }
 
     #[test]

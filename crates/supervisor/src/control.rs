@@ -1360,10 +1360,11 @@ impl Supervisor {
         }
     }
 
-    /// Duration of `steps` control periods, µs (saturating).
-    fn run_us(&self, steps: u32) -> u32 {
-        u32::try_from(u64::from(steps).saturating_mul(u64::from(self.hw.control_period_us)))
-            .unwrap_or(u32::MAX)
+    /// Duration of `steps` control periods, µs, in `u64`: a calibration
+    /// run of paper A's 400 m at Low 1 lasts 4645 s, beyond the 4295 s of
+    /// a `u32`.
+    fn run_us(&self, steps: u32) -> u64 {
+        u64::from(steps).saturating_mul(u64::from(self.hw.control_period_us))
     }
 
     /// The coefficient of the selected kind from the last run and the taped
@@ -1385,7 +1386,8 @@ impl Supervisor {
                 // k2 = taped / (wheel turns · π·0.20 m), turns = edges / Z1.
                 let turns = U16F16::checked_from_num(edges)
                     .and_then(|e| e.checked_div_int(u32::from(consts::Z1)));
-                let time = kinematics::units::Seconds::from_ratio(us / 1000, 1000);
+                let ms = u32::try_from(us / 1000).unwrap_or(u32::MAX);
+                let time = kinematics::units::Seconds::from_ratio(ms, 1000);
                 let distance = Metres::from_mm(taped_cm.saturating_mul(10));
                 turns.zip(time).and_then(|(turns, time)| {
                     kinematics::calib::k2_from_wheel_turns(turns, distance, time)
@@ -1395,9 +1397,7 @@ impl Supervisor {
             }
             CalibrationKind::SpeedK1 => {
                 // Speeds in m/h (km/h × 1000): µm / µs · 3600.
-                let mph = |um: u64| {
-                    u32::try_from(um.saturating_mul(3_600).checked_div(u64::from(us))?).ok()
-                };
+                let mph = |um: u64| u32::try_from(um.saturating_mul(3_600).checked_div(us)?).ok();
                 let monitored = mph(u64::from(edges).saturating_mul(EDGE_UM));
                 let actual = mph(u64::from(taped_um));
                 monitored.zip(actual).and_then(|(monitored, actual)| {
@@ -1424,12 +1424,13 @@ impl Supervisor {
                 // Mean drum speed: counts · 60 / (counts per turn · s).
                 let rpm_x1000 = drum_counts
                     .saturating_mul(60_000_000_000)
-                    .checked_div(
-                        u64::from(self.hw.encoder_counts_per_drum_rev)
-                            .saturating_mul(u64::from(us)),
-                    )
+                    .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev).saturating_mul(us))
                     .and_then(|v| u32::try_from(v).ok());
-                let belt = kinematics::units::MetresPerSecond::from_ratio(taped_um, us);
+                // µm / µs = m/s, U8F24 bits (taped_um < 2³⁰: no overflow).
+                let belt = (u64::from(taped_um) << 24)
+                    .checked_div(us)
+                    .and_then(|bits| u32::try_from(bits).ok())
+                    .map(kinematics::units::MetresPerSecond::from_bits);
                 rpm_x1000
                     .and_then(|n| RevPerMin::from_ratio(n, 1000))
                     .zip(belt)
@@ -2702,6 +2703,52 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Paper A's own k2 procedure (Table 12, SPEC §4) at Low 1: 400 m
+    /// taped, 655.08 wheel turns (16 377 Hall edges) in 4645.16 s — longer
+    /// than the 4295 s a `u32` of µs holds. Expected (Table 12, by hand):
+    /// k2 = 400 / (655.08 · π · 0.20) = 0.9719, at the wheel speed
+    /// 3.6 · 411.61 / 4645.16 = 0.3190 km/h (`PAPER_K2`'s abscissa). Before,
+    /// the run's duration saturated at 4295 s: the point went in at
+    /// 0.345 km/h, 8 % off. The k1 and k3 runs shared the duration.
+    #[test]
+    #[allow(clippy::arithmetic_side_effects)]
+    fn a_calibration_run_longer_than_71_minutes_keeps_its_duration() {
+        use hmi_proto::screen::CalibrationDistance;
+        let mut sup = Supervisor::new(Hardware::BOARD, Settings::default()).unwrap();
+        sup.command(Command::SelectCalibration(CalibrationKind::SlipK2));
+        let steps = 464_516u32; // 4645.16 s of 10 ms periods
+        let gap = 4_645_160_000u64 / 16_377; // µs per Hall edge
+        let mut next_edge = 0u64;
+        sup.control_step(Ticks(0), 0);
+        sup.command(Command::CalibrationStart);
+        for period in 1..=steps {
+            let now = u64::from(period) * 10_000;
+            while next_edge + gap <= now {
+                next_edge += gap;
+                sup.hall_edge(Ticks(next_edge as u32));
+            }
+            sup.control_step(Ticks(now as u32), 0);
+        }
+        sup.command(Command::CalibrationStop);
+        let CalibrationRun::Measured {
+            edges, steps: s, ..
+        } = sup.calibration_run()
+        else {
+            panic!("{:?}", sup.calibration_run());
+        };
+        assert_eq!((edges, s), (16_377, steps));
+        sup.command(Command::CalibrationActualDistance(
+            CalibrationDistance::new(40_000).unwrap(),
+        ));
+        let CalibrationRun::Computed { at, k, .. } = sup.calibration_run() else {
+            panic!("{:?}", sup.calibration_run());
+        };
+        let k2 = 400.0 / (655.08 * core::f64::consts::PI * 0.20);
+        assert!((k.to_f64() - k2).abs() < 0.0005, "k2 {}", k.to_f64());
+        let v = 3.6 * 16_377.0 / 25.0 * core::f64::consts::PI * 0.20 / 4645.16;
+        assert!((at.to_num::<f64>() - v).abs() < 0.002, "at {at} vs {v}");
     }
 
     #[test]

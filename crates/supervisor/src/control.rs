@@ -1714,11 +1714,13 @@ impl Supervisor {
         // The work switch up: the target ramps to rest (crate::planting).
         let target = self.work_ramp(target, elapsed_us);
 
+        // The link's alarms first: one that latches stops the drum (also
+        // an identification) in this very step.
+        self.link_alarms(encoder_delta, elapsed_us);
         let mut actuation = Actuation::OFF;
         if self.run == RunState::Identifying {
             actuation = self.identify_step(measured, delta, elapsed_us);
         }
-        self.link_alarms(encoder_delta, elapsed_us);
         if self.run == RunState::Running {
             // Fault: drum commanded but not turning (with both feedbacks:
             // neither turning; the encoder alone still is the cross-check's).
@@ -2749,6 +2751,66 @@ mod tests {
         assert!((k.to_f64() - k2).abs() < 0.0005, "k2 {}", k.to_f64());
         let v = 3.6 * 16_377.0 / 25.0 * core::f64::consts::PI * 0.20 / 4645.16;
         assert!((at.to_num::<f64>() - v).abs() < 0.002, "at {at} vs {v}");
+    }
+
+    /// The drive identification (page 9) steps the drum at 25 % and 75 %
+    /// duty; the drum driver's link is lost in the middle of it (or the
+    /// driver reports a fault). The alarm latches and stops the drum
+    /// (module docs: latched alarms mean PWM 0, driver off) — in the same
+    /// control step. Before: the step's identification duty had been
+    /// computed before the link's alarms were checked and was applied with
+    /// the driver enabled for that period, the alarm already up.
+    #[test]
+    #[cfg(feature = "drive-link")]
+    fn a_link_alarm_during_the_identification_switches_the_drum_off_at_once() {
+        use crate::drive_link::{DriveLinkSettings, DriverKind, LinkSample};
+        for fault in [false, true] {
+            let mut drive_link = DriveLinkSettings {
+                kind: DriverKind::Zlac8015d,
+                ..DriveLinkSettings::default()
+            };
+            drive_link.generic.micro_rpm_per_count = 1695;
+            let settings = Settings {
+                drive_link,
+                ..Settings::default()
+            };
+            assert!(settings.drive_link.build().is_ok());
+            let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+            assert_eq!(
+                sup.command(Command::IdentifyDrive),
+                Effect::Message(IDENTIFY_MESSAGE)
+            );
+            let answering = LinkSample {
+                answering: true,
+                ..LinkSample::default()
+            };
+            let mut encoder: u16 = 0;
+            for period in 0..30u32 {
+                sup.set_link_sample(answering);
+                let act = sup.control_step(Ticks(period * 10_000), encoder);
+                assert!(act.driver_enabled && act.ccr > 0, "{act:?}");
+                encoder = encoder.wrapping_add(100);
+            }
+            sup.set_link_sample(if fault {
+                LinkSample {
+                    fault_word: 1,
+                    fault_reads: 1,
+                    ..answering
+                }
+            } else {
+                LinkSample {
+                    lost: true,
+                    ..LinkSample::default()
+                }
+            });
+            let act = sup.control_step(Ticks(300_000), encoder);
+            assert!(
+                sup.alarm().is_some_and(|a| a.is_latched()),
+                "{:?}",
+                sup.alarm()
+            );
+            assert_eq!(act, Actuation::OFF, "fault {fault}");
+        }
     }
 
     #[test]

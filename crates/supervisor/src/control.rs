@@ -1703,8 +1703,10 @@ impl Supervisor {
             }
         };
 
-        // The too-fast warning follows the speed; latched alarms and the
-        // instability warning stay.
+        // The too-fast warning follows the speed (with the unit down: a
+        // lifted unit plants nothing); latched alarms and the instability
+        // warning stay.
+        let too_fast = too_fast.filter(|_| self.unit_down());
         match (self.alarm, too_fast) {
             (Some(a), _) if a.is_latched() || a == Alarm::DrumUnstable => {}
             (_, Some(w)) if self.run == RunState::Running => self.alarm = Some(w),
@@ -2811,6 +2813,48 @@ mod tests {
             );
             assert_eq!(act, Actuation::OFF, "fault {fault}");
         }
+    }
+
+    /// The work switch up (the unit lifted on the headland or between
+    /// rows): the drum ramps to rest and nothing is planted, so no travel
+    /// speed is too fast for the spacing and the *Too fast* warning (page
+    /// 2) stays down; lowered at the same speed, it comes up. Edges every
+    /// 40 ms (2.26 km/h at the gear) against the ≈ 0.81 km/h 7 cm allows.
+    /// Before: the warning stood the whole headland.
+    #[test]
+    #[allow(clippy::arithmetic_side_effects)]
+    fn a_lifted_unit_raises_no_too_fast_warning() {
+        use hmi_proto::screen::Spacing;
+        let settings = Settings {
+            mode: Mode::SpeedAdaptive,
+            spacing: Spacing::new(70).unwrap(),
+            work_switch_fitted: true,
+            ..Settings::default()
+        };
+        let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+        sup.command(Command::Start);
+        let mut encoder: u16 = 0;
+        let mut next_edge = 5_000u32;
+        for period in 0..400u32 {
+            let now = period * 10_000;
+            // Lowered for the last second.
+            sup.set_work_switch(period >= 300);
+            while next_edge <= now {
+                sup.hall_edge(Ticks(next_edge));
+                next_edge += 40_000;
+            }
+            let n = f64::from(sup.snapshot().target_drum_rpm_x1000) / 1000.0;
+            encoder = encoder.wrapping_add((n / 60.0 * 47_200.0 * 0.01).round() as u16);
+            sup.control_step(Ticks(now), encoder);
+            if period == 299 {
+                assert_eq!(sup.alarm(), None);
+            }
+        }
+        assert!(
+            matches!(sup.alarm(), Some(Alarm::TooFast { .. })),
+            "{:?}",
+            sup.alarm()
+        );
     }
 
     #[test]

@@ -327,13 +327,17 @@ impl Linkage {
             ),
         };
         let n2 = self.plan.feeding_motor_speed(v0, j)?;
+        // A step rate beyond `Hertz` (65 536 Hz: a fine micro-step setting
+        // at a sane motor speed) saturates: the caller's step-rate ceiling
+        // clamps it and warns; only motor speeds out of range are errors.
+        let hz = |n, spr| step_frequency(n, spr).unwrap_or(Hertz::MAX);
         let cmd = MotorCommands {
             action,
             computed_for: v0,
             planting_speed: n1,
             feeding_speed: n2,
-            planting_step_hz: step_frequency(n1, s.planting_steps_per_rev)?,
-            feeding_step_hz: step_frequency(n2, s.feeding_steps_per_rev)?,
+            planting_step_hz: hz(n1, s.planting_steps_per_rev),
+            feeding_step_hz: hz(n2, s.feeding_steps_per_rev),
         };
         self.last = Some(cmd);
         self.j0 = j;

@@ -68,6 +68,8 @@
 //! nothing ([`None`]). Otherwise the next edge must come by the time `t` with
 //! `v_e·t − a·t²/2 = s′`, i.e. `t = 2s′ / (v_e + √(v_e² − 2a·s′))`; an edge
 //! later than that is impossible for a moving machine, so the signal is lost.
+//! `T` is the longest of the last three gaps, so that one spurious edge
+//! (which splits a gap in two) is no evidence (docs/kinematics.md).
 //! The gap lengths are the learned tooth shares with a tolerance (pitch
 //! errors of teeth not learned yet, capture jitter) that shortens `s` and
 //! lengthens `s′`. With the chassis limit of 1 g this leaves evidence only
@@ -345,6 +347,7 @@ impl EstimatorSettings {
             edges_total: 0,
             valid_run: 0,
             last_gap: 0,
+            gaps: [0; 3],
             glitch_ref: 0,
             ref_stamp: 0,
             ref_edges: 0,
@@ -542,6 +545,9 @@ pub struct MtEstimator {
     /// Accepted edges since the last restart (saturating).
     valid_run: u32,
     last_gap: u32,
+    /// The last three measured gaps since a restart (ticks, newest first;
+    /// 0: not measured yet), for the Hall silence rule.
+    gaps: [u32; 3],
     /// The period glitches are judged against (µs): the last gap, but grown
     /// by at most 2× an edge.
     glitch_ref: u32,
@@ -753,13 +759,33 @@ impl MtEstimator {
     /// (`a`) and the next gap `s′` (`s_next`), all in Q16 nominal gaps, and
     /// the discriminant `(v_e·T)² − 2·a·T²·s′ ≥ 0`.
     fn silence(&self, bound: &DecelerationBound) -> Option<Silence> {
-        if !self.has_last || self.valid_run < 2 || self.last_gap == 0 {
+        // The longest of the last three gaps: one spurious edge splits a
+        // gap into two short ones, each of which alone reads as a faster
+        // machine whose next tooth is overdue long before it can come; a
+        // longer gap gives a lower bound on the speed at the newest edge
+        // (`s/T − a·T/2` falls with T), so the rule only grows more lenient
+        // (a lost signal is seen at most two teeth later while the machine
+        // accelerates; braking, the newest gap is the longest).
+        if !self.has_last || self.valid_run < 2 || self.gaps.contains(&0) {
             return None;
         }
-        let t = u64::from(self.last_gap);
+        let (back, gap) =
+            self.gaps
+                .iter()
+                .enumerate()
+                .fold((0, 0), |m, (i, &g)| if g > m.1 { (i, g) } else { m });
+        let t = u64::from(gap);
         let tol = u64::from(bound.tolerance_pct);
+        // The gap `back` edges before the newest has tooth index
+        // `tooth − back` (mod z).
+        let tooth = self
+            .tooth
+            .wrapping_add(self.z)
+            .wrapping_sub(back)
+            .checked_rem(self.z)
+            .unwrap_or(0);
         // Gap lengths, Q16 nominal gaps (< 2^17 each).
-        let s_last = u64::from(self.weight(self.tooth))
+        let s_last = u64::from(self.weight(tooth))
             .checked_mul(100_u64.checked_sub(tol)?)?
             .checked_div(100)?;
         let next = self
@@ -810,6 +836,7 @@ impl MtEstimator {
             } else if !self.lost {
                 // (A gap with lost edges in it is not a tooth period.)
                 self.last_gap = dt;
+                self.gaps = [dt, self.gaps[0], self.gaps[1]];
                 // The glitch reference grows by at most 2× an edge: a gap
                 // that spans a short pause must not make the next
                 // full-speed gaps look like glitches.
@@ -861,6 +888,7 @@ impl MtEstimator {
         self.ref_edges = self.edges_total;
         self.ref_valid = true;
         self.valid_run = 1;
+        self.gaps = [0; 3];
         self.weights = [0; MAX_TEETH];
         self.weight_sum = u32::try_from(self.z).unwrap_or(0).saturating_mul(ONE_Q16);
         self.samples = [0; MAX_TEETH];
@@ -870,6 +898,7 @@ impl MtEstimator {
     fn restart(&mut self) {
         self.valid_run = 0;
         self.last_gap = 0;
+        self.gaps = [0; 3];
         self.glitch_ref = 0;
         self.ref_valid = false;
         self.history_len = 0;

@@ -184,6 +184,45 @@ fn a_loss_at_high_3_has_a_deadline_and_a_restart_has_none() {
     assert!((43_000..43_600).contains(&d), "{d}");
 }
 
+/// A Hall sensor that delivers every tooth plus one spurious edge is not
+/// a lost signal: the edge after the spurious one is *early* against the
+/// true motion, never late. The spurious edge splits one gap into two short
+/// ones, and each alone reads as a faster machine whose next tooth is
+/// overdue long before it can come (before: at High 3, a noise pulse
+/// 10 ms after an edge made the real edge 14.7 ms later look due within
+/// 11.6 ms, then the next one after 18 ms: the alarm latched and stopped
+/// the drum). Cases: High 3 (24.72 ms a gap, the only gear with evidence)
+/// with a spurious edge at 30–70 % of a gap (past the ¼-period glitch
+/// rule), and a 1 ms bounce of the first edge after a stop (no glitch
+/// reference yet) at 5 km/h (18 ms a gap). Expected: no edge overdue.
+#[test]
+fn a_single_spurious_edge_is_not_a_lost_signal() {
+    let mut cases: Vec<(Vec<u32>, u32)> = Vec::new();
+    for pct in [30u32, 40, 50, 60, 70] {
+        let mut stamps: Vec<u32> = (0..40u32).map(|k| k * 24_720).collect();
+        let spurious = 39 * 24_720 + 24_720 * pct / 100;
+        stamps.push(spurious);
+        stamps.extend((40..60u32).map(|k| k * 24_720));
+        cases.push((stamps, spurious));
+    }
+    let mut stamps = vec![0u32, 1_000];
+    stamps.extend((1..30u32).map(|k| k * 18_100));
+    cases.push((stamps, 1_000));
+    for (stamps, spurious) in cases {
+        let mut est = EstimatorSettings::default().build().unwrap();
+        for (i, &t) in stamps.iter().enumerate() {
+            est.push_edge(Ticks(t));
+            if let Some(&next) = stamps.get(i + 1) {
+                assert!(
+                    !est.next_edge_overdue(next - t, &bound()),
+                    "spurious edge at {spurious} µs: edge {i} at {t} µs, next {} µs later",
+                    next - t
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn bounds_are_validated() {
     use kinematics::speed::DecelerationBoundError as E;

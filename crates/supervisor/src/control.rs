@@ -959,12 +959,35 @@ impl Supervisor {
         self.snapshot
     }
 
-    /// The highest travel speed the current spacing allows, km/h × 100.
+    /// The highest travel speed the current spacing allows, km/h × 100:
+    /// the plan's (eq. 7 at the paper's `n_max`) scaled to the drum's
+    /// limit in force (a drive identified slower) and divided by the motor
+    /// coefficient (the target is eq. 7 times it).
     pub fn max_travel_kmh_x100(&self) -> u16 {
+        let cal = &self.settings.calibration;
+        let cap = self.drum_cap();
+        let rpm_milli = |n: I16F16| {
+            let m = milli(n);
+            let k3 = cal
+                .k3_at(RevPerMin::from_ratio(m, 1000).unwrap_or(RevPerMin::ZERO))
+                .to_milli();
+            u64::from(m).saturating_mul(u64::from(k3))
+        };
+        // V_max ∝ n·k3(n) (eq. 7 solved for the travel speed).
+        let num = rpm_milli(cap).saturating_mul(100);
+        let den = rpm_milli(rpm_to_fix(consts::N_MAX))
+            .saturating_mul(u64::from(self.settings.motor_coefficient.raw()));
         self.plan
-            .max_travel_speed(&self.settings.calibration)
-            .map(|v| u16::try_from(v.to_milli() / 10).unwrap_or(u16::MAX))
-            .unwrap_or(0)
+            .max_travel_speed(cal)
+            .ok()
+            .and_then(|v| u64::from(v.to_milli()).saturating_mul(num).checked_div(den))
+            .map_or(0, |v| u16::try_from(v / 10).unwrap_or(u16::MAX))
+    }
+
+    /// The drum speed the target is held at: the paper's `n_max`, or a
+    /// drive identified slower its own.
+    fn drum_cap(&self) -> I16F16 {
+        rpm_to_fix(kinematics::consts::N_MAX).min(self.law.n_max)
     }
 
     /// Takes one Hall edge (1 MHz capture ticks, extended to 32 bits).
@@ -1337,10 +1360,11 @@ impl Supervisor {
         }
     }
 
-    /// Duration of `steps` control periods, µs (saturating).
-    fn run_us(&self, steps: u32) -> u32 {
-        u32::try_from(u64::from(steps).saturating_mul(u64::from(self.hw.control_period_us)))
-            .unwrap_or(u32::MAX)
+    /// Duration of `steps` control periods, µs, in `u64`: a calibration
+    /// run of paper A's 400 m at Low 1 lasts 4645 s, beyond the 4295 s of
+    /// a `u32`.
+    fn run_us(&self, steps: u32) -> u64 {
+        u64::from(steps).saturating_mul(u64::from(self.hw.control_period_us))
     }
 
     /// The coefficient of the selected kind from the last run and the taped
@@ -1362,7 +1386,8 @@ impl Supervisor {
                 // k2 = taped / (wheel turns · π·0.20 m), turns = edges / Z1.
                 let turns = U16F16::checked_from_num(edges)
                     .and_then(|e| e.checked_div_int(u32::from(consts::Z1)));
-                let time = kinematics::units::Seconds::from_ratio(us / 1000, 1000);
+                let ms = u32::try_from(us / 1000).unwrap_or(u32::MAX);
+                let time = kinematics::units::Seconds::from_ratio(ms, 1000);
                 let distance = Metres::from_mm(taped_cm.saturating_mul(10));
                 turns.zip(time).and_then(|(turns, time)| {
                     kinematics::calib::k2_from_wheel_turns(turns, distance, time)
@@ -1372,9 +1397,7 @@ impl Supervisor {
             }
             CalibrationKind::SpeedK1 => {
                 // Speeds in m/h (km/h × 1000): µm / µs · 3600.
-                let mph = |um: u64| {
-                    u32::try_from(um.saturating_mul(3_600).checked_div(u64::from(us))?).ok()
-                };
+                let mph = |um: u64| u32::try_from(um.saturating_mul(3_600).checked_div(us)?).ok();
                 let monitored = mph(u64::from(edges).saturating_mul(EDGE_UM));
                 let actual = mph(u64::from(taped_um));
                 monitored.zip(actual).and_then(|(monitored, actual)| {
@@ -1401,12 +1424,13 @@ impl Supervisor {
                 // Mean drum speed: counts · 60 / (counts per turn · s).
                 let rpm_x1000 = drum_counts
                     .saturating_mul(60_000_000_000)
-                    .checked_div(
-                        u64::from(self.hw.encoder_counts_per_drum_rev)
-                            .saturating_mul(u64::from(us)),
-                    )
+                    .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev).saturating_mul(us))
                     .and_then(|v| u32::try_from(v).ok());
-                let belt = kinematics::units::MetresPerSecond::from_ratio(taped_um, us);
+                // µm / µs = m/s, U8F24 bits (taped_um < 2³⁰: no overflow).
+                let belt = (u64::from(taped_um) << 24)
+                    .checked_div(us)
+                    .and_then(|bits| u32::try_from(bits).ok())
+                    .map(kinematics::units::MetresPerSecond::from_bits);
                 rpm_x1000
                     .and_then(|n| RevPerMin::from_ratio(n, 1000))
                     .zip(belt)
@@ -1633,19 +1657,22 @@ impl Supervisor {
             Mode::SpeedAdaptive => {
                 match travel.map(|t| self.plan.target(&t, &self.settings.calibration)) {
                     Some(Ok(target)) => {
-                        if let DrumTarget::Saturated { .. } = target {
-                            too_fast = Some(Alarm::TooFast {
-                                max_kmh_x100: self.max_travel_kmh_x100(),
-                            });
-                        }
-                        let n = rpm_to_fix(target.command().drum_speed)
+                        // Eq. 7 as asked (also beyond the plan's n_max)
+                        // times the motor coefficient, then held at the
+                        // drum's limit: the paper's 44.7 r/min, or a drive
+                        // identified slower its own. (Holding eq. 7 at
+                        // n_max before the coefficient ran the drum slow
+                        // under a coefficient below 1.)
+                        let asked = match target {
+                            DrumTarget::Follow(c) => c.drum_speed,
+                            DrumTarget::Saturated { requested, .. } => requested,
+                        };
+                        let n = rpm_to_fix(asked)
                             .saturating_mul_int(i32::from(self.settings.motor_coefficient.raw()))
                             .checked_div_int(100)
                             .unwrap_or(I16F16::ZERO);
-                        // The plan saturates at the paper's 44.7 r/min; a
-                        // drive identified slower saturates at its own.
-                        let cap = rpm_to_fix(kinematics::consts::N_MAX).min(self.law.n_max);
-                        if n > cap && too_fast.is_none() {
+                        let cap = self.drum_cap();
+                        if n > cap {
                             too_fast = Some(Alarm::TooFast {
                                 max_kmh_x100: self.max_travel_kmh_x100(),
                             });
@@ -1676,8 +1703,10 @@ impl Supervisor {
             }
         };
 
-        // The too-fast warning follows the speed; latched alarms and the
-        // instability warning stay.
+        // The too-fast warning follows the speed (with the unit down: a
+        // lifted unit plants nothing); latched alarms and the instability
+        // warning stay.
+        let too_fast = too_fast.filter(|_| self.unit_down());
         match (self.alarm, too_fast) {
             (Some(a), _) if a.is_latched() || a == Alarm::DrumUnstable => {}
             (_, Some(w)) if self.run == RunState::Running => self.alarm = Some(w),
@@ -1687,11 +1716,13 @@ impl Supervisor {
         // The work switch up: the target ramps to rest (crate::planting).
         let target = self.work_ramp(target, elapsed_us);
 
+        // The link's alarms first: one that latches stops the drum (also
+        // an identification) in this very step.
+        self.link_alarms(encoder_delta, elapsed_us);
         let mut actuation = Actuation::OFF;
         if self.run == RunState::Identifying {
             actuation = self.identify_step(measured, delta, elapsed_us);
         }
-        self.link_alarms(encoder_delta, elapsed_us);
         if self.run == RunState::Running {
             // Fault: drum commanded but not turning (with both feedbacks:
             // neither turning; the encoder alone still is the cross-check's).
@@ -2239,7 +2270,7 @@ impl Supervisor {
                 (u32::try_from(um / 10_000).unwrap_or(u32::MAX), 0)
             }
             CalibrationRun::Computed { k, .. } => {
-                (0, u16::try_from(k.to_milli()).unwrap_or(u16::MAX))
+                (0, u16::try_from(coefficient_milli(k)).unwrap_or(u16::MAX))
             }
             _ => (0, 0),
         };
@@ -2278,6 +2309,18 @@ impl Supervisor {
     }
 }
 
+/// A coefficient in thousandths, rounded to the nearest (the screen's
+/// unit): `Coefficient::to_milli` rounds down, and a value set from a
+/// decimal (0.800 is 0.799 999 999 8 in 2⁻³⁰ steps) read one less.
+fn coefficient_milli(k: kinematics::units::Coefficient) -> u32 {
+    // bits < 2³², × 1000 < 2⁴².
+    let m = (u64::from(k.to_bits())
+        .saturating_mul(1000)
+        .saturating_add(1 << 29))
+        >> 30;
+    u32::try_from(m).unwrap_or(u32::MAX)
+}
+
 /// Track per Hall edge: π·0.20 m / 25 = 25 133 µm.
 const EDGE_UM: u64 = 25_133;
 /// Belt per drum turn: π·(D2 + 2·H2) = π·0.070 m = 219 911 µm.
@@ -2295,7 +2338,7 @@ impl Supervisor {
             CalibrationKind::SlipK2 => &settings.calibration.k2,
             CalibrationKind::BeltK3 => &settings.calibration.k3,
         };
-        let k_x1000 = i32::try_from(table.eval(at).to_milli()).unwrap_or(i32::MAX);
+        let k_x1000 = i32::try_from(coefficient_milli(table.eval(at))).unwrap_or(i32::MAX);
         screen::Settings {
             spacing: settings.spacing,
             fixed_drum_speed: settings.fixed_drum_speed,
@@ -2557,6 +2600,261 @@ mod tests {
         assert_eq!(run(true, -157).0, None);
         assert_eq!(run(false, -1).0, Some(Alarm::DrumStall));
         assert_eq!(run(false, 0).0, Some(Alarm::DrumStall));
+    }
+
+    /// Speed-Adaptive at a constant travel speed (one Hall edge every
+    /// 90 ms: ≈ 26.7 r/min at the gear, ≈ 1 km/h), speed-following
+    /// placement; returns the drum target of the last step (r/min) and the
+    /// alarm.
+    #[allow(clippy::arithmetic_side_effects)]
+    fn adaptive_target(spacing_mm: i32, coefficient: i32) -> (f64, Option<Alarm>) {
+        use hmi_proto::screen::{MotorCoefficient, Spacing};
+        let settings = Settings {
+            mode: Mode::SpeedAdaptive,
+            spacing: Spacing::new(spacing_mm).unwrap(),
+            motor_coefficient: MotorCoefficient::new(coefficient).unwrap(),
+            placement: Placement::SpeedFollowing,
+            ..Settings::default()
+        };
+        let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+        sup.command(Command::Start);
+        let mut encoder: u16 = 0;
+        let mut next_edge = 5_000u32;
+        for period in 0..300u32 {
+            let now = period * 10_000;
+            while next_edge <= now {
+                sup.hall_edge(Ticks(next_edge));
+                next_edge += 90_000;
+            }
+            // The drum follows its target (no stall alarm).
+            let n = f64::from(sup.snapshot().target_drum_rpm_x1000) / 1000.0;
+            encoder = encoder.wrapping_add((n / 60.0 * 47_200.0 * 0.01).round() as u16);
+            sup.control_step(Ticks(now), encoder);
+        }
+        (
+            f64::from(sup.snapshot().target_drum_rpm_x1000) / 1000.0,
+            sup.alarm(),
+        )
+    }
+
+    /// docs/firmware.md, control step 3: the target is eq. 7 *times the
+    /// motor coefficient*, held at `n_max` (with the warning) only when that
+    /// product exceeds it. Eq. 7 is inversely proportional to the spacing,
+    /// so eq. 7 at 7 cm is twice eq. 7 at 14 cm (k3 is flat at 0.980 above
+    /// 25 r/min, Table 13 clamped): at ≈ 26 r/min for 14 cm, eq. 7 at 7 cm
+    /// asks ≈ 52 r/min, beyond 44.7; with a coefficient of 0.80 the drum
+    /// must run at 0.80 × 52 ≈ 41.6 r/min, within `n_max`, without a
+    /// warning. Before: eq. 7 was held at 44.7 first, then × 0.80 = 35.76
+    /// r/min (14 % slow: plants 16 % too far apart) under a *Too fast*
+    /// warning.
+    #[test]
+    fn the_motor_coefficient_applies_before_the_n_max_limit() {
+        let (n14, alarm) = adaptive_target(140, 100);
+        assert_eq!(alarm, None);
+        assert!(n14 > 25.0 && n14 < 27.0, "{n14}");
+        let (n7, alarm) = adaptive_target(70, 80);
+        let expected = 0.8 * 2.0 * n14;
+        assert!((n7 - expected).abs() < 0.02, "{n7} vs {expected}");
+        assert_eq!(alarm, None);
+        // A coefficient of 1.20 at 14 cm (≈ 31 r/min) still follows …
+        let (n, alarm) = adaptive_target(140, 120);
+        assert!((n - 1.2 * n14).abs() < 0.02, "{n}");
+        assert_eq!(alarm, None);
+        // … and at 7 cm (≈ 62 r/min) is held at n_max with the warning.
+        let (n, alarm) = adaptive_target(70, 120);
+        assert!((n - 44.7).abs() < 0.01, "{n}");
+        // The maximum shown is the speed at which 1.20 × eq. 7 reaches
+        // 44.7 r/min: V = k3·n_max·π·0.070 m/60 · X/Lclap / 1.20 =
+        // 0.980 · 44.7 · 0.219 911 / 60 · 1.4 / 1.2 = 0.1873 m/s =
+        // 0.674 km/h (hand-computed; Table 13's k3 clamped at 0.980).
+        assert!(
+            matches!(
+                alarm,
+                Some(Alarm::TooFast {
+                    max_kmh_x100: 66..=68
+                })
+            ),
+            "{alarm:?}"
+        );
+    }
+
+    /// A coefficient typed on page 4 is shown back as typed, over the
+    /// whole range the screen accepts (0.800–1.200, docs/hmi.md), for each
+    /// table. Before: `Coefficient` holds 0.800 as 0.799 999 99… (2⁻³⁰
+    /// steps) and the screen value was its thousandths rounded *down*:
+    /// 1.200 showed 1.199, 0.980 showed 0.979, and 0.800 read 799, outside
+    /// the screen's range, so the screen showed the default 1.000.
+    #[test]
+    fn a_coefficient_set_on_the_screen_is_shown_as_set() {
+        use hmi_proto::screen::CalibrationCoefficient;
+        let mut sup = Supervisor::new(Hardware::BOARD, Settings::default()).unwrap();
+        for kind in [
+            CalibrationKind::SpeedK1,
+            CalibrationKind::SlipK2,
+            CalibrationKind::BeltK3,
+        ] {
+            sup.command(Command::SelectCalibration(kind));
+            for v in [800, 801, 980, 993, 1000, 1031, 1199, 1200] {
+                let k = CalibrationCoefficient::new(v).unwrap();
+                assert_eq!(
+                    sup.command(Command::SetCalibrationCoefficient(k)),
+                    Effect::SettingsChanged
+                );
+                assert_eq!(
+                    sup.screen_settings().calibration_coefficient.raw(),
+                    v as u16,
+                    "{kind:?}"
+                );
+            }
+        }
+    }
+
+    /// Paper A's own k2 procedure (Table 12, SPEC §4) at Low 1: 400 m
+    /// taped, 655.08 wheel turns (16 377 Hall edges) in 4645.16 s — longer
+    /// than the 4295 s a `u32` of µs holds. Expected (Table 12, by hand):
+    /// k2 = 400 / (655.08 · π · 0.20) = 0.9719, at the wheel speed
+    /// 3.6 · 411.61 / 4645.16 = 0.3190 km/h (`PAPER_K2`'s abscissa). Before,
+    /// the run's duration saturated at 4295 s: the point went in at
+    /// 0.345 km/h, 8 % off. The k1 and k3 runs shared the duration.
+    #[test]
+    #[allow(clippy::arithmetic_side_effects)]
+    fn a_calibration_run_longer_than_71_minutes_keeps_its_duration() {
+        use hmi_proto::screen::CalibrationDistance;
+        let mut sup = Supervisor::new(Hardware::BOARD, Settings::default()).unwrap();
+        sup.command(Command::SelectCalibration(CalibrationKind::SlipK2));
+        let steps = 464_516u32; // 4645.16 s of 10 ms periods
+        let gap = 4_645_160_000u64 / 16_377; // µs per Hall edge
+        let mut next_edge = 0u64;
+        sup.control_step(Ticks(0), 0);
+        sup.command(Command::CalibrationStart);
+        for period in 1..=steps {
+            let now = u64::from(period) * 10_000;
+            while next_edge + gap <= now {
+                next_edge += gap;
+                sup.hall_edge(Ticks(next_edge as u32));
+            }
+            sup.control_step(Ticks(now as u32), 0);
+        }
+        sup.command(Command::CalibrationStop);
+        let CalibrationRun::Measured {
+            edges, steps: s, ..
+        } = sup.calibration_run()
+        else {
+            panic!("{:?}", sup.calibration_run());
+        };
+        assert_eq!((edges, s), (16_377, steps));
+        sup.command(Command::CalibrationActualDistance(
+            CalibrationDistance::new(40_000).unwrap(),
+        ));
+        let CalibrationRun::Computed { at, k, .. } = sup.calibration_run() else {
+            panic!("{:?}", sup.calibration_run());
+        };
+        let k2 = 400.0 / (655.08 * core::f64::consts::PI * 0.20);
+        assert!((k.to_f64() - k2).abs() < 0.0005, "k2 {}", k.to_f64());
+        let v = 3.6 * 16_377.0 / 25.0 * core::f64::consts::PI * 0.20 / 4645.16;
+        assert!((at.to_num::<f64>() - v).abs() < 0.002, "at {at} vs {v}");
+    }
+
+    /// The drive identification (page 9) steps the drum at 25 % and 75 %
+    /// duty; the drum driver's link is lost in the middle of it (or the
+    /// driver reports a fault). The alarm latches and stops the drum
+    /// (module docs: latched alarms mean PWM 0, driver off) — in the same
+    /// control step. Before: the step's identification duty had been
+    /// computed before the link's alarms were checked and was applied with
+    /// the driver enabled for that period, the alarm already up.
+    #[test]
+    #[cfg(feature = "drive-link")]
+    fn a_link_alarm_during_the_identification_switches_the_drum_off_at_once() {
+        use crate::drive_link::{DriveLinkSettings, DriverKind, LinkSample};
+        for fault in [false, true] {
+            let mut drive_link = DriveLinkSettings {
+                kind: DriverKind::Zlac8015d,
+                ..DriveLinkSettings::default()
+            };
+            drive_link.generic.micro_rpm_per_count = 1695;
+            let settings = Settings {
+                drive_link,
+                ..Settings::default()
+            };
+            assert!(settings.drive_link.build().is_ok());
+            let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+            assert_eq!(
+                sup.command(Command::IdentifyDrive),
+                Effect::Message(IDENTIFY_MESSAGE)
+            );
+            let answering = LinkSample {
+                answering: true,
+                ..LinkSample::default()
+            };
+            let mut encoder: u16 = 0;
+            for period in 0..30u32 {
+                sup.set_link_sample(answering);
+                let act = sup.control_step(Ticks(period * 10_000), encoder);
+                assert!(act.driver_enabled && act.ccr > 0, "{act:?}");
+                encoder = encoder.wrapping_add(100);
+            }
+            sup.set_link_sample(if fault {
+                LinkSample {
+                    fault_word: 1,
+                    fault_reads: 1,
+                    ..answering
+                }
+            } else {
+                LinkSample {
+                    lost: true,
+                    ..LinkSample::default()
+                }
+            });
+            let act = sup.control_step(Ticks(300_000), encoder);
+            assert!(
+                sup.alarm().is_some_and(|a| a.is_latched()),
+                "{:?}",
+                sup.alarm()
+            );
+            assert_eq!(act, Actuation::OFF, "fault {fault}");
+        }
+    }
+
+    /// The work switch up (the unit lifted on the headland or between
+    /// rows): the drum ramps to rest and nothing is planted, so no travel
+    /// speed is too fast for the spacing and the *Too fast* warning (page
+    /// 2) stays down; lowered at the same speed, it comes up. Edges every
+    /// 40 ms (2.26 km/h at the gear) against the ≈ 0.81 km/h 7 cm allows.
+    /// Before: the warning stood the whole headland.
+    #[test]
+    #[allow(clippy::arithmetic_side_effects)]
+    fn a_lifted_unit_raises_no_too_fast_warning() {
+        use hmi_proto::screen::Spacing;
+        let settings = Settings {
+            mode: Mode::SpeedAdaptive,
+            spacing: Spacing::new(70).unwrap(),
+            work_switch_fitted: true,
+            ..Settings::default()
+        };
+        let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
+        sup.command(Command::Start);
+        let mut encoder: u16 = 0;
+        let mut next_edge = 5_000u32;
+        for period in 0..400u32 {
+            let now = period * 10_000;
+            // Lowered for the last second.
+            sup.set_work_switch(period >= 300);
+            while next_edge <= now {
+                sup.hall_edge(Ticks(next_edge));
+                next_edge += 40_000;
+            }
+            let n = f64::from(sup.snapshot().target_drum_rpm_x1000) / 1000.0;
+            encoder = encoder.wrapping_add((n / 60.0 * 47_200.0 * 0.01).round() as u16);
+            sup.control_step(Ticks(now), encoder);
+            if period == 299 {
+                assert_eq!(sup.alarm(), None);
+            }
+        }
+        assert!(
+            matches!(sup.alarm(), Some(Alarm::TooFast { .. })),
+            "{:?}",
+            sup.alarm()
+        );
     }
 
     #[test]

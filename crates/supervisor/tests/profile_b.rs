@@ -423,6 +423,39 @@ fn absurd_speeds_stop_the_motors_and_clamped_rates_warn() {
     assert_eq!(p.snapshot().feed_step_hz, Hertz::lit("1000"));
 }
 
+/// A fine micro-step setting (51 200 steps/rev, in range) at a normal
+/// travel speed: 16 counts per period is π/6 = 0.524 m/s (1.9 km/h), where
+/// n2 = 60 · (0.524 · 0.10) / (2π · 0.25 · 0.025) = 80 r/min (hand-computed,
+/// as `n1_and_n2_by_hand`'s 60 r/min at 12 counts × 16/12), i.e. 68 267
+/// step/s: beyond the 20 kHz the board makes, and beyond the 65 536 Hz a
+/// `Hertz` holds. The motor speeds are sane (80 and 20.9 r/min), so this is
+/// the step-rate ceiling's case (module docs: clamped at `max_step_hz`,
+/// `TooFast`), not a broken encoder's. Before: the step rate's overflow
+/// read as `OutOfRange` and stopped both motors while the tractor drove on.
+#[test]
+fn a_step_rate_beyond_the_hertz_range_is_clamped_not_a_stop() {
+    let cfg = ProfileBConfig::new(ProfileBSettings {
+        feeding_steps_per_rev: 51_200,
+        ..ProfileBSettings::default()
+    })
+    .unwrap();
+    let mut p = BeltPlanter::new(cfg, HW).unwrap();
+    p.start();
+    let mut c = 0;
+    // 20 kHz at 40 Hz a period: 500 periods of ramp.
+    drive(&mut p, &mut c, 600, 16, 0);
+    let s = *p.snapshot();
+    assert_eq!(s.alarm, Some(PlanterAlarm::TooFast));
+    assert_eq!(s.feed_step_hz, HW.max_step_hz);
+    // n1 = 5π · 16/12 r/min at 1600 steps/rev = 558.5 Hz: still planting.
+    let n1_hz = 5.0 * std::f64::consts::PI * 16.0 / 12.0 * 1600.0 / 60.0;
+    assert!(
+        (s.plant_step_hz.to_f64() - n1_hz).abs() < 0.1,
+        "{}",
+        s.plant_step_hz
+    );
+}
+
 #[test]
 fn settings_are_validated_round_trip_and_change_only_when_stopped() {
     let d = ProfileBSettings::default();

@@ -7,7 +7,7 @@
 )]
 
 use hmi_proto::hmi::{
-    Event, Hmi, GET_TIMEOUT_MS, HANDSHAKE_RETRY_MS, HEARTBEAT_MS, LINK_TIMEOUT_MS,
+    Event, Hmi, EVENT_QUEUE, GET_TIMEOUT_MS, HANDSHAKE_RETRY_MS, HEARTBEAT_MS, LINK_TIMEOUT_MS,
 };
 use hmi_proto::screen::*;
 use hmi_proto::virtual_screen::VirtualScreen;
@@ -341,6 +341,55 @@ fn pitfall_screen_errors_are_typed_events() {
         hmi.poll_event(),
         Some(Event::ScreenError(ErrorCode::BufferOverflow))
     );
+}
+
+/// The firmware pushes every byte it has received (up to its 64-byte receive
+/// queue) before it polls the events. A screen file with wrong component
+/// names answers `0x1A` (4 bytes) to every status write; the Stop pressed
+/// in the same burst must still reach the machine, and so must a command.
+/// Expected: `Command::Stop` among the events (docs/hmi.md §3: Stop is
+/// "reported at once", "whatever the link state"); measured before the fix:
+/// the eight errors filled `EVENT_QUEUE` (8) and the Stop was dropped.
+#[test]
+fn a_burst_of_screen_errors_never_costs_a_stop_or_a_command() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    let error = [0x1A, 0xFF, 0xFF, 0xFF];
+    for _ in 0..EVENT_QUEUE {
+        hmi.push_slice(&error);
+    }
+    hmi.push_slice(&[0x65, 0x03, 0x07, 0x01, 0xFF, 0xFF, 0xFF]); // bstop press
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert!(ev.contains(&cmd(Command::Stop)), "{ev:?}");
+    // A command behind a full queue of errors arrives too (gear up, id 4).
+    for _ in 0..EVENT_QUEUE {
+        hmi.push_slice(&error);
+    }
+    hmi.push_slice(&[0x65, 0x03, 0x04, 0x00, 0xFF, 0xFF, 0xFF]);
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert_eq!(
+        ev.last(),
+        Some(&cmd(Command::SelectGear(Gear::Low2))),
+        "{ev:?}"
+    );
+    // A queue full of Starts (nine releases in 63 bytes) then Stop: the last
+    // word is Stop.
+    for _ in 0..EVENT_QUEUE {
+        hmi.push_slice(&[0x65, 0x03, 0x06, 0x00, 0xFF, 0xFF, 0xFF]);
+    }
+    hmi.push_slice(&[0x65, 0x03, 0x07, 0x00, 0xFF, 0xFF, 0xFF]);
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert_eq!(ev.last(), Some(&cmd(Command::Stop)), "{ev:?}");
 }
 
 #[test]

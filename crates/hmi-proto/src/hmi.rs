@@ -188,6 +188,10 @@ pub struct Hmi {
     rx_since_tick: bool,
     /// The last tick that followed received bytes.
     last_rx_ms: u32,
+    /// A startup frame came since the screen was last set up: a `0x66`
+    /// answer naming page 0 then means the screen restarted (its `0x88`
+    /// was lost).
+    restart_seen: bool,
 }
 
 impl Hmi {
@@ -212,6 +216,7 @@ impl Hmi {
             stats: HmiStats::default(),
             rx_since_tick: false,
             last_rx_ms: 0,
+            restart_seen: false,
         }
     }
 
@@ -516,6 +521,7 @@ impl Hmi {
         };
         self.pending = None;
         self.touches.clear();
+        self.restart_seen = false;
         let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
         let _ = self.send(&Instruction::Dims(self.settings.brightness.raw()));
         let _ = self.show_page(self.home_page());
@@ -533,25 +539,28 @@ impl Hmi {
         match frame {
             Frame::CurrentPage(p) => match self.link {
                 Link::Connecting { .. } => self.connect(),
-                Link::Connected { .. } => {
+                Link::Connected { .. } => match Page::from_id(p) {
                     // The screen shows page 0 `boot` only at power-on, before
-                    // the handshake (a restart announces itself with the
-                    // startup frame first): a reply naming it now is a late
-                    // answer to a handshake `sendme` (the screen booted and
-                    // sent `0x88` before answering it) and would hide the
-                    // home page's live status; ignore it.
-                    if let Some(page) = Page::from_id(p).filter(|&pg| pg != Page::Boot) {
+                    // the handshake: a reply naming it now is a late answer
+                    // to a handshake `sendme` (the screen booted and sent
+                    // `0x88` before answering it) and would hide the home
+                    // page's live status; ignore it — unless a startup
+                    // frame came first: the screen restarted and its `0x88`
+                    // was lost.
+                    Some(Page::Boot) if self.restart_seen => self.connect(),
+                    Some(Page::Boot) | None => {}
+                    Some(page) => {
                         self.page = page;
+                        self.restart_seen = false;
                     }
-                }
+                },
             },
-            // The screen restarted: its `0x88` follows; wait for it (or retry).
-            Frame::Startup => {
-                self.link = Link::Connecting {
-                    last_try_ms: Some(self.now_ms),
-                };
-                self.page = Page::Boot;
-            }
+            // A restart announces itself with this frame, then `0x88`
+            // (which sets the screen up). Alone it changes nothing: a `get`
+            // reply whose header byte is hit decodes as one (`71 B4 00 00
+            // 00 FF FF FF` without its header is `00 00 00 FF FF FF`), and
+            // dropping the link for it threw the operator off the run page.
+            Frame::Startup => self.restart_seen = true,
             Frame::Ready => self.connect(),
             // Stop counts on press and on release, connected or not (a
             // corrupted frame may have looked like a screen restart): the

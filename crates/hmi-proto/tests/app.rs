@@ -82,6 +82,59 @@ fn handshake_when_screen_boots_first_or_later() {
     assert_eq!(screen.page(), Page::Mode.id());
 }
 
+/// A `get` reply below 65 536 ends `00 00 FF FF FF`; with its header byte
+/// hit (one bit: `0x71` → `0x73`) the decoder finds the screen's startup
+/// frame `00 00 00 FF FF FF` in it. That is no restart: the screen still
+/// shows the run page. Expected (docs/hmi.md §2: only a restart, startup
+/// then `0x88`, sets the screen up again): the screen stays on page 3 with
+/// its Stop and the link stays up. Measured before the fix: the link was
+/// dropped, and 500 ms later the handshake showed the home page 1 (no Stop
+/// button on it) with `Event::Connected`.
+#[test]
+fn a_reply_hit_in_its_header_is_no_screen_restart() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    hmi.tick(100);
+    screen.set_value("nspacing", 180).unwrap();
+    screen.release("bapply").unwrap();
+    hmi.push_slice(&screen.take_output());
+    let mut tx = [0u8; 512];
+    let n = hmi.poll_transmit(&mut tx);
+    screen.feed(&tx[..n]);
+    let mut reply = screen.take_output();
+    assert_eq!(reply, [0x71, 180, 0, 0, 0, 0xFF, 0xFF, 0xFF]);
+    reply[0] = 0x73;
+    hmi.push_slice(&reply);
+    let mut ev = pump(&mut hmi, &mut screen);
+    for t in (110..=2000).step_by(10) {
+        hmi.tick(t);
+        ev.extend(pump(&mut hmi, &mut screen));
+    }
+    assert!(!ev.contains(&Event::Connected), "{ev:?}");
+    assert!(hmi.is_connected());
+    assert_eq!(screen.page(), Page::Adaptive.id());
+    assert_eq!(hmi.page(), Page::Adaptive);
+    // Touches work at once (Start, then Apply with the value again).
+    screen.release("bstart").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
+
+    // A real restart whose `0x88` is lost: the heartbeat's answer naming
+    // page 0 sets the screen up.
+    screen.boot();
+    let mut out = screen.take_output();
+    assert_eq!(out.split_off(6), [0x88, 0xFF, 0xFF, 0xFF]);
+    hmi.tick(2010);
+    hmi.push_slice(&out);
+    let mut ev = Vec::new();
+    for t in (2020..=4000).step_by(10) {
+        hmi.tick(t);
+        ev.extend(pump(&mut hmi, &mut screen));
+    }
+    assert_eq!(ev, vec![Event::Connected]);
+    assert_eq!(screen.page(), Page::Mode.id());
+}
+
 #[test]
 fn operator_sets_spacing_and_starts() {
     let (mut hmi, mut screen) = connected();

@@ -90,6 +90,11 @@ pub const LINK_TIMEOUT_MS: u32 = 2_500;
 /// so the next byte is read as a header whatever came before it.
 pub const RX_GAP_MS: u32 = 10;
 
+/// Shown in the page's `tmsg` when the screen did not answer the `get` of
+/// an *Apply* within [`GET_TIMEOUT_MS`] (the field is set back to the value
+/// in force).
+pub const REPLY_LOST_MESSAGE: &str = "No answer from screen: Apply again";
+
 /// What the application layer reports to the firmware.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -332,6 +337,16 @@ impl Hmi {
             if now_ms.wrapping_sub(p.since_ms) >= GET_TIMEOUT_MS {
                 self.pending = None;
                 self.stats.timeouts = self.stats.timeouts.wrapping_add(1);
+                // Nothing changed: the field must not keep showing the
+                // value typed as if it were in force, and the operator is
+                // told to apply it again.
+                let _ = self.show_message(REPLY_LOST_MESSAGE);
+                if let Some(input) = Component::input(self.page, p.field) {
+                    let _ = self.send(&Instruction::SetValue(
+                        input.obj(),
+                        p.field.current(&self.settings),
+                    ));
+                }
                 self.event(Event::ReplyTimeout(p.field));
                 self.drain_touches();
             }

@@ -135,6 +135,37 @@ fn a_reply_hit_in_its_header_is_no_screen_restart() {
     assert_eq!(screen.page(), Page::Mode.id());
 }
 
+/// The screen's answer to an *Apply*'s `get` is lost on the line (a hit
+/// byte drops the frame). Nothing changed, so the field must show the value
+/// in force again and the page say so, as for a value out of range
+/// (docs/hmi.md §3: "the field is set back to the value in force, and
+/// nothing changes"); 70 mm is the default spacing (docs/hmi.md §4).
+/// Measured before the fix: the field kept the 180 typed, `tmsg` stayed
+/// empty, and the machine kept planting at 70 mm — the screen showed a
+/// spacing not in force.
+#[test]
+fn a_lost_reply_puts_the_value_in_force_back_and_says_so() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    hmi.tick(100);
+    screen.set_value("nspacing", 180).unwrap();
+    screen.release("bapply").unwrap();
+    hmi.push_slice(&screen.take_output());
+    let mut tx = [0u8; 512];
+    let n = hmi.poll_transmit(&mut tx);
+    assert_eq!(&tx[..n], b"get nspacing.val\xff\xff\xff"); // never answered
+    hmi.tick(100 + GET_TIMEOUT_MS);
+    let ev = pump(&mut hmi, &mut screen);
+    assert_eq!(ev, vec![Event::ReplyTimeout(Field::Spacing)]);
+    assert_eq!(screen.value("nspacing"), Some(70));
+    assert_eq!(
+        screen.text("tmsg"),
+        Some(hmi_proto::hmi::REPLY_LOST_MESSAGE)
+    );
+    assert_eq!(hmi.settings().spacing, Spacing::DEFAULT);
+}
+
 #[test]
 fn operator_sets_spacing_and_starts() {
     let (mut hmi, mut screen) = connected();

@@ -1048,6 +1048,40 @@ fn docs_list_every_component() {
     }
 }
 
+/// A Stop survives one lost or corrupted frame only if the screen sends it
+/// on press *and* on release (docs/hmi.md §3); a builder follows the page
+/// tables, so every Stop row must say so, and §3 must name the pages that
+/// have one. Measured before the fix: page 9's `bstop` row said "Release:
+/// Send ID" only, and §3 named pages 4, 7 and 2 (page 4 has no Stop; 3 and
+/// 9 were missing).
+#[test]
+fn docs_ask_for_press_and_release_on_every_stop() {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/hmi.md"))
+        .expect("docs/hmi.md");
+    let mut stop_pages = Vec::new();
+    for c in COMPONENTS
+        .iter()
+        .filter(|c| c.role == Role::Action(Action::Stop))
+    {
+        let heading = format!("### Page {} `{}`", c.page.id(), c.page.name());
+        let section = doc.split(&heading).nth(1).expect("page section");
+        let section = section.split("### Page").next().unwrap();
+        let row_start = format!("| {} | `{}` |", c.id(), c.name());
+        let row = section
+            .lines()
+            .find(|l| l.starts_with(&row_start))
+            .expect("Stop row");
+        assert!(row.contains("Press **and** Release"), "{:?}: {row}", c.page);
+        stop_pages.push(c.page.id());
+    }
+    stop_pages.sort_unstable();
+    assert_eq!(stop_pages, [2, 3, 7, 9]);
+    assert!(
+        doc.contains("(`bstop` on pages 2, 3 and 9 of profile A and page 7 of profile B)"),
+        "§3 names the Stop pages"
+    );
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
     /// The same session gives the same events however both directions are chunked.

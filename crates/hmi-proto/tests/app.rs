@@ -865,7 +865,7 @@ fn belt_cases() -> Vec<BeltCase> {
             valid: 30,
             invalid: -1,
             command: Command::SetSpeedThreshold(SpeedThreshold::new(30).unwrap()),
-            message: "Threshold Y must be 0.001-0.500 m/s",
+            message: "Threshold Y must be 0.001-0.200 m/s",
         },
     ]
 }
@@ -947,7 +947,7 @@ fn belt_validation_ranges_match_the_contract() {
     assert!(BeltThickness::new(0).is_err() && BeltThickness::new(1).is_ok());
     assert!(BeltThickness::new(1000).is_ok() && BeltThickness::new(1001).is_err());
     assert!(SpeedThreshold::new(0).is_err() && SpeedThreshold::new(1).is_ok());
-    assert!(SpeedThreshold::new(500).is_ok() && SpeedThreshold::new(501).is_err());
+    assert!(SpeedThreshold::new(200).is_ok() && SpeedThreshold::new(201).is_err());
     assert!(ClampCount::new(i32::MAX).is_err() && ClampAngle::new(i32::MIN).is_err());
 }
 

@@ -2295,7 +2295,18 @@ impl Supervisor {
             CalibrationKind::SlipK2 => &settings.calibration.k2,
             CalibrationKind::BeltK3 => &settings.calibration.k3,
         };
-        let k_x1000 = i32::try_from(table.eval(at).to_milli()).unwrap_or(i32::MAX);
+        // To the nearest thousandth: a coefficient typed as 0.801 is held
+        // just below it (`from_ratio` rounds down), and `to_milli`, which
+        // rounds down too, showed 0.800 (0.800 itself: 0.799, out of range,
+        // shown as the default 1.000).
+        let k = u64::from(table.eval(at).to_bits());
+        let frac = fixed::types::U2F30::FRAC_NBITS;
+        let k_x1000 = k
+            .saturating_mul(1000)
+            .saturating_add(1u64.checked_shl(frac.saturating_sub(1)).unwrap_or(0))
+            .checked_shr(frac)
+            .and_then(|v| i32::try_from(v).ok())
+            .unwrap_or(i32::MAX);
         screen::Settings {
             spacing: settings.spacing,
             fixed_drum_speed: settings.fixed_drum_speed,
@@ -2652,5 +2663,37 @@ mod tests {
             prop_assert_eq!(sup.snapshot().target_drum_rpm_x1000, u32::from(raw) * 10);
             prop_assert_eq!(sup.screen_status().target_drum_rpm_x100, raw);
         }
+    }
+
+    /// Page 4: a coefficient typed by hand (0.800–1.200, docs/hmi.md §4)
+    /// and taken is shown back as typed, for each kind. Measured before the
+    /// fix: 0.800 was taken and the screen then showed 1.000 (0.8 in U2F30
+    /// is 1 bit below 0.8, `to_milli` rounds down to 799, out of range,
+    /// and the screen got the default), and 0.801 showed 0.800.
+    #[test]
+    fn every_hand_set_coefficient_is_shown_as_typed() {
+        let mut wrong = std::vec::Vec::new();
+        for kind in [
+            CalibrationKind::SpeedK1,
+            CalibrationKind::SlipK2,
+            CalibrationKind::BeltK3,
+        ] {
+            for raw in 800..=1200 {
+                let mut sup = Supervisor::new(Hardware::BOARD, Settings::default()).unwrap();
+                sup.command(Command::SelectCalibration(kind));
+                let k = screen::CalibrationCoefficient::new(raw).unwrap();
+                let effect = sup.command(Command::SetCalibrationCoefficient(k));
+                let shown = sup.screen_settings().calibration_coefficient.raw();
+                if effect != Effect::SettingsChanged || i32::from(shown) != raw {
+                    wrong.push((kind, raw, effect, shown));
+                }
+            }
+        }
+        assert!(
+            wrong.is_empty(),
+            "{} wrong, e.g. {:?}",
+            wrong.len(),
+            &wrong[..wrong.len().min(4)]
+        );
     }
 }

@@ -149,6 +149,9 @@ pub struct HmiStats {
     pub link_losses: u32,
     /// Partial frames forgotten after a quiet line ([`RX_GAP_MS`]).
     pub gap_resyncs: u32,
+    /// Releases of another component while a Stop was held: the Stop's
+    /// release hit on the line, ignored.
+    pub mismatched_releases: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -197,6 +200,8 @@ pub struct Hmi {
     /// answer naming page 0 then means the screen restarted (its `0x88`
     /// was lost).
     restart_seen: bool,
+    /// The last touch frame was a Stop press: its release comes next.
+    stop_held: bool,
 }
 
 impl Hmi {
@@ -222,6 +227,7 @@ impl Hmi {
             rx_since_tick: false,
             last_rx_ms: 0,
             restart_seen: false,
+            stop_held: false,
         }
     }
 
@@ -525,6 +531,7 @@ impl Hmi {
         self.pending = None;
         self.touches.clear();
         self.tx.clear();
+        self.stop_held = false;
         self.stats.link_losses = self.stats.link_losses.wrapping_add(1);
         self.event(Event::Disconnected);
     }
@@ -537,6 +544,7 @@ impl Hmi {
         self.pending = None;
         self.touches.clear();
         self.restart_seen = false;
+        self.stop_held = false;
         let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
         let _ = self.send(&Instruction::Dims(self.settings.brightness.raw()));
         let _ = self.show_page(self.home_page());
@@ -582,17 +590,32 @@ impl Hmi {
             // screen file sends its ID on both, so one lost frame never
             // loses a Stop (docs/hmi.md).
             Frame::Touch {
-                page, component, ..
+                page,
+                component,
+                event,
             } if Component::lookup(page, component)
                 .is_some_and(|c| matches!(c.role, Role::Action(Action::Stop))) =>
             {
+                self.stop_held = event == TouchEvent::Press;
                 self.event(Event::Command(Command::Stop));
             }
+            // A single-touch screen sends no other component's release
+            // between a press and its release: after a Stop press, a
+            // release naming another component is the Stop's release hit
+            // on the line (page 3: `bstop` 7 and `bstart` 6 are one bit
+            // apart), never a touch of it. Ignored; if the Stop's release
+            // was lost instead, the operator's next touch is ignored once.
             Frame::Touch {
                 page,
                 component,
                 event: TouchEvent::Release,
-            } if self.is_connected() => self.on_touch(page, component),
+            } => {
+                if core::mem::take(&mut self.stop_held) {
+                    self.stats.mismatched_releases = self.stats.mismatched_releases.wrapping_add(1);
+                } else if self.is_connected() {
+                    self.on_touch(page, component);
+                }
+            }
             Frame::Number(v) => match self.pending.take() {
                 Some(p) => {
                     self.on_value(p.field, v);

@@ -444,6 +444,7 @@ fn a_burst_of_screen_errors_never_costs_a_stop_or_a_command() {
         hmi.push_slice(&error);
     }
     hmi.push_slice(&[0x65, 0x03, 0x07, 0x01, 0xFF, 0xFF, 0xFF]); // bstop press
+    hmi.push_slice(&[0x65, 0x03, 0x07, 0x00, 0xFF, 0xFF, 0xFF]); // and release
     let mut ev = Vec::new();
     while let Some(e) = hmi.poll_event() {
         ev.push(e);
@@ -474,6 +475,41 @@ fn a_burst_of_screen_errors_never_costs_a_stop_or_a_command() {
         ev.push(e);
     }
     assert_eq!(ev.last(), Some(&cmd(Command::Stop)), "{ev:?}");
+}
+
+/// On page 3 `bstart` is id 6 and `bstop` id 7: one bit apart. The screen
+/// sends Stop on press and on release (docs/hmi.md §3); if the release
+/// `65 03 07 00` has its id bit 0 hit on the line it reads `65 03 06 00`,
+/// a Start release. A single-touch screen sends no other component's
+/// release between a press and its release, so that frame is the Stop's
+/// release: expected, the machine stays stopped. Measured before the fix:
+/// `[Stop, Start]` — the drum restarted as the operator lifted the finger
+/// from Stop.
+#[test]
+fn a_stop_release_hit_into_a_start_does_not_restart() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bstart").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
+    hmi.push_slice(&[0x65, 0x03, 0x07, 0x01, 0xFF, 0xFF, 0xFF]); // Stop press
+    hmi.push_slice(&[0x65, 0x03, 0x06, 0x00, 0xFF, 0xFF, 0xFF]); // its release, hit
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert_eq!(ev, vec![cmd(Command::Stop)]);
+    // The operator's next Start is a Start.
+    screen.release("bstart").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
+    // A Stop pressed and released normally, then Start: both count.
+    screen.press("bstop").unwrap();
+    screen.release("bstop").unwrap();
+    screen.release("bstart").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::Stop), cmd(Command::Stop), cmd(Command::Start)]
+    );
 }
 
 #[test]

@@ -124,6 +124,10 @@ fn belt_error_text(e: BeltError) -> &'static str {
 /// motors running (both machines).
 pub const PLACEMENT_WHILE_RUNNING: &str = "Stop first to change the placement";
 
+/// The screen's message when profile B gets a command of profile A's drum
+/// (page 9's *Identify* and *Save*, page 10's link settings).
+pub const DRUM_MACHINE_ONLY: &str = "Drum machine (profile A) only";
+
 /// Profile B with its settings: the [`BeltPlanter`] plus what the screen and
 /// the settings store need.
 pub struct BeltMachine {
@@ -228,8 +232,10 @@ impl BeltMachine {
                     Err(_) => Effect::Message("Parameters rejected"),
                 },
                 Some(Err(e)) => Effect::Message(belt_error_text(e)),
-                // A profile A command: not for this machine.
-                None => Effect::None,
+                // A profile A command: not for this machine. Pages 9 and 10
+                // (the drum drive) are reached from page 6 on this machine
+                // too: *Identify* and a link value must not look taken.
+                None => Effect::Message(DRUM_MACHINE_ONLY),
             },
         }
     }
@@ -427,6 +433,34 @@ mod tests {
             refused.len(),
             &refused[..refused.len().min(5)]
         );
+    }
+
+    /// On profile B, page 6's *Drive* shows pages 9 and 10 (profile A's
+    /// drum drive). Their commands must be refused with a message, not
+    /// ignored: measured before the fix, *Identify* did nothing and said
+    /// nothing, and a link value left the screen's "Save, then restart to
+    /// apply" standing while it was dropped (not in the settings saved).
+    #[test]
+    fn profile_b_refuses_the_drum_pages_commands_with_a_message() {
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let mut m = BeltMachine::new(settings.clone(), ProfileBHardware::BOARD).unwrap();
+        for cmd in [
+            Command::IdentifyDrive,
+            Command::AcceptDriveModel,
+            Command::SelectLinkParameter(screen::LinkParameter::Slave),
+            Command::SetLinkValue(5),
+        ] {
+            assert_eq!(
+                m.command(cmd),
+                Effect::Message(DRUM_MACHINE_ONLY),
+                "{cmd:?}"
+            );
+        }
+        assert!(DRUM_MACHINE_ONLY.len() <= hmi_proto::MAX_TEXT_LEN);
+        assert_eq!(m.settings(), &settings);
     }
 
     #[test]

@@ -90,6 +90,11 @@ pub const LINK_TIMEOUT_MS: u32 = 2_500;
 /// so the next byte is read as a header whatever came before it.
 pub const RX_GAP_MS: u32 = 10;
 
+/// Shown in the page's `tmsg` when the screen did not answer the `get` of
+/// an *Apply* within [`GET_TIMEOUT_MS`] (the field is set back to the value
+/// in force).
+pub const REPLY_LOST_MESSAGE: &str = "No answer from screen: Apply again";
+
 /// What the application layer reports to the firmware.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -144,6 +149,9 @@ pub struct HmiStats {
     pub link_losses: u32,
     /// Partial frames forgotten after a quiet line ([`RX_GAP_MS`]).
     pub gap_resyncs: u32,
+    /// Releases of another component while a Stop was held: the Stop's
+    /// release hit on the line, ignored.
+    pub mismatched_releases: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -188,6 +196,12 @@ pub struct Hmi {
     rx_since_tick: bool,
     /// The last tick that followed received bytes.
     last_rx_ms: u32,
+    /// A startup frame came since the screen was last set up: a `0x66`
+    /// answer naming page 0 then means the screen restarted (its `0x88`
+    /// was lost).
+    restart_seen: bool,
+    /// The last touch frame was a Stop press: its release comes next.
+    stop_held: bool,
 }
 
 impl Hmi {
@@ -212,6 +226,8 @@ impl Hmi {
             stats: HmiStats::default(),
             rx_since_tick: false,
             last_rx_ms: 0,
+            restart_seen: false,
+            stop_held: false,
         }
     }
 
@@ -327,6 +343,16 @@ impl Hmi {
             if now_ms.wrapping_sub(p.since_ms) >= GET_TIMEOUT_MS {
                 self.pending = None;
                 self.stats.timeouts = self.stats.timeouts.wrapping_add(1);
+                // Nothing changed: the field must not keep showing the
+                // value typed as if it were in force, and the operator is
+                // told to apply it again.
+                let _ = self.show_message(REPLY_LOST_MESSAGE);
+                if let Some(input) = Component::input(self.page, p.field) {
+                    let _ = self.send(&Instruction::SetValue(
+                        input.obj(),
+                        p.field.current(&self.settings),
+                    ));
+                }
                 self.event(Event::ReplyTimeout(p.field));
                 self.drain_touches();
             }
@@ -457,6 +483,42 @@ impl Hmi {
     }
 
     fn event(&mut self, e: Event) {
+        if self.events.is_full() {
+            // Room is made so that a burst of screen errors (a screen file
+            // with a wrong name answers `0x1A` to every status write) never
+            // costs an operator's command, and nothing costs a Stop: the
+            // oldest event the firmware only logs goes for anything else; a
+            // Stop takes the place of the newest event that is not a Stop
+            // (a Start before it is moot).
+            let logged = |e: &Event| {
+                matches!(
+                    e,
+                    Event::ScreenError(_) | Event::ReplyTimeout(_) | Event::Rejected(_)
+                )
+            };
+            let stop = |e: &Event| matches!(e, Event::Command(Command::Stop));
+            let victim = if logged(&e) {
+                None
+            } else {
+                self.events.iter().position(logged)
+            }
+            .or_else(|| {
+                if stop(&e) {
+                    self.events.iter().rposition(|q| !stop(q))
+                } else {
+                    None
+                }
+            });
+            if let Some(i) = victim {
+                let mut k = 0usize;
+                self.events.retain(|_| {
+                    let keep = k != i;
+                    k = k.wrapping_add(1);
+                    keep
+                });
+                self.stats.events_dropped = self.stats.events_dropped.wrapping_add(1);
+            }
+        }
         if self.events.push_back(e).is_err() {
             self.stats.events_dropped = self.stats.events_dropped.wrapping_add(1);
         }
@@ -469,6 +531,7 @@ impl Hmi {
         self.pending = None;
         self.touches.clear();
         self.tx.clear();
+        self.stop_held = false;
         self.stats.link_losses = self.stats.link_losses.wrapping_add(1);
         self.event(Event::Disconnected);
     }
@@ -480,6 +543,8 @@ impl Hmi {
         };
         self.pending = None;
         self.touches.clear();
+        self.restart_seen = false;
+        self.stop_held = false;
         let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
         let _ = self.send(&Instruction::Dims(self.settings.brightness.raw()));
         let _ = self.show_page(self.home_page());
@@ -497,42 +562,60 @@ impl Hmi {
         match frame {
             Frame::CurrentPage(p) => match self.link {
                 Link::Connecting { .. } => self.connect(),
-                Link::Connected { .. } => {
+                Link::Connected { .. } => match Page::from_id(p) {
                     // The screen shows page 0 `boot` only at power-on, before
-                    // the handshake (a restart announces itself with the
-                    // startup frame first): a reply naming it now is a late
-                    // answer to a handshake `sendme` (the screen booted and
-                    // sent `0x88` before answering it) and would hide the
-                    // home page's live status; ignore it.
-                    if let Some(page) = Page::from_id(p).filter(|&pg| pg != Page::Boot) {
+                    // the handshake: a reply naming it now is a late answer
+                    // to a handshake `sendme` (the screen booted and sent
+                    // `0x88` before answering it) and would hide the home
+                    // page's live status; ignore it — unless a startup
+                    // frame came first: the screen restarted and its `0x88`
+                    // was lost.
+                    Some(Page::Boot) if self.restart_seen => self.connect(),
+                    Some(Page::Boot) | None => {}
+                    Some(page) => {
                         self.page = page;
+                        self.restart_seen = false;
                     }
-                }
+                },
             },
-            // The screen restarted: its `0x88` follows; wait for it (or retry).
-            Frame::Startup => {
-                self.link = Link::Connecting {
-                    last_try_ms: Some(self.now_ms),
-                };
-                self.page = Page::Boot;
-            }
+            // A restart announces itself with this frame, then `0x88`
+            // (which sets the screen up). Alone it changes nothing: a `get`
+            // reply whose header byte is hit decodes as one (`71 B4 00 00
+            // 00 FF FF FF` without its header is `00 00 00 FF FF FF`), and
+            // dropping the link for it threw the operator off the run page.
+            Frame::Startup => self.restart_seen = true,
             Frame::Ready => self.connect(),
             // Stop counts on press and on release, connected or not (a
             // corrupted frame may have looked like a screen restart): the
             // screen file sends its ID on both, so one lost frame never
             // loses a Stop (docs/hmi.md).
             Frame::Touch {
-                page, component, ..
+                page,
+                component,
+                event,
             } if Component::lookup(page, component)
                 .is_some_and(|c| matches!(c.role, Role::Action(Action::Stop))) =>
             {
+                self.stop_held = event == TouchEvent::Press;
                 self.event(Event::Command(Command::Stop));
             }
+            // A single-touch screen sends no other component's release
+            // between a press and its release: after a Stop press, a
+            // release naming another component is the Stop's release hit
+            // on the line (page 3: `bstop` 7 and `bstart` 6 are one bit
+            // apart), never a touch of it. Ignored; if the Stop's release
+            // was lost instead, the operator's next touch is ignored once.
             Frame::Touch {
                 page,
                 component,
                 event: TouchEvent::Release,
-            } if self.is_connected() => self.on_touch(page, component),
+            } => {
+                if core::mem::take(&mut self.stop_held) {
+                    self.stats.mismatched_releases = self.stats.mismatched_releases.wrapping_add(1);
+                } else if self.is_connected() {
+                    self.on_touch(page, component);
+                }
+            }
             Frame::Number(v) => match self.pending.take() {
                 Some(p) => {
                     self.on_value(p.field, v);

@@ -32,7 +32,7 @@
 //! | seedlings clamped N | count | 1–12 | Number |
 //! | roller radius r | 0.1 mm | 50–1000 (5.0–100.0 mm) | Xfloat `ws1`=1, shown in mm |
 //! | belt thickness h | 0.01 mm | 1–1000 (0.01–10.00 mm) | Xfloat `ws1`=2, shown in mm |
-//! | speed threshold Y | mm/s | 1–500 (0.001–0.500 m/s) | Xfloat `ws1`=3, shown in m/s |
+//! | speed threshold Y | mm/s | 1–200 (0.001–0.200 m/s) | Xfloat `ws1`=3, shown in m/s |
 //! | travel speed | m/s × 100 | 0–65535 | Xfloat `ws1`=2 |
 //! | planting / feeding motor speed n1, n2 | r/min × 100 | 0–65535 | Xfloat `ws1`=2 |
 //! | roller turns j | count | 0–2³¹ | Number |
@@ -464,7 +464,7 @@ impl ParamError {
             Field::ClampCount => "Seedlings clamped must be 1-12",
             Field::RollerRadius => "Roller radius must be 5.0-100.0 mm",
             Field::BeltThickness => "Belt thickness must be 0.01-10.00 mm",
-            Field::SpeedThreshold => "Threshold Y must be 0.001-0.500 m/s",
+            Field::SpeedThreshold => "Threshold Y must be 0.001-0.200 m/s",
             Field::FirstPlantDistance => "First plant must be 0.0-100.0 cm",
             Field::LinkValue => "Value out of range",
         }
@@ -587,9 +587,9 @@ bounded!(
     BeltThickness, u16, Field::BeltThickness, 1, 1000, 100
 );
 bounded!(
-    /// Profile B speed-change threshold Y in mm/s, 1–500 (0.001–0.500 m/s).
-    /// Default 20 (0.02 m/s).
-    SpeedThreshold, u16, Field::SpeedThreshold, 1, 500, 20
+    /// Profile B speed-change threshold Y in mm/s, 1–200 (0.001–0.200 m/s:
+    /// the planter's own limit, `supervisor::profile_b`). Default 20 (0.02 m/s).
+    SpeedThreshold, u16, Field::SpeedThreshold, 1, 200, 20
 );
 
 bounded!(

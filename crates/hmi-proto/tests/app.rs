@@ -7,7 +7,7 @@
 )]
 
 use hmi_proto::hmi::{
-    Event, Hmi, GET_TIMEOUT_MS, HANDSHAKE_RETRY_MS, HEARTBEAT_MS, LINK_TIMEOUT_MS,
+    Event, Hmi, EVENT_QUEUE, GET_TIMEOUT_MS, HANDSHAKE_RETRY_MS, HEARTBEAT_MS, LINK_TIMEOUT_MS,
 };
 use hmi_proto::screen::*;
 use hmi_proto::virtual_screen::VirtualScreen;
@@ -80,6 +80,90 @@ fn handshake_when_screen_boots_first_or_later() {
     let ev = pump(&mut hmi, &mut screen);
     assert_eq!(ev, vec![Event::Connected]);
     assert_eq!(screen.page(), Page::Mode.id());
+}
+
+/// A `get` reply below 65 536 ends `00 00 FF FF FF`; with its header byte
+/// hit (one bit: `0x71` → `0x73`) the decoder finds the screen's startup
+/// frame `00 00 00 FF FF FF` in it. That is no restart: the screen still
+/// shows the run page. Expected (docs/hmi.md §2: only a restart, startup
+/// then `0x88`, sets the screen up again): the screen stays on page 3 with
+/// its Stop and the link stays up. Measured before the fix: the link was
+/// dropped, and 500 ms later the handshake showed the home page 1 (no Stop
+/// button on it) with `Event::Connected`.
+#[test]
+fn a_reply_hit_in_its_header_is_no_screen_restart() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    hmi.tick(100);
+    screen.set_value("nspacing", 180).unwrap();
+    screen.release("bapply").unwrap();
+    hmi.push_slice(&screen.take_output());
+    let mut tx = [0u8; 512];
+    let n = hmi.poll_transmit(&mut tx);
+    screen.feed(&tx[..n]);
+    let mut reply = screen.take_output();
+    assert_eq!(reply, [0x71, 180, 0, 0, 0, 0xFF, 0xFF, 0xFF]);
+    reply[0] = 0x73;
+    hmi.push_slice(&reply);
+    let mut ev = pump(&mut hmi, &mut screen);
+    for t in (110..=2000).step_by(10) {
+        hmi.tick(t);
+        ev.extend(pump(&mut hmi, &mut screen));
+    }
+    assert!(!ev.contains(&Event::Connected), "{ev:?}");
+    assert!(hmi.is_connected());
+    assert_eq!(screen.page(), Page::Adaptive.id());
+    assert_eq!(hmi.page(), Page::Adaptive);
+    // Touches work at once (Start, then Apply with the value again).
+    screen.release("bstart").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
+
+    // A real restart whose `0x88` is lost: the heartbeat's answer naming
+    // page 0 sets the screen up.
+    screen.boot();
+    let mut out = screen.take_output();
+    assert_eq!(out.split_off(6), [0x88, 0xFF, 0xFF, 0xFF]);
+    hmi.tick(2010);
+    hmi.push_slice(&out);
+    let mut ev = Vec::new();
+    for t in (2020..=4000).step_by(10) {
+        hmi.tick(t);
+        ev.extend(pump(&mut hmi, &mut screen));
+    }
+    assert_eq!(ev, vec![Event::Connected]);
+    assert_eq!(screen.page(), Page::Mode.id());
+}
+
+/// The screen's answer to an *Apply*'s `get` is lost on the line (a hit
+/// byte drops the frame). Nothing changed, so the field must show the value
+/// in force again and the page say so, as for a value out of range
+/// (docs/hmi.md §3: "the field is set back to the value in force, and
+/// nothing changes"); 70 mm is the default spacing (docs/hmi.md §4).
+/// Measured before the fix: the field kept the 180 typed, `tmsg` stayed
+/// empty, and the machine kept planting at 70 mm — the screen showed a
+/// spacing not in force.
+#[test]
+fn a_lost_reply_puts_the_value_in_force_back_and_says_so() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    hmi.tick(100);
+    screen.set_value("nspacing", 180).unwrap();
+    screen.release("bapply").unwrap();
+    hmi.push_slice(&screen.take_output());
+    let mut tx = [0u8; 512];
+    let n = hmi.poll_transmit(&mut tx);
+    assert_eq!(&tx[..n], b"get nspacing.val\xff\xff\xff"); // never answered
+    hmi.tick(100 + GET_TIMEOUT_MS);
+    let ev = pump(&mut hmi, &mut screen);
+    assert_eq!(ev, vec![Event::ReplyTimeout(Field::Spacing)]);
+    assert_eq!(screen.value("nspacing"), Some(70));
+    assert_eq!(
+        screen.text("tmsg"),
+        Some(hmi_proto::hmi::REPLY_LOST_MESSAGE)
+    );
+    assert_eq!(hmi.settings().spacing, Spacing::DEFAULT);
 }
 
 #[test]
@@ -340,6 +424,91 @@ fn pitfall_screen_errors_are_typed_events() {
     assert_eq!(
         hmi.poll_event(),
         Some(Event::ScreenError(ErrorCode::BufferOverflow))
+    );
+}
+
+/// The firmware pushes every byte it has received (up to its 64-byte receive
+/// queue) before it polls the events. A screen file with wrong component
+/// names answers `0x1A` (4 bytes) to every status write; the Stop pressed
+/// in the same burst must still reach the machine, and so must a command.
+/// Expected: `Command::Stop` among the events (docs/hmi.md §3: Stop is
+/// "reported at once", "whatever the link state"); measured before the fix:
+/// the eight errors filled `EVENT_QUEUE` (8) and the Stop was dropped.
+#[test]
+fn a_burst_of_screen_errors_never_costs_a_stop_or_a_command() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    let error = [0x1A, 0xFF, 0xFF, 0xFF];
+    for _ in 0..EVENT_QUEUE {
+        hmi.push_slice(&error);
+    }
+    hmi.push_slice(&[0x65, 0x03, 0x07, 0x01, 0xFF, 0xFF, 0xFF]); // bstop press
+    hmi.push_slice(&[0x65, 0x03, 0x07, 0x00, 0xFF, 0xFF, 0xFF]); // and release
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert!(ev.contains(&cmd(Command::Stop)), "{ev:?}");
+    // A command behind a full queue of errors arrives too (gear up, id 4).
+    for _ in 0..EVENT_QUEUE {
+        hmi.push_slice(&error);
+    }
+    hmi.push_slice(&[0x65, 0x03, 0x04, 0x00, 0xFF, 0xFF, 0xFF]);
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert_eq!(
+        ev.last(),
+        Some(&cmd(Command::SelectGear(Gear::Low2))),
+        "{ev:?}"
+    );
+    // A queue full of Starts (nine releases in 63 bytes) then Stop: the last
+    // word is Stop.
+    for _ in 0..EVENT_QUEUE {
+        hmi.push_slice(&[0x65, 0x03, 0x06, 0x00, 0xFF, 0xFF, 0xFF]);
+    }
+    hmi.push_slice(&[0x65, 0x03, 0x07, 0x00, 0xFF, 0xFF, 0xFF]);
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert_eq!(ev.last(), Some(&cmd(Command::Stop)), "{ev:?}");
+}
+
+/// On page 3 `bstart` is id 6 and `bstop` id 7: one bit apart. The screen
+/// sends Stop on press and on release (docs/hmi.md §3); if the release
+/// `65 03 07 00` has its id bit 0 hit on the line it reads `65 03 06 00`,
+/// a Start release. A single-touch screen sends no other component's
+/// release between a press and its release, so that frame is the Stop's
+/// release: expected, the machine stays stopped. Measured before the fix:
+/// `[Stop, Start]` — the drum restarted as the operator lifted the finger
+/// from Stop.
+#[test]
+fn a_stop_release_hit_into_a_start_does_not_restart() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bstart").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
+    hmi.push_slice(&[0x65, 0x03, 0x07, 0x01, 0xFF, 0xFF, 0xFF]); // Stop press
+    hmi.push_slice(&[0x65, 0x03, 0x06, 0x00, 0xFF, 0xFF, 0xFF]); // its release, hit
+    let mut ev = Vec::new();
+    while let Some(e) = hmi.poll_event() {
+        ev.push(e);
+    }
+    assert_eq!(ev, vec![cmd(Command::Stop)]);
+    // The operator's next Start is a Start.
+    screen.release("bstart").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
+    // A Stop pressed and released normally, then Start: both count.
+    screen.press("bstop").unwrap();
+    screen.release("bstop").unwrap();
+    screen.release("bstart").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::Stop), cmd(Command::Stop), cmd(Command::Start)]
     );
 }
 
@@ -732,7 +901,7 @@ fn belt_cases() -> Vec<BeltCase> {
             valid: 30,
             invalid: -1,
             command: Command::SetSpeedThreshold(SpeedThreshold::new(30).unwrap()),
-            message: "Threshold Y must be 0.001-0.500 m/s",
+            message: "Threshold Y must be 0.001-0.200 m/s",
         },
     ]
 }
@@ -814,7 +983,7 @@ fn belt_validation_ranges_match_the_contract() {
     assert!(BeltThickness::new(0).is_err() && BeltThickness::new(1).is_ok());
     assert!(BeltThickness::new(1000).is_ok() && BeltThickness::new(1001).is_err());
     assert!(SpeedThreshold::new(0).is_err() && SpeedThreshold::new(1).is_ok());
-    assert!(SpeedThreshold::new(500).is_ok() && SpeedThreshold::new(501).is_err());
+    assert!(SpeedThreshold::new(200).is_ok() && SpeedThreshold::new(201).is_err());
     assert!(ClampCount::new(i32::MAX).is_err() && ClampAngle::new(i32::MIN).is_err());
 }
 
@@ -913,6 +1082,40 @@ fn docs_list_every_component() {
         let row = format!("| {} | `{}` |", c.id(), c.name());
         assert!(doc.contains(&row), "missing {row} ({:?})", c.page);
     }
+}
+
+/// A Stop survives one lost or corrupted frame only if the screen sends it
+/// on press *and* on release (docs/hmi.md §3); a builder follows the page
+/// tables, so every Stop row must say so, and §3 must name the pages that
+/// have one. Measured before the fix: page 9's `bstop` row said "Release:
+/// Send ID" only, and §3 named pages 4, 7 and 2 (page 4 has no Stop; 3 and
+/// 9 were missing).
+#[test]
+fn docs_ask_for_press_and_release_on_every_stop() {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/hmi.md"))
+        .expect("docs/hmi.md");
+    let mut stop_pages = Vec::new();
+    for c in COMPONENTS
+        .iter()
+        .filter(|c| c.role == Role::Action(Action::Stop))
+    {
+        let heading = format!("### Page {} `{}`", c.page.id(), c.page.name());
+        let section = doc.split(&heading).nth(1).expect("page section");
+        let section = section.split("### Page").next().unwrap();
+        let row_start = format!("| {} | `{}` |", c.id(), c.name());
+        let row = section
+            .lines()
+            .find(|l| l.starts_with(&row_start))
+            .expect("Stop row");
+        assert!(row.contains("Press **and** Release"), "{:?}: {row}", c.page);
+        stop_pages.push(c.page.id());
+    }
+    stop_pages.sort_unstable();
+    assert_eq!(stop_pages, [2, 3, 7, 9]);
+    assert!(
+        doc.contains("(`bstop` on pages 2, 3 and 9 of profile A and page 7 of profile B)"),
+        "§3 names the Stop pages"
+    );
 }
 
 proptest! {

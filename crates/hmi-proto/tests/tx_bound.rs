@@ -87,7 +87,7 @@ fn profile_b_pages_fit_with_the_widest_parameters() {
             clamp_count: ClampCount::new(12).unwrap(),
             roller_radius: RollerRadius::new(1000).unwrap(),
             belt_thickness: BeltThickness::new(1000).unwrap(),
-            speed_threshold: SpeedThreshold::new(500).unwrap(),
+            speed_threshold: SpeedThreshold::new(200).unwrap(),
         },
         ..Settings::default()
     };

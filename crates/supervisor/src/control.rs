@@ -2951,4 +2951,36 @@ mod tests {
             prop_assert_eq!(sup.screen_status().target_drum_rpm_x100, raw);
         }
     }
+
+    /// Page 4: a coefficient typed by hand (0.800–1.200, docs/hmi.md §4)
+    /// and taken is shown back as typed, for each kind. Measured before the
+    /// fix: 0.800 was taken and the screen then showed 1.000 (0.8 in U2F30
+    /// is 1 bit below 0.8, `to_milli` rounds down to 799, out of range,
+    /// and the screen got the default), and 0.801 showed 0.800.
+    #[test]
+    fn every_hand_set_coefficient_is_shown_as_typed() {
+        let mut wrong = std::vec::Vec::new();
+        for kind in [
+            CalibrationKind::SpeedK1,
+            CalibrationKind::SlipK2,
+            CalibrationKind::BeltK3,
+        ] {
+            for raw in 800..=1200 {
+                let mut sup = Supervisor::new(Hardware::BOARD, Settings::default()).unwrap();
+                sup.command(Command::SelectCalibration(kind));
+                let k = screen::CalibrationCoefficient::new(raw).unwrap();
+                let effect = sup.command(Command::SetCalibrationCoefficient(k));
+                let shown = sup.screen_settings().calibration_coefficient.raw();
+                if effect != Effect::SettingsChanged || i32::from(shown) != raw {
+                    wrong.push((kind, raw, effect, shown));
+                }
+            }
+        }
+        assert!(
+            wrong.is_empty(),
+            "{} wrong, e.g. {:?}",
+            wrong.len(),
+            &wrong[..wrong.len().min(4)]
+        );
+    }
 }

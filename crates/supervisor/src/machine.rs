@@ -72,23 +72,44 @@ pub fn belt_to_screen(c: &ProfileBConfig) -> screen::BeltSettings {
 /// validated as a whole (the screen checked each value's own range).
 pub fn belt_with(c: &ProfileBConfig, cmd: Command) -> Option<Result<ProfileBConfig, BeltError>> {
     let mut s: ProfileBSettings = *c.settings();
+    // `num / den` metres, rounded to the nearest bit like the limits
+    // `ProfileBConfig::new` checks (`Metres::lit`): `from_ratio` rounds
+    // down, and 0.1 m (X = 10.0 cm, the screen's minimum) fell half a bit
+    // below the check's 0.10.
+    let metres = |num: u16, den: u32| {
+        Some(Metres::from_bits(nearest_bits(
+            u32::from(num),
+            den,
+            fixed::types::U12F20::FRAC_NBITS,
+        )?))
+    };
     match cmd {
-        Command::SetBeltSpacing(v) => s.plant_spacing = Metres::from_mm(u32::from(v.raw())),
-        Command::SetSeedlingPitch(v) => s.belt_pitch = Metres::from_mm(u32::from(v.raw())),
+        Command::SetBeltSpacing(v) => s.plant_spacing = metres(v.raw(), 1000)?,
+        Command::SetSeedlingPitch(v) => s.belt_pitch = metres(v.raw(), 1000)?,
         Command::SetClampAngle(v) => s.clamping_angle_deg = U16F16::from_num(v.raw()),
         Command::SetClampCount(v) => s.seedlings_clamped = v.raw(),
-        Command::SetRollerRadius(v) => {
-            s.roller_radius = Metres::from_ratio(u32::from(v.raw()), 10_000)?;
-        }
-        Command::SetBeltThickness(v) => {
-            s.belt_thickness = Metres::from_ratio(u32::from(v.raw()), 100_000)?;
-        }
+        Command::SetRollerRadius(v) => s.roller_radius = metres(v.raw(), 10_000)?,
+        Command::SetBeltThickness(v) => s.belt_thickness = metres(v.raw(), 100_000)?,
         Command::SetSpeedThreshold(v) => {
-            s.threshold = MetresPerSecond::from_ratio(u32::from(v.raw()), 1000)?;
+            s.threshold = MetresPerSecond::from_bits(nearest_bits(
+                u32::from(v.raw()),
+                1000,
+                fixed::types::U8F24::FRAC_NBITS,
+            )?);
         }
         _ => return None,
     }
     Some(ProfileBConfig::new(s))
+}
+
+/// The bits of `num / den` in a fixed-point type with `frac` fractional
+/// bits, rounded to the nearest; `None` if `den` is 0 or it does not fit.
+fn nearest_bits(num: u32, den: u32, frac: u32) -> Option<u32> {
+    let scaled = u64::from(num).checked_shl(frac)?;
+    let bits = scaled
+        .checked_add(u64::from(den / 2))?
+        .checked_div(u64::from(den))?;
+    u32::try_from(bits).ok()
 }
 
 /// A short text for the screen.
@@ -102,6 +123,10 @@ fn belt_error_text(e: BeltError) -> &'static str {
 /// The screen's message when the placement is changed with the drum or the
 /// motors running (both machines).
 pub const PLACEMENT_WHILE_RUNNING: &str = "Stop first to change the placement";
+
+/// The screen's message when profile B gets a command of profile A's drum
+/// (page 9's *Identify* and *Save*, page 10's link settings).
+pub const DRUM_MACHINE_ONLY: &str = "Drum machine (profile A) only";
 
 /// Profile B with its settings: the [`BeltPlanter`] plus what the screen and
 /// the settings store need.
@@ -207,8 +232,10 @@ impl BeltMachine {
                     Err(_) => Effect::Message("Parameters rejected"),
                 },
                 Some(Err(e)) => Effect::Message(belt_error_text(e)),
-                // A profile A command: not for this machine.
-                None => Effect::None,
+                // A profile A command: not for this machine. Pages 9 and 10
+                // (the drum drive) are reached from page 6 on this machine
+                // too: *Identify* and a link value must not look taken.
+                None => Effect::Message(DRUM_MACHINE_ONLY),
             },
         }
     }
@@ -314,6 +341,8 @@ impl Machine {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+    use crate::profile_b::ProfileBHardware;
+    use crate::settings::Profile;
 
     #[test]
     fn the_screens_belt_defaults_are_the_kinematics_defaults() {
@@ -360,6 +389,78 @@ mod tests {
         assert_eq!(belt_to_screen(&n).clamp_count.raw(), 3);
         // Not a profile B parameter.
         assert!(belt_with(&c, Command::Start).is_none());
+    }
+
+    /// Every value page 8 takes (its ranges: docs/hmi.md §4, profile B
+    /// table), set alone from the defaults on a stopped planter, is taken
+    /// by the machine and shown back as typed. Measured before the fix:
+    /// the documented minimums X = 10.0 cm, B = 2.0 cm and r = 5.0 mm were
+    /// refused with "Spacing X: 10-100 cm" (and the like): `from_ratio`
+    /// rounds 0.1 m down to 104 857 µ-bits, the check's `lit("0.10")` to
+    /// the nearest, 104 858. And Y above 0.200 m/s, which the screen took
+    /// (up to 0.500), was refused with "Threshold Y: 0-0.2 m/s".
+    #[test]
+    fn every_value_page_8_takes_the_planter_takes() {
+        use hmi_proto::screen::Field;
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let fields = [
+            Field::BeltSpacing,
+            Field::SeedlingPitch,
+            Field::ClampAngle,
+            Field::ClampCount,
+            Field::RollerRadius,
+            Field::BeltThickness,
+            Field::SpeedThreshold,
+        ];
+        let mut refused = std::vec::Vec::new();
+        for f in fields {
+            for raw in 0..=1000 {
+                let Ok(cmd) = f.validate(raw) else { continue };
+                let mut m = BeltMachine::new(settings.clone(), ProfileBHardware::BOARD).unwrap();
+                let effect = m.command(cmd);
+                let back = f.current(&m.screen_settings());
+                if effect != Effect::SettingsChanged || back != raw {
+                    refused.push((f, raw, effect, back));
+                }
+            }
+        }
+        assert!(
+            refused.is_empty(),
+            "{} refused, e.g. {:?}",
+            refused.len(),
+            &refused[..refused.len().min(5)]
+        );
+    }
+
+    /// On profile B, page 6's *Drive* shows pages 9 and 10 (profile A's
+    /// drum drive). Their commands must be refused with a message, not
+    /// ignored: measured before the fix, *Identify* did nothing and said
+    /// nothing, and a link value left the screen's "Save, then restart to
+    /// apply" standing while it was dropped (not in the settings saved).
+    #[test]
+    fn profile_b_refuses_the_drum_pages_commands_with_a_message() {
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let mut m = BeltMachine::new(settings.clone(), ProfileBHardware::BOARD).unwrap();
+        for cmd in [
+            Command::IdentifyDrive,
+            Command::AcceptDriveModel,
+            Command::SelectLinkParameter(screen::LinkParameter::Slave),
+            Command::SetLinkValue(5),
+        ] {
+            assert_eq!(
+                m.command(cmd),
+                Effect::Message(DRUM_MACHINE_ONLY),
+                "{cmd:?}"
+            );
+        }
+        assert!(DRUM_MACHINE_ONLY.len() <= hmi_proto::MAX_TEXT_LEN);
+        assert_eq!(m.settings(), &settings);
     }
 
     #[test]

@@ -1056,10 +1056,21 @@ mod app {
                     }
                     Effect::Message(text) => {
                         defmt::warn!("screen message: {=str}", text);
-                        // A value the machine refused goes back to the one
-                        // in force on the screen (the screen link took it).
-                        refresh_settings(cx);
-                        say(cx, text);
+                        if cmd == Command::AcknowledgeAlarm {
+                            // The alarm stays latched (the driver still
+                            // silent): the screen has left its page, and
+                            // no page leads back, so it comes back with
+                            // the reason (page 5 has no message box).
+                            cx.shared.hmi.lock(|hmi| {
+                                let _ = hmi.show_alarm(text);
+                            });
+                        } else {
+                            // A value the machine refused goes back to the
+                            // one in force on the screen (the screen link
+                            // took it).
+                            refresh_settings(cx);
+                            say(cx, text);
+                        }
                     }
                     Effect::AlarmCleared => {
                         defmt::info!("alarm acknowledged");

@@ -350,10 +350,19 @@ fn a_refused_register_is_named_on_the_screen_and_in_the_log() {
     let mut s = settings(FeedbackSource::Driver, CommandPath::Pwm, 115_200);
     s.drive_link.kind = DriverKind::Generic;
     s.drive_link.generic.speed_feedback = 0x2AB0;
-    let (mut bench, flash) = boot("refused", &s, 115_200, &["gear=2", "noise=0"], 3_000);
+    let (mut bench, flash) = boot("refused", &s, 115_200, &["gear=2", "noise=0"], 3_500);
     pump_to(&mut bench, 2_000);
     let text = bench.screen.text("talarm").map(str::to_owned);
     let page = bench.screen.page();
+    // OK while the driver still refuses: the supervisor keeps the alarm
+    // ("Drum driver still not answering"). The screen had already left
+    // page 5 for the page before (docs/hmi.md, page 5), and no page leads
+    // back to it: the alarm page must come back, saying why (it stayed on
+    // page 1 with Start refused, "Acknowledge the alarm first").
+    bench.tap("bok").unwrap();
+    pump_to(&mut bench, 2_600);
+    let page_after_ok = bench.screen.page();
+    let text_after_ok = bench.screen.text("talarm").map(str::to_owned);
     let (logs, _) = run_to_end(bench);
     let _ = std::fs::remove_file(&flash);
     let lost = time_of(
@@ -377,6 +386,12 @@ fn a_refused_register_is_named_on_the_screen_and_in_the_log() {
     assert!(!logs.iter().any(|l| l.contains("alarm: LinkLost")));
     let (t, ccr) = ccr_after(&logs, alarm + 1);
     assert_eq!(ccr, 0, "PWM at {t} ms");
+    assert_eq!(page_after_ok, hmi_proto::screen::Page::Alarm.id());
+    assert_eq!(
+        text_after_ok.as_deref(),
+        Some("Drum driver still not answering")
+    );
+    assert!(!logs.iter().any(|l| l.contains("alarm acknowledged")));
 }
 
 #[test]

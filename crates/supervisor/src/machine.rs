@@ -259,10 +259,12 @@ impl BeltMachine {
         let s = self.planter.snapshot();
         let x100 =
             |milli: u32| u16::try_from(milli.checked_div(10).unwrap_or(0)).unwrap_or(u16::MAX);
-        // Metres → 0.1 mm.
+        // Metres → 0.1 mm, rounded to the nearest (r = 25 mm is stored
+        // 0.4 µm short: truncated, the screen showed 24.9 mm).
         let dmm = u16::try_from(
             u64::from(s.roller_radius.to_bits())
                 .saturating_mul(10_000)
+                .saturating_add(1 << 19)
                 .checked_shr(20)
                 .unwrap_or(0),
         )
@@ -352,6 +354,19 @@ mod tests {
             belt_to_screen(&ProfileBConfig::default()),
             screen::BeltSettings::default()
         );
+    }
+
+    /// The live radius on page 7 (`xrad`, 0.1 mm) is rounded to the
+    /// nearest: r = 25 mm is stored 0.4 µm short (U12F20), and truncated
+    /// the screen showed 24.9 mm on a new roll (measured before: 249).
+    #[test]
+    fn the_screens_roller_radius_is_rounded() {
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let m = BeltMachine::new(settings, ProfileBHardware::BOARD).unwrap();
+        assert_eq!(m.screen_status().roller_radius_dmm, 250);
     }
 
     #[test]

@@ -128,11 +128,23 @@ pub const PLACEMENT_WHILE_RUNNING: &str = "Stop first to change the placement";
 /// (page 9's *Identify* and *Save*, page 10's link settings).
 pub const DRUM_MACHINE_ONLY: &str = "Drum machine (profile A) only";
 
+/// The screen's message after *New roll* (page 7): the roller turn count
+/// starts again.
+pub const NEW_ROLL_DONE: &str = "New roll: turns j = 0";
+
+/// The screen's message when *New roll* is pressed with the motors running.
+pub const NEW_ROLL_WHILE_RUNNING: &str = "Stop the motors before a new roll";
+
+/// The screen's message when profile A gets a command of profile B's belt
+/// (page 7's *New roll*).
+pub const BELT_MACHINE_ONLY: &str = "Belt machine (profile B) only";
+
 /// Profile B with its settings: the [`BeltPlanter`] plus what the screen and
 /// the settings store need.
 pub struct BeltMachine {
     planter: BeltPlanter,
     settings: Settings,
+    /// Roller turns `j` since power-up or the last *New roll*.
     roller_turns: u32,
 }
 
@@ -166,6 +178,11 @@ impl BeltMachine {
     pub fn control_step(&mut self, ground_encoder: u16, roller_pulses: u32) -> StepperCommand {
         self.roller_turns = self.roller_turns.saturating_add(roller_pulses);
         self.planter.control_step(ground_encoder, self.roller_turns)
+    }
+
+    /// Roller turns `j` since power-up or the last *New roll*.
+    pub const fn roller_turns(&self) -> u32 {
+        self.roller_turns
     }
 
     /// Applies one operator command.
@@ -222,6 +239,15 @@ impl BeltMachine {
                 self.planter.set_position_lock(!f);
                 Effect::SettingsChanged
             }
+            // A new belt roll (page 7): `j` from 0, only with the motors
+            // stopped (docs/profile-b.md, "New roll").
+            Command::NewRoll => match self.planter.new_roll() {
+                Ok(()) => {
+                    self.roller_turns = 0;
+                    Effect::Message(NEW_ROLL_DONE)
+                }
+                Err(_) => Effect::Message(NEW_ROLL_WHILE_RUNNING),
+            },
             other => match belt_with(&self.settings.belt, other) {
                 Some(Ok(config)) => match self.planter.set_config(config) {
                     Ok(()) => {

@@ -146,6 +146,11 @@ pub struct BeltMachine {
     settings: Settings,
     /// Roller turns `j` since power-up or the last *New roll*.
     roller_turns: u32,
+    /// Control periods since the last roller index pulse counted
+    /// (saturating; `u16::MAX`: none yet, the next one counts).
+    since_index: u16,
+    /// Roller index pulses not counted by the minimum-gap guard.
+    index_pulses_ignored: u32,
 }
 
 impl BeltMachine {
@@ -159,6 +164,8 @@ impl BeltMachine {
             planter,
             settings,
             roller_turns: 0,
+            since_index: u16::MAX,
+            index_pulses_ignored: 0,
         })
     }
 
@@ -175,9 +182,51 @@ impl BeltMachine {
     /// One control period: the ground-wheel encoder counter and the number
     /// of roller index pulses (one per feeding-roller turn) since the last
     /// period.
+    ///
+    /// The index input is not debounced in hardware: a pulse closer than
+    /// [`BeltMachine::roller_index_gap_periods`] periods to the last one
+    /// counted, and every pulse after the first in one period, is a bounce
+    /// and is not counted ([`BeltMachine::index_pulses_ignored`]).
     pub fn control_step(&mut self, ground_encoder: u16, roller_pulses: u32) -> StepperCommand {
-        self.roller_turns = self.roller_turns.saturating_add(roller_pulses);
+        self.since_index = self.since_index.saturating_add(1);
+        if roller_pulses > 0 {
+            let mut ignored = roller_pulses;
+            if u32::from(self.since_index) >= self.roller_index_gap_periods() {
+                self.roller_turns = self.roller_turns.saturating_add(1);
+                self.since_index = 0;
+                ignored = ignored.saturating_sub(1);
+            }
+            self.index_pulses_ignored = self.index_pulses_ignored.saturating_add(ignored);
+        }
         self.planter.control_step(ground_encoder, self.roller_turns)
+    }
+
+    /// The roller index guard's minimum gap, control periods (at least 1):
+    /// half the shortest roller turn the planter can command, which is
+    /// `feeding steps/rev` at the step-rate ceiling `max_step_hz` (the
+    /// feeding rate is clamped there). The board: 1600 steps at 20 kHz is
+    /// 80 ms a turn (12.5 r/s, twelve times paper B's fastest, ≈ 1 r/s),
+    /// so 40 ms = 4 periods: a real turn is never dropped, a bounce within
+    /// 30–40 ms of a counted pulse is (docs/profile-b.md, "Roller index").
+    pub fn roller_index_gap_periods(&self) -> u32 {
+        let hw = self.planter.hardware();
+        let steps = u64::from(self.planter.config().settings().feeding_steps_per_rev);
+        // µs per turn = steps · 10^6 / Hz, Hertz as U16F16 bits (steps
+        // ≤ 51 200 < 2^16, so the product < 2^52).
+        let turn_us = steps
+            .saturating_mul(1_000_000 << 16)
+            .checked_div(u64::from(hw.max_step_hz.to_bits()))
+            .unwrap_or(0);
+        let gap = turn_us
+            .checked_div(u64::from(hw.control_period_us).saturating_mul(2))
+            .unwrap_or(0);
+        u32::try_from(gap).unwrap_or(u32::MAX).max(1)
+    }
+
+    /// Roller index pulses the minimum-gap guard did not count (bounces),
+    /// since power-up.
+    pub const fn index_pulses_ignored(&self) -> u32 {
+        self.index_pulses_ignored
     }
 
     /// Roller turns `j` since power-up or the last *New roll*.
@@ -244,6 +293,7 @@ impl BeltMachine {
             Command::NewRoll => match self.planter.new_roll() {
                 Ok(()) => {
                     self.roller_turns = 0;
+                    self.since_index = u16::MAX;
                     Effect::Message(NEW_ROLL_DONE)
                 }
                 Err(_) => Effect::Message(NEW_ROLL_WHILE_RUNNING),

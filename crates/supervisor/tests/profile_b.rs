@@ -596,7 +596,7 @@ fn position_lock_keeps_the_belt_with_the_ground_and_tightens_the_spacing() {
 }
 
 // ---------------------------------------------------------------------
-// New roll (page 7 `broll`), on `BeltMachine`:
+// New roll (page 7 `broll`) and the roller index guard, on `BeltMachine`:
 // the profile B machine the firmware runs, which counts the roller index
 // pulses into `j`.
 
@@ -728,4 +728,48 @@ fn new_roll_is_refused_on_profile_a_and_the_messages_fit() {
             "{text}"
         );
     }
+}
+
+/// The roller index input has no debounce. Each bounce used to add a
+/// turn to `j` (measured before the guard: j = 4 after one turn with
+/// three bounces, 200 after 100 turns each with a bounce 10 ms later).
+/// The guard counts at most one pulse per `roller_index_gap_periods`
+/// (4 periods on the board: half of the 80 ms turn at the 20 kHz ceiling,
+/// 1600 steps/rev) and never drops a real turn, even at that ceiling.
+#[test]
+fn roller_index_bounces_are_not_turns() {
+    let mut m = belt_machine();
+    let mut c = 0u16;
+    m.command(Command::Start);
+    run_belt(&mut m, &mut c, 50, 0);
+    // One turn: its pulse, a bounce in the next period, two in the third
+    // (an overcapture reported as two), then quiet.
+    for pulses in [1, 1, 0, 2, 0, 0, 0, 0] {
+        c = c.wrapping_add(12);
+        m.control_step(c, pulses);
+    }
+    assert_eq!(m.planter().snapshot().roller_turns, 1);
+    // 100 turns at paper B's fastest (≈ 1 r/s, 100 periods a turn), each
+    // with a bounce one period later.
+    for _ in 0..100 {
+        for i in 0..100 {
+            c = c.wrapping_add(12);
+            m.control_step(c, u32::from(i < 2));
+        }
+    }
+    assert_eq!(m.planter().snapshot().roller_turns, 101);
+    assert_eq!(m.index_pulses_ignored(), 3 + 100);
+    // The board's guard: 1600 steps at 20 kHz = 80 ms a turn, half = 40 ms.
+    assert_eq!(m.roller_index_gap_periods(), 4);
+    // Turns at the step-rate ceiling (one every 8 periods) all count, and
+    // so do pulses exactly one gap apart (4 periods).
+    let before = m.planter().snapshot().roller_turns;
+    run_belt(&mut m, &mut c, 8 * 50, 8);
+    run_belt(&mut m, &mut c, 4 * 50, 4);
+    assert_eq!(m.planter().snapshot().roller_turns, before + 100);
+    assert_eq!(m.index_pulses_ignored(), 103);
+    // Stopped (a roll threaded by hand), the turns still count.
+    m.command(Command::Stop);
+    run_belt(&mut m, &mut c, 20, 10);
+    assert_eq!(m.planter().snapshot().roller_turns, before + 102);
 }

@@ -699,6 +699,7 @@ impl Hmi {
             Action::SaveSettings => Some(Command::SaveSettings),
             Action::IdentifyDrive => Some(Command::IdentifyDrive),
             Action::AcceptDriveModel => Some(Command::AcceptDriveModel),
+            Action::NewRoll => Some(Command::NewRoll),
             Action::ToggleEncoderDirection => {
                 s.drum_encoder_reversed = !s.drum_encoder_reversed;
                 Some(Command::SetDrumEncoderReversed(s.drum_encoder_reversed))

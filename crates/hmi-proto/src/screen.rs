@@ -778,6 +778,10 @@ pub enum Command {
     /// Page 10: the selected link setting's new value (the whole link
     /// settings are validated; they apply after *Save* and a restart).
     SetLinkValue(i32),
+    /// Profile B, page 7 `broll`: a new seedling-belt roll is loaded, the
+    /// roller turn count j (and with it the radius `r + h·j`) starts again
+    /// from 0. Only with the motors stopped.
+    NewRoll,
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -894,7 +898,8 @@ pub struct Status {
     pub plant_motor_rpm_x100: u16,
     /// Profile B: feeding motor speed n2, r/min × 100 (saturating).
     pub feed_motor_rpm_x100: u16,
-    /// Profile B: seedling-roller turns j since the belt was loaded.
+    /// Profile B: seedling-roller turns j since the belt was loaded (page 7
+    /// *New roll*, [`Command::NewRoll`]; power-up counts from 0 too).
     pub roller_turns: u32,
     /// Profile B: effective roller radius r' = r + h·j, 0.1 mm (saturating).
     pub roller_radius_dmm: u16,
@@ -1049,6 +1054,8 @@ pub enum Action {
     AcceptDriveModel,
     /// [`Command::SelectLinkParameter`] with the next parameter.
     NextLinkParameter,
+    /// [`Command::NewRoll`].
+    NewRoll,
 }
 
 /// The role of a component in the contract.
@@ -1772,6 +1779,7 @@ const SOURCE: &[Source] = &[
         R::Status(StatusField::Plants),
     ),
     c(P::Belt, 11, "tmsg", K::Text, R::Message),
+    c(P::Belt, 12, "broll", K::Button, R::Action(A::NewRoll)),
     // 8 beltpar (profile B parameters)
     c(
         P::BeltParameters,

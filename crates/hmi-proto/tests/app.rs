@@ -826,6 +826,26 @@ fn profile_b_starts_on_the_belt_page_and_returns_home() {
     assert_eq!(screen.page(), Page::Belt.id());
 }
 
+/// Page 7's *New roll* (`broll`, id 12): a button like Start, reported on
+/// release as `Command::NewRoll` (the machine decides whether it is taken
+/// and answers with a message, crates/supervisor `BeltMachine::command`).
+#[test]
+fn profile_b_new_roll_button_sends_its_command() {
+    let (mut hmi, mut screen) = connected_b();
+    let c = Component::lookup(Page::Belt.id(), 12).unwrap();
+    assert_eq!(
+        (c.name(), c.kind(), c.role),
+        ("broll", Kind::Button, Role::Action(Action::NewRoll))
+    );
+    // A press alone is not a touch (release only, like every button but
+    // Stop).
+    screen.press("broll").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![]);
+    screen.release("broll").unwrap();
+    assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::NewRoll)]);
+    assert_eq!(screen.page(), Page::Belt.id());
+}
+
 /// One page-8 field: its input and Apply button, a valid and an
 /// out-of-range value, the command and the message.
 struct BeltCase {

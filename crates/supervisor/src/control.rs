@@ -1309,6 +1309,8 @@ impl Supervisor {
                     None => Effect::Message("Value out of range"),
                 }
             }
+            // Page 7's *New roll* (the belt roller's turn count).
+            Command::NewRoll => Effect::Message(crate::machine::BELT_MACHINE_ONLY),
             // Profile B's parameters are kept (and saved) here too, so that
             // they survive a switch of machine.
             Command::SetBeltSpacing(_)

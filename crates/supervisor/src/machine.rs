@@ -128,12 +128,29 @@ pub const PLACEMENT_WHILE_RUNNING: &str = "Stop first to change the placement";
 /// (page 9's *Identify* and *Save*, page 10's link settings).
 pub const DRUM_MACHINE_ONLY: &str = "Drum machine (profile A) only";
 
+/// The screen's message after *New roll* (page 7): the roller turn count
+/// starts again.
+pub const NEW_ROLL_DONE: &str = "New roll: turns j = 0";
+
+/// The screen's message when *New roll* is pressed with the motors running.
+pub const NEW_ROLL_WHILE_RUNNING: &str = "Stop the motors before a new roll";
+
+/// The screen's message when profile A gets a command of profile B's belt
+/// (page 7's *New roll*).
+pub const BELT_MACHINE_ONLY: &str = "Belt machine (profile B) only";
+
 /// Profile B with its settings: the [`BeltPlanter`] plus what the screen and
 /// the settings store need.
 pub struct BeltMachine {
     planter: BeltPlanter,
     settings: Settings,
+    /// Roller turns `j` since power-up or the last *New roll*.
     roller_turns: u32,
+    /// Control periods since the last roller index pulse counted
+    /// (saturating; `u16::MAX`: none yet, the next one counts).
+    since_index: u16,
+    /// Roller index pulses not counted by the minimum-gap guard.
+    index_pulses_ignored: u32,
 }
 
 impl BeltMachine {
@@ -147,6 +164,8 @@ impl BeltMachine {
             planter,
             settings,
             roller_turns: 0,
+            since_index: u16::MAX,
+            index_pulses_ignored: 0,
         })
     }
 
@@ -163,9 +182,56 @@ impl BeltMachine {
     /// One control period: the ground-wheel encoder counter and the number
     /// of roller index pulses (one per feeding-roller turn) since the last
     /// period.
+    ///
+    /// The index input is not debounced in hardware: a pulse closer than
+    /// [`BeltMachine::roller_index_gap_periods`] periods to the last one
+    /// counted, and every pulse after the first in one period, is a bounce
+    /// and is not counted ([`BeltMachine::index_pulses_ignored`]).
     pub fn control_step(&mut self, ground_encoder: u16, roller_pulses: u32) -> StepperCommand {
-        self.roller_turns = self.roller_turns.saturating_add(roller_pulses);
+        self.since_index = self.since_index.saturating_add(1);
+        if roller_pulses > 0 {
+            let mut ignored = roller_pulses;
+            if u32::from(self.since_index) >= self.roller_index_gap_periods() {
+                self.roller_turns = self.roller_turns.saturating_add(1);
+                self.since_index = 0;
+                ignored = ignored.saturating_sub(1);
+            }
+            self.index_pulses_ignored = self.index_pulses_ignored.saturating_add(ignored);
+        }
         self.planter.control_step(ground_encoder, self.roller_turns)
+    }
+
+    /// The roller index guard's minimum gap, control periods (at least 1):
+    /// half the shortest roller turn the planter can command, which is
+    /// `feeding steps/rev` at the step-rate ceiling `max_step_hz` (the
+    /// feeding rate is clamped there). The board: 1600 steps at 20 kHz is
+    /// 80 ms a turn (12.5 r/s, twelve times paper B's fastest, ≈ 1 r/s),
+    /// so 40 ms = 4 periods: a real turn is never dropped, a bounce within
+    /// 30–40 ms of a counted pulse is (docs/profile-b.md, "Roller index").
+    pub fn roller_index_gap_periods(&self) -> u32 {
+        let hw = self.planter.hardware();
+        let steps = u64::from(self.planter.config().settings().feeding_steps_per_rev);
+        // µs per turn = steps · 10^6 / Hz, Hertz as U16F16 bits (steps
+        // ≤ 51 200 < 2^16, so the product < 2^52).
+        let turn_us = steps
+            .saturating_mul(1_000_000 << 16)
+            .checked_div(u64::from(hw.max_step_hz.to_bits()))
+            .unwrap_or(0);
+        let gap = turn_us
+            .checked_div(u64::from(hw.control_period_us).saturating_mul(2))
+            .unwrap_or(0);
+        u32::try_from(gap).unwrap_or(u32::MAX).max(1)
+    }
+
+    /// Roller index pulses the minimum-gap guard did not count (bounces),
+    /// since power-up.
+    pub const fn index_pulses_ignored(&self) -> u32 {
+        self.index_pulses_ignored
+    }
+
+    /// Roller turns `j` since power-up or the last *New roll*.
+    pub const fn roller_turns(&self) -> u32 {
+        self.roller_turns
     }
 
     /// Applies one operator command.
@@ -222,6 +288,16 @@ impl BeltMachine {
                 self.planter.set_position_lock(!f);
                 Effect::SettingsChanged
             }
+            // A new belt roll (page 7): `j` from 0, only with the motors
+            // stopped (docs/profile-b.md, "New roll").
+            Command::NewRoll => match self.planter.new_roll() {
+                Ok(()) => {
+                    self.roller_turns = 0;
+                    self.since_index = u16::MAX;
+                    Effect::Message(NEW_ROLL_DONE)
+                }
+                Err(_) => Effect::Message(NEW_ROLL_WHILE_RUNNING),
+            },
             other => match belt_with(&self.settings.belt, other) {
                 Some(Ok(config)) => match self.planter.set_config(config) {
                     Ok(()) => {
@@ -259,10 +335,12 @@ impl BeltMachine {
         let s = self.planter.snapshot();
         let x100 =
             |milli: u32| u16::try_from(milli.checked_div(10).unwrap_or(0)).unwrap_or(u16::MAX);
-        // Metres → 0.1 mm.
+        // Metres → 0.1 mm, rounded to the nearest (r = 25 mm is stored
+        // 0.4 µm short: truncated, the screen showed 24.9 mm).
         let dmm = u16::try_from(
             u64::from(s.roller_radius.to_bits())
                 .saturating_mul(10_000)
+                .saturating_add(1 << 19)
                 .checked_shr(20)
                 .unwrap_or(0),
         )
@@ -352,6 +430,19 @@ mod tests {
             belt_to_screen(&ProfileBConfig::default()),
             screen::BeltSettings::default()
         );
+    }
+
+    /// The live radius on page 7 (`xrad`, 0.1 mm) is rounded to the
+    /// nearest: r = 25 mm is stored 0.4 µm short (U12F20), and truncated
+    /// the screen showed 24.9 mm on a new roll (measured before: 249).
+    #[test]
+    fn the_screens_roller_radius_is_rounded() {
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let m = BeltMachine::new(settings, ProfileBHardware::BOARD).unwrap();
+        assert_eq!(m.screen_status().roller_radius_dmm, 250);
     }
 
     #[test]

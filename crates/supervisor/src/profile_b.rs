@@ -589,6 +589,28 @@ impl BeltPlanter {
         }
     }
 
+    /// A new seedling-belt roll is loaded (page 7 *New roll*): only while
+    /// stopped ([`Error::Running`] otherwise). The caller's roller turn
+    /// count `j` must start again from 0 with it (`BeltMachine` does).
+    ///
+    /// What follows `j` here: the snapshot's `j` and radius show `j = 0`
+    /// and `r` at once, and the linkage forgets the `n2` it held (it is
+    /// rebuilt every stopped period anyway). Nothing else holds `j`: the
+    /// feeding rate (eq. 9) and the position lock's belt per step
+    /// `2π·(r + h·j)/steps` are computed each period from the `j` passed
+    /// to [`BeltPlanter::control_step`], and the lock's account (ground
+    /// and belt since Start) restarts at every [`BeltPlanter::start`]. As
+    /// this is refused while running, no rate jumps.
+    pub fn new_roll(&mut self) -> Result<(), Error> {
+        if self.state == PlanterState::Running {
+            return Err(Error::Running);
+        }
+        self.linkage = Linkage::new(*self.config.plan());
+        self.snapshot.roller_turns = 0;
+        self.snapshot.roller_radius = self.config.settings().roller_radius;
+        Ok(())
+    }
+
     /// Operator Stop: both motors off at the next control step.
     pub fn stop(&mut self) {
         self.state = PlanterState::Stopped;
@@ -747,16 +769,18 @@ impl BeltPlanter {
                     cmd.enabled = true;
                 }
             }
-            self.snapshot.roller_turns = roller_turns;
-            self.snapshot.roller_radius = self
-                .config
-                .plan()
-                .roller_radius(j)
-                .unwrap_or(self.config.settings().roller_radius);
         } else {
             self.halt(LinkageAction::Stop);
             self.linkage = Linkage::new(*self.config.plan());
         }
+        // Also while stopped: the screen shows the turns made while a roll
+        // is threaded, and `j = 0` after *New roll*.
+        self.snapshot.roller_turns = roller_turns;
+        self.snapshot.roller_radius = self
+            .config
+            .plan()
+            .roller_radius(self.radius_turns(roller_turns))
+            .unwrap_or(self.config.settings().roller_radius);
         self.snapshot.state = self.state;
         self.snapshot.alarm = alarm;
         self.snapshot.feed_step_hz = cmd.feed_step_hz;

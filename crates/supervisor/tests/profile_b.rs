@@ -24,13 +24,19 @@
     clippy::float_cmp
 )]
 
+use hmi_proto::screen::Command;
 use kinematics::profile_b::{LinkageAction, ProfileBSettings};
 use kinematics::units::{Hertz, Metres, MetresPerSecond};
 use machine_sim::{Config, Event, Inputs, Machine, Profile};
+use supervisor::control::{Effect, Hardware, Supervisor};
+use supervisor::machine::{
+    BeltMachine, Machine as Firmware, BELT_MACHINE_ONLY, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING,
+};
 use supervisor::profile_b::{
     BeltPlanter, ConfigField, Error, PlanterAlarm, PlanterState, ProfileBConfig, ProfileBHardware,
     StepperCommand, CONFIG_BYTES,
 };
+use supervisor::settings::{Profile as MachineProfile, Settings};
 
 const HW: ProfileBHardware = ProfileBHardware::BOARD;
 
@@ -587,4 +593,183 @@ fn position_lock_keeps_the_belt_with_the_ground_and_tightens_the_spacing() {
         "the linkage alone lags {lag_free:?} um"
     );
     assert!(cv_lock < cv_free, "CV {cv_lock:.2} % vs {cv_free:.2} %");
+}
+
+// ---------------------------------------------------------------------
+// New roll (page 7 `broll`) and the roller index guard, on `BeltMachine`:
+// the profile B machine the firmware runs, which counts the roller index
+// pulses into `j`.
+
+/// Profile B's machine with the default settings (position lock on, the
+/// default placement).
+fn belt_machine() -> BeltMachine {
+    let settings = Settings {
+        profile: MachineProfile::SeedlingBelt,
+        ..Settings::default()
+    };
+    BeltMachine::new(settings, HW).unwrap()
+}
+
+/// `periods` control periods at 12 ground counts per period (Vm = π/8 m/s,
+/// see [`drive`]), a roller index pulse in every `pulse_every`-th period
+/// (0: none).
+fn run_belt(m: &mut BeltMachine, counter: &mut u16, periods: u32, pulse_every: u32) {
+    for i in 1..=periods {
+        *counter = counter.wrapping_add(12);
+        let pulses = u32::from(pulse_every != 0 && i % pulse_every == 0);
+        m.control_step(*counter, pulses);
+    }
+}
+
+/// SPEC §8 eq. 9 with eq. 8, in `f64` from the nominal defaults (X = 0.25 m,
+/// B = 0.10 m, r = 25 mm, h = 1 mm, 1600 steps/rev): the feeding motor's
+/// step rate `n2·steps/60`, `n2 = 60·Vm·B/(2π·X·(r + h·j))`.
+fn eq9_feed_hz(vm: f64, j: u32) -> f64 {
+    let (x, b, r, h, steps) = (0.25, 0.10, 0.025, 0.001, 1600.0);
+    let n2 = 60.0 * vm * b / (2.0 * std::f64::consts::PI * x * (r + h * f64::from(j)));
+    n2 * steps / 60.0
+}
+
+/// The bug: `j` counted from power-up and nothing reset it, so a second
+/// roll started at j ≈ 42, r' = 67 mm, and was fed at 25/67 = 37 % of the
+/// rate (spacing ≈ 2.7 X), the position lock with it. *New roll* with the
+/// motors stopped restarts `j`, and the next run feeds at eq. 9's rate for
+/// r = 25 mm. Tolerances: the linkage's target within 0.05 Hz of the `f64`
+/// formula at j = 0 (the stored U12F20 settings are 1.9e-5 off: 0.03 Hz at
+/// 1600 Hz) and within 0.05 % at j = 42 (h is stored 4e-4 high, r' =
+/// 67.016 mm: 2.4e-4, 0.15 Hz); the rate sent, with the position lock's
+/// correction, within 0.1 % once the start-up lag is taken up (measured:
+/// 1600.15 Hz, a belt lag of 2 µm).
+#[test]
+fn new_roll_while_stopped_feeds_the_next_run_at_the_empty_roller_rate() {
+    let vm = std::f64::consts::PI / 8.0;
+    let mut m = belt_machine();
+    let mut c = 0u16;
+    // A whole roll: 42 turns, one every 0.5 s, while planting.
+    assert_eq!(m.command(Command::Start), Effect::None);
+    run_belt(&mut m, &mut c, 42 * 50, 50);
+    let s = *m.planter().snapshot();
+    assert_eq!(s.roller_turns, 42);
+    assert_eq!(m.screen_status().roller_radius_dmm, 670);
+    let full = eq9_feed_hz(vm, 42); // 597.0 Hz
+    assert!(
+        (s.target_feed_step_hz.to_f64() - full).abs() < 5e-4 * full,
+        "{} vs {full}",
+        s.target_feed_step_hz
+    );
+
+    // Refused while running: nothing changes.
+    assert_eq!(
+        m.command(Command::NewRoll),
+        Effect::Message(NEW_ROLL_WHILE_RUNNING)
+    );
+    run_belt(&mut m, &mut c, 1, 0);
+    assert_eq!(m.planter().snapshot().roller_turns, 42);
+    assert_eq!(m.roller_turns(), 42);
+    assert_eq!(
+        m.planter().snapshot().target_feed_step_hz,
+        s.target_feed_step_hz
+    );
+
+    // Stopped (the machine stands while the roll is changed): taken, and
+    // the screen shows j = 0 and r at once.
+    assert_eq!(m.command(Command::Stop), Effect::None);
+    for _ in 0..10 {
+        m.control_step(c, 0);
+    }
+    assert_eq!(m.command(Command::NewRoll), Effect::Message(NEW_ROLL_DONE));
+    let st = m.screen_status();
+    assert_eq!((st.roller_turns, st.roller_radius_dmm), (0, 250));
+    assert_eq!(m.roller_turns(), 0);
+
+    // The next run: eq. 9 at j = 0 (1600 Hz), not at j = 42 (597 Hz).
+    assert_eq!(m.command(Command::Start), Effect::None);
+    run_belt(&mut m, &mut c, 400, 0);
+    let s = *m.planter().snapshot();
+    let empty = eq9_feed_hz(vm, 0);
+    assert_eq!(s.roller_turns, 0);
+    assert!(
+        (s.target_feed_step_hz.to_f64() - empty).abs() < 0.05,
+        "{} vs {empty}",
+        s.target_feed_step_hz
+    );
+    assert!(
+        (s.feed_step_hz.to_f64() - empty).abs() < 1e-3 * empty,
+        "sent {} vs {empty}",
+        s.feed_step_hz
+    );
+    // And the position lock's belt is fed at r's radius: its lag is small.
+    assert!(
+        m.planter().belt_lag_um().abs() < 100,
+        "{}",
+        m.planter().belt_lag_um()
+    );
+}
+
+/// Profile A has no belt roller: *New roll* is refused with a message and
+/// changes nothing (also through `Machine`, as the firmware calls it).
+#[test]
+fn new_roll_is_refused_on_profile_a_and_the_messages_fit() {
+    let mut a = Supervisor::new(Hardware::BOARD, Settings::default()).unwrap();
+    let before = a.settings().clone();
+    assert_eq!(
+        a.command(Command::NewRoll),
+        Effect::Message(BELT_MACHINE_ONLY)
+    );
+    assert_eq!(a.settings(), &before);
+    let mut m = Firmware::DrumBelt(a);
+    assert_eq!(
+        m.command(Command::NewRoll),
+        Effect::Message(BELT_MACHINE_ONLY)
+    );
+    for text in [BELT_MACHINE_ONLY, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING] {
+        assert!(
+            text.is_ascii() && text.len() <= hmi_proto::MAX_TEXT_LEN,
+            "{text}"
+        );
+    }
+}
+
+/// The roller index input has no debounce. Each bounce used to add a
+/// turn to `j` (measured before the guard: j = 4 after one turn with
+/// three bounces, 200 after 100 turns each with a bounce 10 ms later).
+/// The guard counts at most one pulse per `roller_index_gap_periods`
+/// (4 periods on the board: half of the 80 ms turn at the 20 kHz ceiling,
+/// 1600 steps/rev) and never drops a real turn, even at that ceiling.
+#[test]
+fn roller_index_bounces_are_not_turns() {
+    let mut m = belt_machine();
+    let mut c = 0u16;
+    m.command(Command::Start);
+    run_belt(&mut m, &mut c, 50, 0);
+    // One turn: its pulse, a bounce in the next period, two in the third
+    // (an overcapture reported as two), then quiet.
+    for pulses in [1, 1, 0, 2, 0, 0, 0, 0] {
+        c = c.wrapping_add(12);
+        m.control_step(c, pulses);
+    }
+    assert_eq!(m.planter().snapshot().roller_turns, 1);
+    // 100 turns at paper B's fastest (≈ 1 r/s, 100 periods a turn), each
+    // with a bounce one period later.
+    for _ in 0..100 {
+        for i in 0..100 {
+            c = c.wrapping_add(12);
+            m.control_step(c, u32::from(i < 2));
+        }
+    }
+    assert_eq!(m.planter().snapshot().roller_turns, 101);
+    assert_eq!(m.index_pulses_ignored(), 3 + 100);
+    // The board's guard: 1600 steps at 20 kHz = 80 ms a turn, half = 40 ms.
+    assert_eq!(m.roller_index_gap_periods(), 4);
+    // Turns at the step-rate ceiling (one every 8 periods) all count, and
+    // so do pulses exactly one gap apart (4 periods).
+    let before = m.planter().snapshot().roller_turns;
+    run_belt(&mut m, &mut c, 8 * 50, 8);
+    run_belt(&mut m, &mut c, 4 * 50, 4);
+    assert_eq!(m.planter().snapshot().roller_turns, before + 100);
+    assert_eq!(m.index_pulses_ignored(), 103);
+    // Stopped (a roll threaded by hand), the turns still count.
+    m.command(Command::Stop);
+    run_belt(&mut m, &mut c, 20, 10);
+    assert_eq!(m.planter().snapshot().roller_turns, before + 102);
 }

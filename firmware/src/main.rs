@@ -29,6 +29,7 @@ compile_error!("enable at least one machine: feature `profile-a` or `profile-b`"
 
 mod board;
 mod div64;
+mod edge_queue;
 mod stats;
 
 use rtic_monotonics::systick::prelude::*;
@@ -71,6 +72,7 @@ mod app {
         board, mono_now, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS,
         RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS,
     };
+    use crate::edge_queue::DropMark;
     #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     use ::drive_link::link::ControlAction;
     #[cfg(feature = "drive-link")]
@@ -727,14 +729,21 @@ mod app {
     ///   so latency only has to stay below the shortest period (1 ms).
     /// - Released by TIM2 capture (≤ 1 kHz) and overflow (15.3 Hz).
     /// - Budget: 2 µs.
-    #[task(binds = TIM2, priority = 3, local = [edges_in], shared = [hall])]
+    #[task(binds = TIM2, priority = 3, local = [edges_in, drop_mark: DropMark = DropMark::new()], shared = [hall])]
     fn hall_capture(mut cx: hall_capture::Context) {
         if let Some(edge) = cx.shared.hall.lock(|h| h.on_interrupt()) {
             stats::HALL_EDGES.inc();
             if edge.after_lost {
                 stats::HALL_EDGES_LOST.inc();
             }
-            if cx.local.edges_in.enqueue(edge).is_err() {
+            // A full queue (the control task late) drops the edge; the next
+            // one queued follows a loss (firmware/src/edge_queue.rs).
+            let edges_in = &mut cx.local.edges_in;
+            if !cx
+                .local
+                .drop_mark
+                .queue(edge, |e| e.after_lost = true, |e| edges_in.enqueue(e))
+            {
                 stats::HALL_EDGES_DROPPED.inc();
             }
         }

@@ -652,6 +652,11 @@ mod app {
                 register,
                 code
             ),
+            Some(LossCause::Unfit { function, register }) => defmt::warn!(
+                "drive link: lost: the driver's replies to function {=u8} on register {=u16:#06x} do not fit the request (register width, function): check the driver profile",
+                function,
+                register
+            ),
             Some(LossCause::Corrupt) => defmt::warn!(
                 "drive link: lost: corrupt replies after the retries (noise, termination, baud)"
             ),
@@ -673,7 +678,10 @@ mod app {
                 age_us: u32::try_from(now_us.saturating_sub(s.sampled_at_us)).unwrap_or(u32::MAX),
             }),
             lost: link.is_lost(),
-            refused: matches!(link.loss_cause(), Some(LossCause::Refused { .. })),
+            refused: matches!(
+                link.loss_cause(),
+                Some(LossCause::Refused { .. } | LossCause::Unfit { .. })
+            ),
             answering: link.is_answering(),
             fault_word: link.fault_word(),
             fault_reads: link.counters().fault_reads,

@@ -111,6 +111,16 @@ pub enum LossCause {
         /// The exception code (1 function, 2 register, 3 value, 4 device).
         code: u8,
     },
+    /// The driver answered the last attempt from its slave id with a reply
+    /// that does not fit the request (a byte count for another register
+    /// width, a write echoed with another register or value): its profile
+    /// names the wrong register width or function.
+    Unfit {
+        /// The request's function code (3 read, 6 write).
+        function: u8,
+        /// The request's register.
+        register: u16,
+    },
 }
 
 /// Counters since start (wrapping at u32::MAX, never panicking).
@@ -206,6 +216,9 @@ pub struct Link {
     timed_out: bool,
     /// When the current request's first attempt ended (µs).
     first_sent_at: u64,
+    /// The current attempt got a reply from the slave that does not fit
+    /// it (not a late reply to it: that would fit).
+    unfit: bool,
 }
 
 impl Link {
@@ -231,6 +244,7 @@ impl Link {
             loss: None,
             timed_out: false,
             first_sent_at: 0,
+            unfit: false,
         }
     }
 
@@ -338,6 +352,7 @@ impl Link {
             if self.retry.is_none() {
                 self.first_sent_at = now_us;
             }
+            self.unfit = false;
             let deadline = now_us.saturating_add(u64::from(self.config.reply_timeout_us));
             self.state = State::Awaiting {
                 job,
@@ -376,10 +391,7 @@ impl Link {
             }
             Err(ReplyError::Exception(code)) => {
                 self.counters.exceptions = self.counters.exceptions.wrapping_add(1);
-                let (function, register) = match request {
-                    Request::Read { address, .. } => (0x03, address),
-                    Request::Write { address, .. } => (0x06, address),
-                };
+                let (function, register) = request.function_and_register();
                 self.failed(
                     now_us,
                     LossCause::Refused {
@@ -389,8 +401,11 @@ impl Link {
                     },
                 )
             }
-            Err(ReplyError::Slave(_) | ReplyError::Mismatch) => {
-                // A late reply to an earlier request: keep waiting.
+            Err(e) => {
+                // A late reply to an earlier request: keep waiting. From
+                // this slave it may also be its answer, unfit (the cause
+                // if this attempt fails).
+                self.unfit |= e == ReplyError::Mismatch;
                 self.counters.late_replies = self.counters.late_replies.wrapping_add(1);
                 None
             }
@@ -403,7 +418,14 @@ impl Link {
             State::Awaiting { deadline, .. } if now_us >= deadline => {
                 self.counters.timeouts = self.counters.timeouts.wrapping_add(1);
                 self.timed_out = true;
-                self.failed(now_us, LossCause::NoReply)
+                let cause = match (self.unfit, self.state) {
+                    (true, State::Awaiting { request, .. }) => {
+                        let (function, register) = request.function_and_register();
+                        LossCause::Unfit { function, register }
+                    }
+                    _ => LossCause::NoReply,
+                };
+                self.failed(now_us, cause)
             }
             _ => None,
         }

@@ -72,6 +72,18 @@ pub enum Request {
     },
 }
 
+impl Request {
+    /// The function code (3 read, 6 write) and the (first) register, as a
+    /// log names the request.
+    #[must_use]
+    pub const fn function_and_register(self) -> (u8, u16) {
+        match self {
+            Self::Read { address, .. } => (0x03, address),
+            Self::Write { address, .. } => (0x06, address),
+        }
+    }
+}
+
 /// A reply that matched its request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

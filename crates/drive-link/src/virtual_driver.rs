@@ -28,6 +28,9 @@ pub struct Injection {
     pub extra_delay_us: u32,
     /// Answer nothing.
     pub silent: bool,
+    /// Answer reads as a driver with 32-bit registers does: four bytes a
+    /// register (the value sign-extended), a byte count twice the asked.
+    pub wide_registers: bool,
 }
 
 /// The simulated driver.
@@ -123,7 +126,8 @@ impl VirtualZlac {
         let arg = u16::from_be_bytes([body[4], body[5]]);
         let reply = match f {
             0x03 if (1..=2).contains(&arg) => {
-                let mut out = std::vec![self.slave, 0x03, (arg * 2) as u8];
+                let width = if self.inject.wide_registers { 4 } else { 2 };
+                let mut out = std::vec![self.slave, 0x03, (arg * width) as u8];
                 for r in reg..reg + arg {
                     let v = match r {
                         0x20AB => self.actual_decirpm as u16,
@@ -143,7 +147,11 @@ impl VirtualZlac {
                             ))
                         }
                     };
-                    out.extend_from_slice(&v.to_be_bytes());
+                    if self.inject.wide_registers {
+                        out.extend_from_slice(&(v as i16 as i32).to_be_bytes());
+                    } else {
+                        out.extend_from_slice(&v.to_be_bytes());
+                    }
                 }
                 out
             }

@@ -267,6 +267,36 @@ fn a_refused_register_is_named_as_the_cause_of_the_loss() {
     assert_eq!(b.link.counters().losses, 1);
 }
 
+/// A driver whose registers are 32 bits wide (it answers a one-register
+/// read with a byte count of 4): every reply is from its slave id and has a
+/// good CRC but does not fit the request. The loss must name the request
+/// and that the reply did not fit (check the profile), not "no reply"
+/// (check the wiring), which it said before.
+#[test]
+fn a_driver_whose_replies_do_not_fit_is_named_as_the_cause() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        b.driver.inject.wide_registers = true;
+        b.run_for(600_000);
+        assert!(matches!(b.events.first(), Some((_, Event::Lost))));
+        // The first request is the velocity-mode write (fits: echoed), then
+        // the speed read of the ZLAC8015D's 0x20AB (Modbus function 03).
+        assert_eq!(
+            b.link.loss_cause(),
+            Some(LossCause::Unfit {
+                function: 0x03,
+                register: ZLAC8015D.speed_feedback
+            }),
+            "{baud} baud"
+        );
+        assert!(b.link.counters().late_replies >= 3);
+        // The same driver with 16-bit registers again: it answers.
+        b.driver.inject.wide_registers = false;
+        b.run_for(300_000);
+        assert!(b.link.is_answering());
+    }
+}
+
 #[test]
 fn a_cut_link_is_lost_within_the_retry_budget_and_recovers() {
     for baud in [9600, 115_200] {

@@ -445,9 +445,10 @@ pub struct LinkSample {
     pub speed: Option<ReadBack>,
     /// The link is lost (its retry budget used up) and not answering yet.
     pub lost: bool,
-    /// The loss came from Modbus exceptions: the driver answers but refuses
-    /// a register or function its profile names
-    /// ([`drive_link::link::LossCause::Refused`]).
+    /// The loss came from the driver's profile, not the line: the driver
+    /// answers but refuses a register or function its profile names
+    /// ([`drive_link::link::LossCause::Refused`]), or its replies do not
+    /// fit the requests ([`drive_link::link::LossCause::Unfit`]).
     pub refused: bool,
     /// The last transaction was answered.
     pub answering: bool,

@@ -275,6 +275,14 @@ pub struct EstimatorSettings {
     /// An edge closer than `last period >> glitch_shift` is a glitch
     /// (default 2, i.e. ¼ period).
     pub glitch_shift: u8,
+    /// The first gap after a stop (no edge for `stop_timeout_ticks`) shorter
+    /// than this is a glitch: there is no period yet to judge it by, and
+    /// from rest the gear cannot cover a tooth that fast. Default 20 ms:
+    /// from rest the first tooth (25.13 mm) brings the track to at most
+    /// √(2·a·p) and the next one takes ≥ 29 ms even at a = 1 g (docs/
+    /// kinematics.md). A contact bounce of the first edge (1 ms) read as
+    /// 85 km/h for a window and ran the drum to its limit. 0: off.
+    pub from_rest_min_gap_ticks: u32,
     /// Median of the last 3 measurements (adds about one window of latency).
     pub median_of_3: bool,
     /// Learn and compensate the tooth-pitch errors.
@@ -289,6 +297,7 @@ impl Default for EstimatorSettings {
             stop_timeout_ticks: 1_500_000,
             min_edge_gap_ticks: 500,
             glitch_shift: 2,
+            from_rest_min_gap_ticks: 20_000,
             median_of_3: false,
             pitch_compensation: true,
         }
@@ -331,7 +340,10 @@ impl EstimatorSettings {
         if self.timer_hz == 0 {
             return Err(EstimatorConfigError::TimerRate);
         }
-        if self.stop_timeout_ticks <= self.min_edge_gap_ticks || self.stop_timeout_ticks > 1 << 31 {
+        if self.stop_timeout_ticks <= self.min_edge_gap_ticks
+            || self.stop_timeout_ticks <= self.from_rest_min_gap_ticks
+            || self.stop_timeout_ticks > 1 << 31
+        {
             return Err(EstimatorConfigError::Timeout);
         }
         if !(1..=8).contains(&self.glitch_shift) {
@@ -361,6 +373,7 @@ impl EstimatorSettings {
             history_len: 0,
             glitches: 0,
             lost: false,
+            from_rest: false,
         })
     }
 }
@@ -551,6 +564,9 @@ pub struct MtEstimator {
     /// The period glitches are judged against (µs): the last gap, but grown
     /// by at most 2× an edge.
     glitch_ref: u32,
+    /// The newest edge came after a stop: the next gap is the first from
+    /// rest ([`EstimatorSettings::from_rest_min_gap_ticks`]).
+    from_rest: bool,
     ref_stamp: u32,
     ref_edges: u32,
     ref_valid: bool,
@@ -822,7 +838,11 @@ impl MtEstimator {
             let last = self.stamps.get(self.head).copied().unwrap_or(0);
             let dt = t.wrapping_sub(last);
             let expected_min = if self.glitch_ref == 0 {
-                0
+                if self.from_rest {
+                    self.cfg.from_rest_min_gap_ticks
+                } else {
+                    0
+                }
             } else {
                 self.glitch_ref >> self.cfg.glitch_shift
             };
@@ -840,6 +860,7 @@ impl MtEstimator {
                 // The glitch reference grows by at most 2× an edge: a gap
                 // that spans a short pause must not make the next
                 // full-speed gaps look like glitches.
+                self.from_rest = false;
                 self.glitch_ref = if self.glitch_ref == 0 {
                     dt
                 } else {
@@ -896,6 +917,7 @@ impl MtEstimator {
     }
 
     fn restart(&mut self) {
+        self.from_rest = true;
         self.valid_run = 0;
         self.last_gap = 0;
         self.gaps = [0; 3];

@@ -414,6 +414,43 @@ fn a_short_pause_does_not_turn_the_next_real_edges_into_glitches() {
     assert_eq!(push(20_000, &mut est), EdgeVerdict::Glitch);
 }
 
+/// A contact bounce of the first edge after a stop: the machine starts
+/// from rest (2 s without an edge, past the 1.5 s timeout) at 100 ms a
+/// tooth (24 r/min of the 25-tooth gear: 60 / (25 × 0.1 s), by hand), and
+/// the first edge bounces 1 ms later. With no period yet to judge it by,
+/// the bounce was taken as a 1 ms tooth: 2400 r/min of the gear (85 km/h
+/// of track) for a window, the drum commanded to its limit. From rest the
+/// next tooth cannot come within 20 ms (≥ 29 ms at 1 g, docs/kinematics.md),
+/// so it is a glitch; a real first gap of 30 ms still counts.
+#[test]
+fn a_bounce_of_the_first_edge_after_a_stop_is_a_glitch() {
+    use kinematics::speed::EdgeVerdict;
+    let mut est = EstimatorSettings::default().build().unwrap();
+    for k in 0..20u32 {
+        est.push_edge(Ticks(k * 100_000));
+    }
+    let t0 = 19 * 100_000 + 2_000_000;
+    assert_eq!(est.push_edge(Ticks(t0)), EdgeVerdict::Restart);
+    assert_eq!(est.push_edge(Ticks(t0 + 1_000)), EdgeVerdict::Glitch);
+    let mut fastest = 0.0f64;
+    for k in 1..=10u32 {
+        let t = t0 + k * 100_000;
+        assert_eq!(est.push_edge(Ticks(t)), EdgeVerdict::Accepted, "tooth {k}");
+        for dt in [1_000u32, 50_000] {
+            let m = est.update(Ticks(t + dt));
+            fastest = fastest.max(m.gear_speed.to_f64());
+        }
+    }
+    assert!(
+        fastest <= 24.0 * 1.05,
+        "gear read {fastest:.1} r/min, truth 24"
+    );
+    // A real first gap of 30 ms (a hard start) is a tooth.
+    let t1 = t0 + 10 * 100_000 + 2_000_000;
+    assert_eq!(est.push_edge(Ticks(t1)), EdgeVerdict::Restart);
+    assert_eq!(est.push_edge(Ticks(t1 + 30_000)), EdgeVerdict::Accepted);
+}
+
 /// Edge times of a 25-tooth gear whose tooth `k` sits `pos_err[k]` pitches
 /// off its nominal place, driven at `speed(t)` pitches per second for
 /// `secs` s, integrated in 10 µs steps.

@@ -3,6 +3,14 @@
 //!
 //! Data flow (documented in `docs/hmi.md`):
 //! * buttons send "Send Component ID" on release (`0x65 page id 0x00`);
+//!   Stop acts on its press too, from any page;
+//! * touches count only from the page the MCU knows is shown (another
+//!   page's: ignored, counted in [`HmiStats::foreign_page_touches`], and
+//!   the screen asked `sendme`);
+//! * a motor-starting button ([`Action::starts_motor`]: Start, Identify)
+//!   acts only on its press then its release, no other touch frame between,
+//!   within [`START_TAP_MS`], on the page shown: touch frames carry no CRC,
+//!   and one hit bit turns another button's frame into a Start;
 //! * an *Apply* button makes the MCU read the input with `get name.val`; the
 //!   `0x71` reply is validated into a [`Command`] or rejected with a message in
 //!   the page's `tmsg` box and the old value written back (nothing changes);
@@ -90,6 +98,11 @@ pub const LINK_TIMEOUT_MS: u32 = 2_500;
 /// so the next byte is read as a header whatever came before it.
 pub const RX_GAP_MS: u32 = 10;
 
+/// A motor-starting button's release counts only this long after its press
+/// (docs/hmi.md §3): a press held longer, or whose release was lost, is no
+/// tap (a tap takes 0.1–0.5 s).
+pub const START_TAP_MS: u32 = 2_000;
+
 /// Shown in the page's `tmsg` when the screen did not answer the `get` of
 /// an *Apply* within [`GET_TIMEOUT_MS`] (the field is set back to the value
 /// in force).
@@ -152,6 +165,14 @@ pub struct HmiStats {
     /// Releases of another component while a Stop was held: the Stop's
     /// release hit on the line, ignored.
     pub mismatched_releases: u32,
+    /// Touch events naming a page other than the one shown (or a
+    /// motor-starting button while the page is not known): ignored, and
+    /// the screen is asked its page.
+    pub foreign_page_touches: u32,
+    /// Releases of a motor-starting button without its press just before
+    /// (another touch frame between them, a lost or hit press, or held
+    /// longer than [`START_TAP_MS`]): ignored.
+    pub unpaired_starts: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -175,7 +196,7 @@ enum Link {
 
 /// The screen link: feed it received bytes and the time; drain events and bytes.
 ///
-/// Fixed size (≤ 704 bytes, asserted by a test: see the `*_QUEUE` and
+/// Fixed size (≤ 728 bytes, asserted by a test: see the `*_QUEUE` and
 /// [`TX_CAPACITY`] consts), no heap.
 #[derive(Debug)]
 pub struct Hmi {
@@ -202,6 +223,15 @@ pub struct Hmi {
     restart_seen: bool,
     /// The last touch frame was a Stop press: its release comes next.
     stop_held: bool,
+    /// [`page`](Self::page) is the page the screen shows (or will show
+    /// once it has read the `page` instruction queued): set by a `page`
+    /// instruction queued and by a `0x66` answer; cleared before the
+    /// handshake, on a lost link and when a `page` instruction did not fit
+    /// the transmit queue.
+    page_known: bool,
+    /// The last touch frame was the press of a motor-starting button on
+    /// the page shown: its page, id and the time.
+    start_press: Option<(u8, u8, u32)>,
 }
 
 impl Hmi {
@@ -228,6 +258,8 @@ impl Hmi {
             last_rx_ms: 0,
             restart_seen: false,
             stop_held: false,
+            page_known: false,
+            start_press: None,
         }
     }
 
@@ -387,7 +419,10 @@ impl Hmi {
     /// Shows `page` with its settings values.
     pub fn show_page(&mut self, page: Page) -> Result<(), TxFull> {
         self.page = page;
-        self.send(&Instruction::Page(page.id()))?;
+        // Not queued: the screen may still show the page before.
+        let sent = self.send(&Instruction::Page(page.id()));
+        self.page_known = sent.is_ok();
+        sent?;
         // `page_instructions`, component by component (no list on the
         // stack).
         for comp in Component::on_page(page) {
@@ -511,6 +546,8 @@ impl Hmi {
         self.touches.clear();
         self.tx.clear();
         self.stop_held = false;
+        self.start_press = None;
+        self.page_known = false;
         self.stats.link_losses = self.stats.link_losses.wrapping_add(1);
         self.event(Event::Disconnected);
     }
@@ -524,6 +561,7 @@ impl Hmi {
         self.touches.clear();
         self.restart_seen = false;
         self.stop_held = false;
+        self.start_press = None;
         let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
         let _ = self.send(&Instruction::Dims(self.settings.brightness.raw()));
         let _ = self.show_page(self.home_page());
@@ -553,6 +591,7 @@ impl Hmi {
                     Some(Page::Boot) | None => {}
                     Some(page) => {
                         self.page = page;
+                        self.page_known = true;
                         self.restart_seen = false;
                     }
                 },
@@ -564,37 +603,11 @@ impl Hmi {
             // dropping the link for it threw the operator off the run page.
             Frame::Startup => self.restart_seen = true,
             Frame::Ready => self.connect(),
-            // Stop counts on press and on release, connected or not (a
-            // corrupted frame may have looked like a screen restart): the
-            // screen file sends its ID on both, so one lost frame never
-            // loses a Stop (docs/hmi.md).
             Frame::Touch {
                 page,
                 component,
                 event,
-            } if Component::lookup(page, component)
-                .is_some_and(|c| matches!(c.role, Role::Action(Action::Stop))) =>
-            {
-                self.stop_held = event == TouchEvent::Press;
-                self.event(Event::Command(Command::Stop));
-            }
-            // A single-touch screen sends no other component's release
-            // between a press and its release: after a Stop press, a
-            // release naming another component is the Stop's release hit
-            // on the line (page 3: `bstop` 7 and `bstart` 6 are one bit
-            // apart), never a touch of it. Ignored; if the Stop's release
-            // was lost instead, the operator's next touch is ignored once.
-            Frame::Touch {
-                page,
-                component,
-                event: TouchEvent::Release,
-            } => {
-                if core::mem::take(&mut self.stop_held) {
-                    self.stats.mismatched_releases = self.stats.mismatched_releases.wrapping_add(1);
-                } else if self.is_connected() {
-                    self.on_touch(page, component);
-                }
-            }
+            } => self.on_touch(page, component, event),
             Frame::Number(v) => match self.pending.take() {
                 Some(p) => {
                     self.on_value(p.field, v);
@@ -612,11 +625,71 @@ impl Hmi {
         }
     }
 
-    fn on_touch(&mut self, page: u8, id: u8) {
-        let Some(comp) = Component::lookup(page, id) else {
+    /// One touch frame (docs/hmi.md §3). Frames carry no CRC: a motor
+    /// starts only on evidence one hit frame cannot fake — the press and
+    /// then the release of the same motor-starting button, no other touch
+    /// frame between them, within [`START_TAP_MS`], both naming the page
+    /// shown.
+    fn on_touch(&mut self, page: u8, id: u8, event: TouchEvent) {
+        // Whatever this frame is, a press waiting for its release is used.
+        let press = self.start_press.take();
+        let comp = Component::lookup(page, id);
+        let role = comp.map(|c| c.role);
+        // Stop counts on press and on release, from any page, connected or
+        // not (a corrupted frame may have looked like a screen restart):
+        // the screen file sends its ID on both, so one lost frame never
+        // loses a Stop.
+        if matches!(role, Some(Role::Action(Action::Stop))) {
+            self.stop_held = event == TouchEvent::Press;
+            self.event(Event::Command(Command::Stop));
+            return;
+        }
+        let starts_motor = matches!(role, Some(Role::Action(a)) if a.starts_motor());
+        let shown = self.page_known && page == self.page.id();
+        if event == TouchEvent::Press {
+            // Other buttons act on their release; their press is ignored.
+            if starts_motor && shown && self.is_connected() {
+                self.start_press = Some((page, id, self.now_ms));
+            }
+            return;
+        }
+        // A single-touch screen sends no other component's release
+        // between a press and its release: after a Stop press, a release
+        // naming another component is the Stop's release hit on the line
+        // (page 3: `bstop` 7 and `bstart` 6 are one bit apart), never a
+        // touch of it. Ignored; if the Stop's release was lost instead,
+        // the operator's next touch is ignored once.
+        if core::mem::take(&mut self.stop_held) {
+            self.stats.mismatched_releases = self.stats.mismatched_releases.wrapping_add(1);
+            return;
+        }
+        if !self.is_connected() {
+            return;
+        }
+        let Some(comp) = comp else {
             self.stats.unknown_touches = self.stats.unknown_touches.wrapping_add(1);
             return;
         };
+        if !shown {
+            // Another page than the one shown (in flight across a page
+            // change, or a hit page byte), or the page is not known: ask
+            // the screen, so that a page believed wrongly is put right.
+            let _ = self.send(&Instruction::SendMe);
+            if self.page_known || starts_motor {
+                self.stats.foreign_page_touches = self.stats.foreign_page_touches.wrapping_add(1);
+                return;
+            }
+            // Page not known: the other buttons are taken from the page
+            // they name, as before.
+            self.page = comp.page;
+        } else if starts_motor
+            && !press.is_some_and(|(p, i, t)| {
+                p == page && i == id && self.now_ms.wrapping_sub(t) <= START_TAP_MS
+            })
+        {
+            self.stats.unpaired_starts = self.stats.unpaired_starts.wrapping_add(1);
+            return;
+        }
         if self.pending.is_some() {
             if self.touches.push_back((page, id)).is_err() {
                 self.stats.touches_dropped = self.stats.touches_dropped.wrapping_add(1);
@@ -638,8 +711,9 @@ impl Hmi {
     }
 
     fn act(&mut self, comp: &'static Component) {
-        // The screen is the truth about which page is shown.
-        self.page = comp.page;
+        // The page is not taken from the touch: it was checked on arrival
+        // (`on_touch`), and a queued navigation acted on before this touch
+        // has changed it since.
         let Role::Action(action) = comp.role else {
             return;
         };

@@ -1007,7 +1007,8 @@ impl StatusField {
     }
 }
 
-/// What a button does when released.
+/// What a button does when released (a motor-starting one: when pressed
+/// then released, [`Action::starts_motor`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Action {
@@ -1058,11 +1059,24 @@ pub enum Action {
     NewRoll,
 }
 
+impl Action {
+    /// `true` for the buttons whose command starts a motor: *Start*
+    /// (profile A's drum, profile B's two steppers) and *Identify* (runs
+    /// the drum for 7 s). Their screen file sends the press and the
+    /// release, and the MCU acts only on the press then the release of the
+    /// same button on the page shown (docs/hmi.md §3). Calibration's
+    /// *Start run* only starts counting.
+    pub const fn starts_motor(self) -> bool {
+        matches!(self, Self::Start | Self::IdentifyDrive)
+    }
+}
+
 /// The role of a component in the contract.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Role {
-    /// A button: "Send Component ID" on Touch Release.
+    /// A button: "Send Component ID" on Touch Release (and on Touch Press
+    /// for Stop and [`Action::starts_motor`], docs/hmi.md §3).
     Action(Action),
     /// An editable number (numeric keyboard); read by `get name.val`.
     Input(Field),

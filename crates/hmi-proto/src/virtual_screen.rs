@@ -38,7 +38,7 @@ use std::string::{String, ToString};
 use std::vec::Vec;
 
 use crate::frame::{ErrorCode, Frame, Text, TouchEvent};
-use crate::screen::{Kind, Page, COMPONENTS};
+use crate::screen::{Action, Kind, Page, Role, COMPONENTS};
 use crate::TERMINATOR;
 
 /// Size of the screen's serial instruction buffer (Nextion: 1024 bytes).
@@ -124,7 +124,9 @@ impl VirtualScreen {
     }
 
     /// The transplanter's screen file ([`crate::screen::COMPONENTS`]): buttons
-    /// send their id on release, Stop buttons on press too (docs/hmi.md).
+    /// send their id on release, Stop buttons and the motor-starting
+    /// buttons (Start, Identify: [`Action::starts_motor`]) on press too
+    /// (docs/hmi.md §3).
     /// Shows page 0; call [`boot`](Self::boot)
     /// to emit the power-on frames.
     pub fn with_contract() -> Self {
@@ -136,7 +138,10 @@ impl VirtualScreen {
                 id: c.id(),
                 name: c.name().to_string(),
                 is_text: c.kind() == Kind::Text,
-                send_on_press: c.role == crate::screen::Role::Action(crate::screen::Action::Stop),
+                send_on_press: matches!(
+                    c.role,
+                    Role::Action(a) if a == Action::Stop || a.starts_motor()
+                ),
                 send_on_release: c.kind() == Kind::Button,
                 val: 0,
                 txt: String::new(),

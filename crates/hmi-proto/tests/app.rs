@@ -116,7 +116,7 @@ fn a_reply_hit_in_its_header_is_no_screen_restart() {
     assert_eq!(screen.page(), Page::Adaptive.id());
     assert_eq!(hmi.page(), Page::Adaptive);
     // Touches work at once (Start, then Apply with the value again).
-    screen.release("bstart").unwrap();
+    screen.tap("bstart").unwrap();
     assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
 
     // A real restart whose `0x88` is lost: the heartbeat's answer naming
@@ -197,7 +197,7 @@ fn operator_sets_spacing_and_starts() {
     );
     assert_eq!(screen.text("tgear"), Some("Low 3"));
 
-    screen.release("bstart").unwrap();
+    screen.tap("bstart").unwrap();
     screen.release("bstop").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
@@ -369,7 +369,7 @@ fn pitfall_touch_during_get_is_not_lost() {
     assert!(hmi.awaiting_reply());
     // The operator presses Start before the screen answers: its touch frame
     // arrives first, the number after.
-    screen.release("bstart").unwrap();
+    screen.tap("bstart").unwrap();
     screen.feed(&buf[..n]);
     hmi.push_slice(&screen.take_output());
     let mut ev = Vec::new();
@@ -395,7 +395,7 @@ fn stop_is_never_delayed_and_queued_touches_survive_a_timeout() {
     hmi.push_slice(&screen.take_output());
     assert!(hmi.awaiting_reply());
     // The reply is lost. Start is queued, Stop goes through at once.
-    screen.release("bstart").unwrap();
+    screen.tap("bstart").unwrap();
     screen.release("bstop").unwrap();
     hmi.push_slice(&screen.take_output());
     assert_eq!(hmi.poll_event(), Some(cmd(Command::Stop)));
@@ -464,9 +464,10 @@ fn a_burst_of_screen_errors_never_costs_a_stop_or_a_command() {
         Some(&cmd(Command::SelectGear(Gear::Low2))),
         "{ev:?}"
     );
-    // A queue full of Starts (nine releases in 63 bytes) then Stop: the last
-    // word is Stop.
+    // A queue full of Starts (eight taps, press and release, in 112 bytes)
+    // then Stop: the last word is Stop.
     for _ in 0..EVENT_QUEUE {
+        hmi.push_slice(&[0x65, 0x03, 0x06, 0x01, 0xFF, 0xFF, 0xFF]);
         hmi.push_slice(&[0x65, 0x03, 0x06, 0x00, 0xFF, 0xFF, 0xFF]);
     }
     hmi.push_slice(&[0x65, 0x03, 0x07, 0x00, 0xFF, 0xFF, 0xFF]);
@@ -474,6 +475,8 @@ fn a_burst_of_screen_errors_never_costs_a_stop_or_a_command() {
     while let Some(e) = hmi.poll_event() {
         ev.push(e);
     }
+    assert_eq!(ev.len(), EVENT_QUEUE, "{ev:?}");
+    assert_eq!(ev[0], cmd(Command::Start), "{ev:?}");
     assert_eq!(ev.last(), Some(&cmd(Command::Stop)), "{ev:?}");
 }
 
@@ -490,7 +493,7 @@ fn a_stop_release_hit_into_a_start_does_not_restart() {
     let (mut hmi, mut screen) = connected();
     screen.release("badapt").unwrap();
     pump(&mut hmi, &mut screen);
-    screen.release("bstart").unwrap();
+    screen.tap("bstart").unwrap();
     assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
     hmi.push_slice(&[0x65, 0x03, 0x07, 0x01, 0xFF, 0xFF, 0xFF]); // Stop press
     hmi.push_slice(&[0x65, 0x03, 0x06, 0x00, 0xFF, 0xFF, 0xFF]); // its release, hit
@@ -500,12 +503,12 @@ fn a_stop_release_hit_into_a_start_does_not_restart() {
     }
     assert_eq!(ev, vec![cmd(Command::Stop)]);
     // The operator's next Start is a Start.
-    screen.release("bstart").unwrap();
+    screen.tap("bstart").unwrap();
     assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
     // A Stop pressed and released normally, then Start: both count.
     screen.press("bstop").unwrap();
     screen.release("bstop").unwrap();
-    screen.release("bstart").unwrap();
+    screen.tap("bstart").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
         vec![cmd(Command::Stop), cmd(Command::Stop), cmd(Command::Start)]
@@ -652,7 +655,7 @@ fn calibration_and_settings_pages() {
     screen.release("bdrive").unwrap();
     assert!(pump(&mut hmi, &mut screen).is_empty());
     assert_eq!(screen.page(), Page::Drive.id());
-    screen.release("bident").unwrap();
+    screen.tap("bident").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
         vec![cmd(Command::IdentifyDrive)]
@@ -805,7 +808,7 @@ fn profile_b_starts_on_the_belt_page_and_returns_home() {
     assert_eq!(screen.page(), Page::Belt.id());
 
     // Start and Stop on page 7.
-    screen.release("bstart").unwrap();
+    screen.tap("bstart").unwrap();
     screen.release("bstop").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
@@ -1153,7 +1156,7 @@ proptest! {
             let mut buf = [0u8; 512];
             let script: &[&dyn Fn(&mut VirtualScreen)] = &[
                 &|s| { let _ = s.release("badapt"); },
-                &|s| { let _ = s.set_value("nspacing", 250); let _ = s.release("bapply"); let _ = s.release("bstart"); },
+                &|s| { let _ = s.set_value("nspacing", 250); let _ = s.release("bapply"); let _ = s.tap("bstart"); },
                 &|s| { let _ = s.set_value("nspacing", 5); let _ = s.release("bapply"); },
                 &|s| { let _ = s.release("bgeardn"); let _ = s.release("bstop"); },
             ];

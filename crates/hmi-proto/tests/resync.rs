@@ -307,6 +307,20 @@ proptest! {
             protocol_frame_at(&stream, p).is_some_and(|len| p + len < stream.len())
         });
         prop_assume!(!hidden);
+        // Rule 3 of `Decoder`: when the second frame's header breaks a
+        // terminator the stream before it had begun (`… FF FF`, the third
+        // byte turned into the header), a touch event right after that
+        // byte wins over a frame starting at it. A second frame whose
+        // bytes after its header are a whole touch event (a number reply
+        // `71 65 68 E1 00 FF FF FF`) is then read as that touch, by design
+        // (a lost Stop costs more than a lost reply, which the link asks
+        // for again). Found by this test on CI: noise `71 00`, first
+        // `66 00 FF FF FF`, then that number.
+        let rule3 = stream[..second_at].ends_with(&[0xFF, 0xFF])
+            && stream.get(second_at + 1) == Some(&0x65)
+            && protocol_frame_at(&stream, second_at + 1)
+                .is_some_and(|len| second_at + 1 + len == stream.len());
+        prop_assume!(!rule3);
         let want = decode_alone(&second);
         let mut d = Decoder::new();
         let mut frames = Vec::new();

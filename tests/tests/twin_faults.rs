@@ -398,8 +398,11 @@ fn usart1_overrun_is_counted_and_the_link_recovers() {
     // bytes arrive faster than they can be read.
     twin.tap("bsave").unwrap();
     for _ in 0..100 {
-        // A `sendme` answer (0x66 page) over and over: valid frames.
-        let burst: Vec<u8> = [0x66u8, 0x01, 0xFF, 0xFF, 0xFF].repeat(12);
+        // A `sendme` answer (0x66 page) over and over: valid frames,
+        // naming the page shown (6, settings). (A screen answering page 1
+        // here would say page 1 is shown, and the operator's next touch on
+        // page 6 would be ignored as another page's: docs/hmi.md §3.)
+        let burst: Vec<u8> = [0x66u8, 0x06, 0xFF, 0xFF, 0xFF].repeat(12);
         twin.send_serial(0, &burst);
         twin.run_ms(5).unwrap();
     }

@@ -16,16 +16,21 @@ const SYSCLK: f64 = 72e6;
 const PCLK1: f64 = 36e6;
 const PCLK2: f64 = 72e6;
 
-fn boot(image: Image) -> Twin {
+/// The image on a fresh twin at power-on, not run yet.
+fn load(image: Image) -> Twin {
     let elf = image.elf().expect("build the real-board image");
-    let mut twin = Twin::new(
+    Twin::new(
         &elf,
         Options {
             decode_logs: false,
             ..Options::default()
         },
     )
-    .expect("load the ELF");
+    .expect("load the ELF")
+}
+
+fn boot(image: Image) -> Twin {
+    let mut twin = load(image);
     // init runs with interrupts off, then the idle loop sleeps: 50 ms is
     // ample (init is ~1 ms of work plus the 2 ms HSE start-up).
     let slept = twin
@@ -351,15 +356,7 @@ fn profile_b_step_timers_are_not_blocked_after_init() {
 #[test]
 fn the_outputs_are_driven_low_before_the_watchdog_starts() {
     for image in [Image::ProfileA, Image::ProfileB] {
-        let elf = image.elf().expect("build the real-board image");
-        let mut twin = Twin::new(
-            &elf,
-            Options {
-                decode_logs: false,
-                ..Options::default()
-            },
-        )
-        .expect("load the ELF");
+        let mut twin = load(image);
         let mut outputs = vec![('A', 8), ('B', 12), ('A', 1)];
         if image == Image::ProfileB {
             outputs.push(('B', 6));

@@ -1113,23 +1113,34 @@ fn docs_list_every_component() {
 /// have one. Measured before the fix: page 9's `bstop` row said "Release:
 /// Send ID" only, and §3 named pages 4, 7 and 2 (page 4 has no Stop; 3 and
 /// 9 were missing).
+/// docs/hmi.md's row of component `c` in its page's table.
+#[allow(clippy::expect_used, clippy::panic, clippy::unwrap_used)]
+fn doc_row<'d>(doc: &'d str, c: &Component) -> &'d str {
+    let heading = format!("### Page {} `{}`", c.page.id(), c.page.name());
+    let section = doc.split(&heading).nth(1).expect("page section");
+    let section = section.split("### Page").next().unwrap();
+    let row_start = format!("| {} | `{}` |", c.id(), c.name());
+    section
+        .lines()
+        .find(|l| l.starts_with(&row_start))
+        .unwrap_or_else(|| panic!("no row for {:?} {}", c.page, c.name()))
+}
+
+#[allow(clippy::expect_used)]
+fn hmi_doc() -> String {
+    std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/hmi.md"))
+        .expect("docs/hmi.md")
+}
+
 #[test]
 fn docs_ask_for_press_and_release_on_every_stop() {
-    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/hmi.md"))
-        .expect("docs/hmi.md");
+    let doc = hmi_doc();
     let mut stop_pages = Vec::new();
     for c in COMPONENTS
         .iter()
         .filter(|c| c.role == Role::Action(Action::Stop))
     {
-        let heading = format!("### Page {} `{}`", c.page.id(), c.page.name());
-        let section = doc.split(&heading).nth(1).expect("page section");
-        let section = section.split("### Page").next().unwrap();
-        let row_start = format!("| {} | `{}` |", c.id(), c.name());
-        let row = section
-            .lines()
-            .find(|l| l.starts_with(&row_start))
-            .expect("Stop row");
+        let row = doc_row(&doc, c);
         assert!(row.contains("Press **and** Release"), "{:?}: {row}", c.page);
         stop_pages.push(c.page.id());
     }
@@ -1138,6 +1149,25 @@ fn docs_ask_for_press_and_release_on_every_stop() {
     assert!(
         doc.contains("(`bstop` on pages 2, 3 and 9 of profile A and page 7 of profile B)"),
         "§3 names the Stop pages"
+    );
+}
+
+/// A builder follows the page tables: every motor-starting button's row
+/// must ask for its ID on press and on release (docs/hmi.md §6), and §3
+/// must name them.
+#[test]
+fn docs_ask_for_press_and_release_on_every_motor_start() {
+    let doc = hmi_doc();
+    for c in COMPONENTS
+        .iter()
+        .filter(|c| matches!(c.role, Role::Action(a) if a.starts_motor()))
+    {
+        let row = doc_row(&doc, c);
+        assert!(row.contains("Press **and** Release"), "{:?}: {row}", c.page);
+    }
+    assert!(
+        doc.contains("(`bstart` on pages 2, 3 and 7, `bident` on page\n  9)"),
+        "§3 names the motor-starting buttons"
     );
 }
 

@@ -336,30 +336,3 @@ fn after_a_reconnect_an_old_pages_start_is_ignored() {
     hmi.push_slice(&touch(3, 6, TouchEvent::Release));
     assert_eq!(events(&mut hmi), []);
 }
-
-/// A builder follows the page tables: every motor-starting button's row
-/// must ask for its ID on press and on release (docs/hmi.md §6), and §3
-/// must name them.
-#[test]
-fn docs_ask_for_press_and_release_on_every_motor_start() {
-    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/hmi.md"))
-        .expect("docs/hmi.md");
-    for c in COMPONENTS
-        .iter()
-        .filter(|c| matches!(c.role, Role::Action(a) if a.starts_motor()))
-    {
-        let heading = format!("### Page {} `{}`", c.page.id(), c.page.name());
-        let section = doc.split(&heading).nth(1).expect("page section");
-        let section = section.split("### Page").next().unwrap();
-        let row_start = format!("| {} | `{}` |", c.id(), c.name());
-        let row = section
-            .lines()
-            .find(|l| l.starts_with(&row_start))
-            .expect("row");
-        assert!(row.contains("Press **and** Release"), "{:?}: {row}", c.page);
-    }
-    assert!(
-        doc.contains("(`bstart` on pages 2, 3 and 7, `bident` on page\n  9)"),
-        "§3 names the motor-starting buttons"
-    );
-}

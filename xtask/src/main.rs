@@ -202,24 +202,41 @@ fn ensure_tools() -> Result {
     ensure_linker()
 }
 
-/// Whether libclang (for unicorn's bindgen) is installed.
+/// Whether a file name is one that bindgen (clang-sys) loads as libclang.
+fn is_libclang(name: &str) -> bool {
+    name.starts_with("libclang.so")
+        || name.strip_prefix("libclang-").is_some_and(|rest| {
+            rest.starts_with(|c: char| c.is_ascii_digit()) && rest.contains(".so")
+        })
+}
+
+/// Whether the libclang that bindgen loads (for unicorn's build) is
+/// installed: `libclang.so*` or `libclang-<version>.so*`, in the library
+/// directories or an `llvm-*/lib` below them. `libclang-cpp.so` (which
+/// `llvm-dev` brings) is another library: bindgen cannot load it.
 fn have_libclang() -> bool {
+    fn dir_has_libclang(dir: &Path) -> bool {
+        std::fs::read_dir(dir)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .any(|e| is_libclang(&e.file_name().to_string_lossy()))
+    }
     [
         "/usr/lib",
         "/usr/lib/x86_64-linux-gnu",
         "/usr/lib/aarch64-linux-gnu",
     ]
     .iter()
-    .flat_map(|d| std::fs::read_dir(d).into_iter().flatten().flatten())
-    .any(|e| {
-        let name = e.file_name().to_string_lossy().into_owned();
-        (name.starts_with("llvm-")
-            && std::fs::read_dir(e.path().join("lib"))
+    .any(|d| {
+        let d = Path::new(d);
+        dir_has_libclang(d)
+            || std::fs::read_dir(d)
                 .into_iter()
                 .flatten()
                 .flatten()
-                .any(|l| l.file_name().to_string_lossy().starts_with("libclang")))
-            || name.starts_with("libclang-") && name.contains(".so")
+                .filter(|e| e.file_name().to_string_lossy().starts_with("llvm-"))
+                .any(|e| dir_has_libclang(&e.path().join("lib")))
     })
 }
 
@@ -600,7 +617,8 @@ fn packages(names: &[&str]) -> Vec<String> {
 /// `cargo xtask ci`: everything a submission must pass.
 fn ci() -> Result {
     let started = Instant::now();
-    ensure_linker()?;
+    // clippy builds the twin (unicorn, bindgen): its tools come first.
+    ensure_tools()?;
     run("rustfmt check", cargo().args(["fmt", "--all", "--check"]))?;
     run(
         "clippy host (all targets)",
@@ -835,4 +853,29 @@ fn flash() -> Result {
             .args(["run", "--chip", "STM32F103RB"])
             .arg(elf),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_libclang;
+
+    #[test]
+    fn libclang_is_the_library_bindgen_loads_not_libclang_cpp() {
+        for name in [
+            "libclang.so",
+            "libclang.so.1",
+            "libclang-14.so.1",
+            "libclang-16.so",
+        ] {
+            assert!(is_libclang(name), "{name}");
+        }
+        for name in [
+            "libclang-cpp.so.14",
+            "libclang-cpp.so",
+            "libclangBasic.a",
+            "libclang.a",
+        ] {
+            assert!(!is_libclang(name), "{name}");
+        }
+    }
 }

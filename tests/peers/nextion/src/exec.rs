@@ -388,11 +388,7 @@ impl Screen {
             self.note(
                 at_us,
                 NoteKind::TextTruncated,
-                format!(
-                    "{}: {} bytes cut to txt_maxl {maxl}",
-                    c.name,
-                    new.len()
-                ),
+                format!("{}: {} bytes cut to txt_maxl {maxl}", c.name, new.len()),
             );
             new.truncate(maxl);
         }
@@ -518,7 +514,8 @@ impl Screen {
             }
             "sendme" => {
                 count(0)?;
-                self.tx.send(at_us, &codes::frame(codes::CURRENT_PAGE, &[self.dp]));
+                self.tx
+                    .send(at_us, &codes::frame(codes::CURRENT_PAGE, &[self.dp]));
                 Ok(Done::Data)
             }
             "get" => {
@@ -647,7 +644,14 @@ impl Screen {
 /// NIS 6.12: "A get/print/printh/wup/sleep instruction can be executed
 /// during sleep mode."
 fn allowed_asleep(bytes: &[u8]) -> bool {
-    [&b"get "[..], b"print ", b"prints ", b"printh ", b"wup=", b"sleep="]
-        .iter()
-        .any(|p| bytes.starts_with(p))
+    [
+        &b"get "[..],
+        b"print ",
+        b"prints ",
+        b"printh ",
+        b"wup=",
+        b"sleep=",
+    ]
+    .iter()
+    .any(|p| bytes.starts_with(p))
 }

@@ -179,9 +179,7 @@ pub(crate) fn name(s: &[u8]) -> Result<Vec<Seg<'_>>, u8> {
             segs.push(Seg::Index(part.as_bytes()[0], n));
             continue;
         }
-        if !part
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'_')
+        if !part.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
             || part.as_bytes()[0].is_ascii_digit()
         {
             return Err(codes::INVALID_VARIABLE);
@@ -279,7 +277,9 @@ pub(crate) fn apply(op: u8, a: i32, b: i32) -> Option<i32> {
         b'+' => Some(a.wrapping_add(b)),
         b'-' => Some(a.wrapping_sub(b)),
         b'*' => Some(a.wrapping_mul(b)),
-        b'/' => a.checked_div(b).or_else(|| (b == -1).then(|| a.wrapping_neg())),
+        b'/' => a
+            .checked_div(b)
+            .or_else(|| (b == -1).then(|| a.wrapping_neg())),
         b'%' => a.checked_rem(b).or((b == -1).then_some(0)),
         _ => None,
     }

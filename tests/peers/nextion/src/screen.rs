@@ -393,7 +393,11 @@ impl Screen {
         let t = self.now_us;
         if self.booting_until.is_some() {
             if self.dropped_booting == 0 {
-                self.note(t, NoteKind::DroppedWhileBooting, "bytes lost while starting".into());
+                self.note(
+                    t,
+                    NoteKind::DroppedWhileBooting,
+                    "bytes lost while starting".into(),
+                );
             }
             self.dropped_booting += 1;
             return;
@@ -441,9 +445,16 @@ impl Screen {
         }
         match self.cfg.overflow {
             Overflow::Nextion => {
-                let lost = self.queue.len();
-                self.queue.clear();
-                self.queued_bytes = 0;
+                // The instruction being executed has left the buffer.
+                let running = self
+                    .queue
+                    .front()
+                    .filter(|p| p.received_us.max(self.busy_until) <= t)
+                    .is_some();
+                let keep = usize::from(running);
+                let lost = self.queue.len() - keep;
+                let dropped: usize = self.queue.drain(keep..).map(|p| p.bytes.len() + 3).sum();
+                self.queued_bytes -= dropped;
                 if self.partial.len() >= self.cfg.buffer_size {
                     self.partial.clear();
                     self.ff_run = 0;
@@ -461,7 +472,11 @@ impl Screen {
                     // instruction goes.
                     self.partial.clear();
                     self.ff_run = 0;
-                    self.note(t, NoteKind::LostToOverflow, "unfinished instruction lost".into());
+                    self.note(
+                        t,
+                        NoteKind::LostToOverflow,
+                        "unfinished instruction lost".into(),
+                    );
                     true
                 } else {
                     self.note(t, NoteKind::LostToOverflow, "byte dropped".into());
@@ -490,13 +505,17 @@ impl Screen {
     /// Execute the queued instructions that complete by `now_us`.
     fn run(&mut self, now_us: u64) {
         while self.booting_until.is_none() && !self.com_stopped {
-            let Some(front) = self.queue.front() else { break };
+            let Some(front) = self.queue.front() else {
+                break;
+            };
             let start = front.received_us.max(self.busy_until);
             let end = start + self.duration(&front.bytes);
             if end > now_us {
                 break;
             }
-            let Some(p) = self.queue.pop_front() else { break };
+            let Some(p) = self.queue.pop_front() else {
+                break;
+            };
             self.queued_bytes -= p.bytes.len() + 3;
             self.busy_until = end;
             self.execute(end, &p.bytes);
@@ -543,17 +562,15 @@ impl Screen {
     /// The page spec of a page id the screen file has (with the keyboard
     /// page in Popup mode).
     pub(crate) fn page_spec(&self, id: u8) -> Option<&'static PageSpec> {
-        contract::page(id).or(
-            (self.cfg.keyboard == Keyboard::Popup && id == contract::KEYBOARD_PAGE.id)
-                .then_some(&contract::KEYBOARD_PAGE),
-        )
+        contract::page(id).or((self.cfg.keyboard == Keyboard::Popup
+            && id == contract::KEYBOARD_PAGE.id)
+            .then_some(&contract::KEYBOARD_PAGE))
     }
 
     pub(crate) fn page_named(&self, name: &str) -> Option<&'static PageSpec> {
-        contract::page_named(name).or(
-            (self.cfg.keyboard == Keyboard::Popup && name == contract::KEYBOARD_PAGE.name)
-                .then_some(&contract::KEYBOARD_PAGE),
-        )
+        contract::page_named(name).or((self.cfg.keyboard == Keyboard::Popup
+            && name == contract::KEYBOARD_PAGE.name)
+            .then_some(&contract::KEYBOARD_PAGE))
     }
 
     /// Load page `id`: `dp` changes; its local components get their design
@@ -764,6 +781,11 @@ impl Screen {
     pub fn take_output_until(&mut self, now_us: u64) -> Vec<(u64, u8)> {
         self.advance(now_us);
         self.tx.take_until(now_us)
+    }
+
+    /// Bytes queued for sending and not yet taken.
+    pub fn output_queued(&self) -> usize {
+        self.tx.pending()
     }
 
     /// When the screen's transmitter has sent everything queued.

@@ -506,7 +506,7 @@ fn tjc_overflow_drops_the_bytes_until_there_is_room() {
     // The 47th instruction's first bytes wait in the buffer: an empty
     // instruction ends them (0x1A) before the next one.
     s.advance(100_000);
-    s.receive(100_000, &[&T[..], &i("sendme")].concat());
+    s.receive(100_000, &[T, &i("sendme")].concat());
     let out = s.take_output();
     assert_eq!(out, [f(0x24, &[]), f(0x1A, &[]), f(0x66, &[3])].concat());
     let n = s

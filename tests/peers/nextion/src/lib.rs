@@ -39,7 +39,9 @@
 //! * What the screen sends, in order, with when each byte has left at the
 //!   baud rate (10 bits a byte): [`Screen::take_output`],
 //!   [`Screen::take_output_timed`], [`Screen::take_output_until`].
-//! * Time is only the caller's (`now_us` arguments, never decreasing).
+//! * Time is only the caller's (`now_us` arguments; an earlier time than
+//!   one already seen counts as the latest). Touches take effect at once,
+//!   also while instructions wait to execute.
 //!
 //! # Choices where the documents are silent
 //!
@@ -82,6 +84,7 @@ mod exec;
 pub mod line;
 mod parse;
 mod screen;
+mod touch;
 
 pub use line::pace;
 pub use screen::{

@@ -167,3 +167,14 @@ fn a_release_after_the_mcu_changed_the_page_is_no_event() {
     assert_eq!(s.release(50_000, "bstop"), Touch::PageChanged);
     assert_eq!(s.take_output(), touch(3, 7, true));
 }
+
+#[test]
+fn a_page_instruction_closes_the_keyboard() {
+    let mut s = showing(8);
+    assert_eq!(s.tap(1_000, "nclamp").1, Touch::Keyboard);
+    s.receive(2_000, &i("page 5"));
+    assert!(s.keyboard_enter(3_000, 4).is_err());
+    assert!(s.keyboard_cancel(3_000).is_err());
+    assert_eq!(s.page(), 5);
+    assert_eq!(s.global_value(8, "nclamp"), Some(0));
+}

@@ -74,6 +74,9 @@ MANUAL_FRAMES = [
 READ_SPEED = ("01 03 20 AB 00 02 BE 2B", "01 03 04 00 64 00 64 BA 07")
 
 FAILURES = 0
+# Longest wait for an expected reply: reads return as soon as the reply is in, so a
+# generous ceiling costs nothing and keeps the test independent of host load.
+REPLY_WAIT = 3.0
 
 
 def check(cond: bool, what: str) -> None:
@@ -97,8 +100,18 @@ class Slave:
         return json.loads(self.p.stdout.readline())
 
 
-def crc(frame: bytes) -> bytes:
-    return FramerRTU.compute_CRC(frame).to_bytes(2, "big")
+def frame(hex_without_crc: str) -> bytes:
+    body = bytes.fromhex(hex_without_crc)
+    return body + FramerRTU.compute_CRC(body).to_bytes(2, "big")
+
+
+def write(client: ModbusSerialClient, address: int, *values: int) -> bool:
+    """Write one or more registers (06 / 16); True when the driver acknowledged."""
+    if len(values) == 1:
+        r = client.write_register(address, values[0] & 0xFFFF, device_id=1)
+    else:
+        r = client.write_registers(address, [v & 0xFFFF for v in values], device_id=1)
+    return not r.isError()
 
 
 def main() -> None:
@@ -114,7 +127,7 @@ def main() -> None:
                 break
             time.sleep(0.02)
         slave = Slave(a)
-        client = ModbusSerialClient(b, baudrate=115200, timeout=0.3, retries=0)
+        client = ModbusSerialClient(b, baudrate=115200, timeout=REPLY_WAIT, retries=0)
         check(client.connect(), "client connects")
         run(slave, client, client.socket)
         client.close()
@@ -131,18 +144,19 @@ def main() -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def raw(ser, frame: bytes, wait: float = 0.3, expect: int | None = None) -> bytes:
-    """Send raw bytes; collect the reply until `expect` bytes arrived or `wait` s passed."""
-    ser.reset_input_buffer()
-    ser.write(frame)
-    return receive(ser, wait, expect)
+def raw(ser, data: bytes, expect: int, wait: float = REPLY_WAIT) -> bytes:
+    """Send raw bytes; collect `expect` reply bytes (fewer if `wait` s pass first).
+
+    The input is never flushed: a stray reply byte would show up in the next comparison."""
+    ser.write(data)
+    return receive(ser, expect=expect, wait=wait)
 
 
-def receive(ser, wait: float = 0.3, expect: int | None = None) -> bytes:
+def receive(ser, expect: int, wait: float = REPLY_WAIT) -> bytes:
     out, deadline = b"", time.monotonic() + wait
-    while time.monotonic() < deadline and (expect is None or len(out) < expect):
+    while time.monotonic() < deadline and len(out) < expect:
         ser.timeout = max(0.0, deadline - time.monotonic())
-        out += ser.read(expect - len(out) if expect else 256)
+        out += ser.read(expect - len(out))
     return out
 
 
@@ -159,42 +173,42 @@ def run(slave: Slave, client: ModbusSerialClient, ser) -> None:
         check(got == want, f"manual frame {req} -> {got.hex(' ').upper()}")
     slave.cmd(cmd="time", ms=0)
     for req in ("01 06 20 0D 00 03 53 C8", "01 06 20 0E 00 08 E2 0F"):  # velocity mode, enable
-        raw(ser, hx(req), expect=8)
-    client.write_registers(0x2088, [10, 10], device_id=1)  # 10 r/min both motors
+        check(raw(ser, hx(req), expect=8) == hx(req), f"manual frame {req}")
+    check(write(client, 0x2088, 10, 10), "write 0x2088 = 10, 10")  # 10 r/min both motors
     got = raw(ser, hx(READ_SPEED[0]), expect=9)
     check(got == hx(READ_SPEED[1]), f"manual §2.1 read of actual speed -> {got.hex(' ').upper()}")
 
     # -- enable sequence ----------------------------------------------------------------
-    client.write_register(0x200E, 0x07, device_id=1)  # stop
-    client.write_register(0x200D, 0, device_id=1)
-    client.write_register(0x200E, 0x08, device_id=1)
+    check(write(client, 0x200E, 0x07), "write 0x200E = 0x07")  # stop
+    check(write(client, 0x200D, 0), "write 0x200D = 0")
+    check(write(client, 0x200E, 0x08), "write 0x200E = 0x08")
     check(slave.cmd(cmd="state")["enabled"] is False, "enable ignored without a control mode")
-    client.write_register(0x200D, 3, device_id=1)
-    client.write_register(0x200E, 0x08, device_id=1)
+    check(write(client, 0x200D, 3), "write 0x200D = 3")
+    check(write(client, 0x200E, 0x08), "write 0x200E = 0x08")
     st = slave.cmd(cmd="state")
     check(st["enabled"] is True and st["mode"] == 3, "enabled after mode 3 then 0x08 (§3.1)")
     sw = client.read_holding_registers(0x20A2, count=1, device_id=1).registers[0]
     check(sw == 0x4141, f"status word 0x20A2 shaft lock + running both sides: 0x{sw:04X}")
 
     # -- speed at resolution 1 and 10 ---------------------------------------------------
-    client.write_registers(0x2088, [100, (-250) & 0xFFFF], device_id=1)
+    check(write(client, 0x2088, 100, -250), "write 0x2088 = 100, -250")
     st = slave.cmd(cmd="state")
     fb = client.read_holding_registers(0x20AB, count=2, device_id=1).registers
     check(st["left"]["target_rpm"] == 100.0 and st["left"]["actual_rpm"] == 100.0
           and st["right"]["actual_rpm"] == -250.0 and fb == [1000, (-2500) & 0xFFFF],
           f"resolution 1: 100 / -250 r/min -> feedback {fb} (0.1 r/min)")
-    client.write_register(0x2022, 10, device_id=1)
+    check(write(client, 0x2022, 10), "write 0x2022 = 10")
     check(slave.cmd(cmd="get", reg="0x2022")["value"] == 10, "0x2022 set to 10")
     st = slave.cmd(cmd="state")
     check(st["left"]["actual_rpm"] == 10.0, "resolution 10: the same raw 100 is now 10.0 r/min")
-    client.write_register(0x2088, (-1234) & 0xFFFF, device_id=1)
+    check(write(client, 0x2088, -1234), "write 0x2088 = -1234")
     fb = client.read_holding_registers(0x20AB, count=1, device_id=1).registers[0]
     st = slave.cmd(cmd="state")
     check(st["left"]["target_rpm"] == -123.4 and fb == (-1234) & 0xFFFF,
           f"resolution 10: raw -1234 -> -123.4 r/min, feedback {fb - 65536}")
     r = client.write_register(0x2088, 30001, device_id=1)
     check(r.isError() and r.exception_code == 3, "resolution 10: 3000.1 r/min refused (exception 3)")
-    client.write_register(0x2022, 1, device_id=1)
+    check(write(client, 0x2022, 1), "write 0x2022 = 1")
 
     # -- 0x2008 maximum motor speed -----------------------------------------------------
     r = client.write_register(0x2008, 1001, device_id=1)
@@ -204,42 +218,43 @@ def run(slave: Slave, client: ModbusSerialClient, ser) -> None:
     r = client.write_register(0x2088, 2640, device_id=1)
     fb = client.read_holding_registers(0x20AB, count=1, device_id=1).registers[0]
     check(not r.isError() and fb == 10000, f"target 2640 accepted, speed limited to 1000 r/min: {fb}")
-    client.write_register(0x2008, 500, device_id=1)
+    check(write(client, 0x2008, 500), "write 0x2008 = 500")
     fb = client.read_holding_registers(0x20AB, count=1, device_id=1).registers[0]
     check(fb == 5000, f"0x2008 = 500 limits the speed to 500 r/min: {fb}")
-    client.write_register(0x2008, 1000, device_id=1)
+    check(write(client, 0x2008, 1000), "write 0x2008 = 1000")
 
     # -- fault latch and clear ----------------------------------------------------------
-    client.write_register(0x2088, 100, device_id=1)
+    check(write(client, 0x2088, 100), "write 0x2088 = 100")
     slave.cmd(cmd="set", reg="0x20A5", value=0x0800)
     st = slave.cmd(cmd="state")
     check(st["enabled"] is False and st["faults"] == ["encoder error"] and st["left"]["actual_rpm"] == 0,
           "fault 0x0800 (encoder error) stops the motor")
     regs = client.read_holding_registers(0x20A2, count=5, device_id=1).registers
     check(regs[0] & 0xC0 == 0xC0 and regs[3] == 0x0800, f"status word alarm, 0x20A5 = 0x0800: {regs}")
-    client.write_register(0x200E, 0x08, device_id=1)
+    check(write(client, 0x200E, 0x08), "write 0x200E = 0x08")
     st = slave.cmd(cmd="state")
     check(st["enabled"] is False and st["faults"] == ["encoder error"], "enable refused while faulted")
-    raw(ser, hx("01 06 20 0E 00 06 63 CB"), expect=8)  # clear fault (§3.5)
+    clear = hx("01 06 20 0E 00 06 63 CB")  # clear fault (§3.5)
+    check(raw(ser, clear, expect=8) == clear, "clear fault frame echoed")
     st = slave.cmd(cmd="state")
     check(st["faults"] == [] and st["enabled"] is False, "clear (0x06) clears the latch, driver disabled")
-    client.write_register(0x200E, 0x08, device_id=1)
+    check(write(client, 0x200E, 0x08), "write 0x200E = 0x08")
     check(slave.cmd(cmd="state")["enabled"] is True, "enable after clear")
 
     # -- offline time (0x2000, default 1000 ms) -----------------------------------------
     slave.cmd(cmd="time", ms=10_000)
-    client.write_register(0x200E, 0x08, device_id=1)  # a frame at t = 10 000
+    check(write(client, 0x200E, 0x08), "write 0x200E = 0x08")  # a frame at t = 10 000
     slave.cmd(cmd="time", ms=11_000)
     check(slave.cmd(cmd="state")["enabled"] is True, "still enabled 1000 ms after the last frame")
     slave.cmd(cmd="time", ms=11_001)
     st = slave.cmd(cmd="state")
     check(st["enabled"] is False and st["offline_stop"] is True and st["left"]["actual_rpm"] == 0,
           "stopped 1001 ms after the last frame")
-    client.write_register(0x200E, 0x08, device_id=1)
-    client.write_register(0x2000, 0, device_id=1)
+    check(write(client, 0x200E, 0x08), "write 0x200E = 0x08")
+    check(write(client, 0x2000, 0), "write 0x2000 = 0")
     slave.cmd(cmd="time", ms=100_000)
     check(slave.cmd(cmd="state")["enabled"] is True, "offline time 0 never stops")
-    client.write_register(0x2000, 1000, device_id=1)
+    check(write(client, 0x2000, 1000), "write 0x2000 = 1000")
 
     # -- unmapped addresses, read-only, unsupported functions ---------------------------
     for addr, count in ((0x2015, 1), (0x2014, 2), (0x1FFF, 1), (0x20B1, 1), (0x2041, 1)):
@@ -262,29 +277,36 @@ def run(slave: Slave, client: ModbusSerialClient, ser) -> None:
     check(not client.read_holding_registers(0x20AB, count=1, device_id=1).isError(), "clear_exceptions")
 
     # -- framing: bad CRC, other unit, chunks, back to back -----------------------------
+    # Silence is shown by order: the slave serves frames in order, so when the first bytes
+    # back are the reply to a good frame sent after a bad one, the bad one got no reply.
     good = hx("01 03 20 AB 00 02 BE 2B")
+    good_reply = raw(ser, good, expect=9)
+    check(len(good_reply) == 9, "reference reply")
+    probe = frame("01 03 20 00 00 01")  # offline time: 1000
+    probe_reply = frame("01 03 02 03 E8")
     bad = good[:-1] + bytes([good[-1] ^ 0x01])
-    check(raw(ser, bad) == b"", "silent on a bad CRC")
-    other = hx("02 03 20 AB 00 02") + crc(hx("02 03 20 AB 00 02"))
-    check(raw(ser, other) == b"", "silent on another unit id")
-    check(len(raw(ser, good, expect=9)) == 9, "answers after bad frames")
-    ser.reset_input_buffer()
+    check(raw(ser, bad + probe, expect=7) == probe_reply, "no reply to a bad CRC")
+    other = frame("02 03 20 AB 00 02")
+    check(raw(ser, other + probe, expect=7) == probe_reply, "no reply to another unit id")
+    check(raw(ser, bad, expect=0) == b"" and raw(ser, probe, expect=7) == probe_reply,
+          "bad CRC alone in a write, then a good frame in the next")
     for part in (good[:1], good[1:5], good[5:]):
         ser.write(part)
         time.sleep(0.03)
-    check(len(receive(ser, expect=9)) == 9, "request in three chunks answered")
+    check(receive(ser, expect=9) == good_reply, "request in three chunks answered")
     wr = hx("01 06 20 80 01 F4 83 F5")
-    got = raw(ser, wr + good, expect=17)
-    check(got[:8] == wr and len(got) == 17, "two requests back to back: two replies")
-    got = raw(ser, other + bad + good, expect=9)
-    check(len(got) == 9 and got[:3] == hx("01 03 04"), "other unit + bad CRC + good in one write: one reply")
+    check(raw(ser, wr + good, expect=17) == wr + good_reply, "two requests back to back: two replies")
+    check(raw(ser, other + bad + good, expect=9) == good_reply,
+          "other unit + bad CRC + good in one write: one reply")
+    check(write(client, 0x2000, 1000) and raw(ser, probe, expect=7) == probe_reply, "no stray bytes")
 
     # -- log ----------------------------------------------------------------------------
     log = slave.cmd(cmd="log")["requests"]
     check(len(log) > 50 and all("t_ms" in e for e in log), f"log holds {len(log)} requests")
     last = log[-1]
-    check(last["function"] == 3 and last["address"] == "0x20AB" and last["count"] == 2
-          and last["exception"] is None and last["t_ms"] == 100_000, f"last log entry {last}")
+    check(last["function"] == 3 and last["address"] == "0x2000" and last["count"] == 1
+          and last["reply"] == [1000] and last["exception"] is None and last["t_ms"] == 100_000,
+          f"last log entry {last}")
     check(any(e["exception"] == 2 for e in log), "log records exceptions")
     check(slave.cmd(cmd="log")["requests"] == [], "log is emptied by reading it")
 
@@ -296,3 +318,6 @@ if __name__ == "__main__":
         if e.code:
             print("selftest FAILED", flush=True)
         raise
+    except Exception as e:  # a client error (no reply, lost connection) is a failure too
+        print(f"FAIL {type(e).__name__}: {e}\nselftest FAILED", flush=True)
+        sys.exit(1)

@@ -9,6 +9,7 @@ Communication Instruction V1.06 (§2.1-2.3 p.4-5, §3.1-3.6 p.6-13).
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -88,8 +89,8 @@ def check(cond: bool, what: str) -> None:
 
 
 class Slave:
-    def __init__(self, port: str):
-        self.p = subprocess.Popen([sys.executable, os.path.join(HERE, "slave.py"), "--port", port],
+    def __init__(self, port: str, *extra: str):
+        self.p = subprocess.Popen([sys.executable, os.path.join(HERE, "slave.py"), "--port", port, *extra],
                                   stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         ready = json.loads(self.p.stdout.readline())
         check(ready.get("ready") is True and ready.get("port") == port, f"ready line {ready}")
@@ -130,15 +131,20 @@ def main() -> None:
         client = ModbusSerialClient(b, baudrate=115200, timeout=REPLY_WAIT, retries=0)
         check(client.connect(), "client connects")
         run(slave, client, client.socket)
+        slave.cmd(cmd="quit")
+        slave.p.wait(timeout=5)
+        slave = Slave(a, "--lag-ms", "100")
+        run_lag(slave, client)
         client.close()
         print("selftest passed", flush=True)
     finally:
         if slave:
-            try:
-                slave.cmd(cmd="quit")
-            except (BrokenPipeError, ValueError):
-                pass
-            slave.p.wait(timeout=5)
+            if slave.p.poll() is None:
+                try:
+                    slave.cmd(cmd="quit")
+                except (BrokenPipeError, ValueError):
+                    pass
+                slave.p.wait(timeout=5)
         socat.terminate()
         socat.wait()
         shutil.rmtree(tmp, ignore_errors=True)
@@ -298,6 +304,9 @@ def run(slave: Slave, client: ModbusSerialClient, ser) -> None:
     check(raw(ser, wr + good, expect=17) == wr + good_reply, "two requests back to back: two replies")
     check(raw(ser, other + bad + good, expect=9) == good_reply,
           "other unit + bad CRC + good in one write: one reply")
+    accel = frame("01 03 20 80 00 01")
+    check(raw(ser, frame("00 06 20 80 02 58") + accel, expect=7) == frame("01 03 02 02 58"),
+          "broadcast (unit 0) write executed without a reply")
     check(write(client, 0x2000, 1000) and raw(ser, probe, expect=7) == probe_reply, "no stray bytes")
 
     # -- log ----------------------------------------------------------------------------
@@ -308,7 +317,22 @@ def run(slave: Slave, client: ModbusSerialClient, ser) -> None:
           and last["reply"] == [1000] and last["exception"] is None and last["t_ms"] == 100_000,
           f"last log entry {last}")
     check(any(e["exception"] == 2 for e in log), "log records exceptions")
+    check(any(e["unit"] == 0 and e["values"] == [600] for e in log), "log records the broadcast")
     check(slave.cmd(cmd="log")["requests"] == [], "log is emptied by reading it")
+
+
+def run_lag(slave: Slave, client: ModbusSerialClient) -> None:
+    """--lag-ms 100: the actual speed follows the target with a 100 ms time constant."""
+    check(write(client, 0x200D, 3) and write(client, 0x200E, 0x08) and write(client, 0x2088, 100),
+          "lag: velocity mode, enable, 100 r/min")
+    check(slave.cmd(cmd="state")["left"]["actual_rpm"] == 0.0, "lag: speed 0 at the command")
+    slave.cmd(cmd="time", ms=100)
+    rpm = slave.cmd(cmd="state")["left"]["actual_rpm"]
+    fb = client.read_holding_registers(0x20AB, count=1, device_id=1).registers[0]
+    check(abs(rpm - 100 * (1 - math.exp(-1))) < 1e-9 and fb == 632, f"lag: {rpm:.3f} r/min after 100 ms")
+    check(write(client, 0x2000, 0), "lag: offline time off for the long wait")
+    slave.cmd(cmd="time", ms=2000)
+    check(abs(slave.cmd(cmd="state")["left"]["actual_rpm"] - 100) < 1e-6, "lag: settled after 2 s")
 
 
 if __name__ == "__main__":

@@ -186,7 +186,7 @@ class Drive:
 
     # -- derived quantities ------------------------------------------------
     def resolution(self) -> int:
-        return self.regs[0x2022]
+        return max(1, self.regs[0x2022])  # a harness "set" of 0 must not divide by zero
 
     def target_rpm(self, reg: int) -> float:
         return s16(self.regs[reg]) / self.resolution()
@@ -491,7 +491,7 @@ async def main() -> None:
             if c.get("cmd") == "quit":
                 break
             reply = peer.command(c)
-        except (ValueError, KeyError, TypeError) as e:
+        except Exception as e:  # a bad command never stops the slave
             reply = {"ok": False, "error": f"{type(e).__name__}: {e}"}
         emit(reply)
     await peer.server.shutdown()

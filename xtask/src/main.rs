@@ -22,6 +22,7 @@ use qemu_tests::{images, workspace_root, BootOptions};
 mod bench;
 mod plan;
 mod report;
+mod stack;
 
 type Result<T = ()> = std::result::Result<T, String>;
 
@@ -53,6 +54,7 @@ fn main() -> ExitCode {
         "plan" => plan::run(rest),
         "report" => report::run(rest),
         "bench" => bench::run(rest),
+        "stack" => stack_cmd(rest),
         "help" | "--help" | "-h" => {
             println!("{}", include_str!("usage.txt"));
             Ok(())
@@ -833,6 +835,21 @@ fn size() -> Result {
     check_forbidden_symbols(&Board::Stm32f103.elf())?;
     check_forbidden_symbols(&Board::Stm32f103ProfileB.elf())?;
     check_forbidden_symbols(&Board::Stm32f103DriveLink.elf())
+}
+
+/// `cargo xtask stack ELF [qemu]`: the stack analysis of one image.
+fn stack_cmd(args: &[String]) -> Result {
+    let elf = args.first().ok_or("stack: which ELF?")?;
+    let chip = if args.get(1).map(String::as_str) == Some("qemu") {
+        stack::Chip { ram: 0x2000_0000..0x2000_2000, nvic_prio_bits: 4 }
+    } else {
+        stack::Chip { ram: 0x2000_0000..0x2000_5000, nvic_prio_bits: 4 }
+    };
+    let t = Instant::now();
+    let report = stack::analyse(Path::new(elf), &llvm_tool("llvm-objdump")?, &chip)?;
+    println!("{}", report.table());
+    eprintln!("{:?}", t.elapsed());
+    report.check_margin()
 }
 
 /// `cargo xtask flash`: a real board on a debug probe.

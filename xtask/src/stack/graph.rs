@@ -1,0 +1,397 @@
+//! The call graph: each function analysed once (callees first, so that a
+//! caller knows which registers a call preserves), then the deepest path
+//! below each function, failing on recursion.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use super::flow::{self, Callee, Facts, Summary};
+use super::image::Image;
+
+/// A node of the call graph.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Node {
+    /// A function, by entry address.
+    Fn(u32),
+    /// A call through a function pointer the analysis could not resolve:
+    /// any function whose address the image stores.
+    AnyPointer,
+}
+
+/// How deep the stack goes below a node.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Depth {
+    /// Bytes below the node's entry SP, its callees included.
+    pub below: u32,
+    /// Bytes below the top of the stack on paths that restart the stack
+    /// (`msr msp`), 0 if none.
+    pub fresh: u32,
+}
+
+/// Where a node's deepest path goes next: the call's address and the
+/// callee (for `fresh`, also whether the call is the one on the
+/// restarted stack).
+#[derive(Clone, Copy, Debug, Default)]
+struct Via {
+    below: Option<(u32, Key)>,
+    fresh: Option<(u32, Key, bool)>,
+}
+
+/// The analysed functions of one image.
+pub struct Graph<'a> {
+    image: &'a Image,
+    summaries: BTreeMap<u32, Summary>,
+    in_progress: BTreeSet<u32>,
+    /// Each node's depth, by the panic handler's runs on its path.
+    depths: BTreeMap<Key, (Depth, Via)>,
+}
+
+impl<'a> Graph<'a> {
+    /// An empty graph over `image`.
+    pub fn new(image: &'a Image) -> Graph<'a> {
+        Graph {
+            image,
+            summaries: BTreeMap::new(),
+            in_progress: BTreeSet::new(),
+            depths: BTreeMap::new(),
+        }
+    }
+
+    /// Analyses the function at `entry` (and what it calls), giving what a
+    /// caller needs to know of it. A function reached again while it is
+    /// being analysed (recursion) counts as changing nothing and never
+    /// returning for now: [`Graph::stabilise`] then analyses again until
+    /// nothing changes.
+    pub fn facts(&mut self, entry: u32) -> Result<Facts, String> {
+        if let Some(s) = self.summaries.get(&entry) {
+            return Ok(s.facts);
+        }
+        if self.in_progress.contains(&entry) {
+            return Ok(Facts {
+                clobbers: super::insn::Regs::NONE,
+                returns: false,
+            });
+        }
+        if !self.image.insns.contains_key(&entry) {
+            return Err(format!(
+                "a call to {}, which is not an instruction",
+                self.image.name(entry)
+            ));
+        }
+        self.in_progress.insert(entry);
+        let image = self.image;
+        let summary = flow::analyse(image, entry, &mut |t| self.facts(t));
+        self.in_progress.remove(&entry);
+        let summary = summary?;
+        let facts = summary.facts;
+        self.summaries.insert(entry, summary);
+        Ok(facts)
+    }
+
+    /// Analyses every function again until no function's facts change:
+    /// the least fixed point for recursive functions (a register is
+    /// changed, a function returns, only if some path does so).
+    pub fn stabilise(&mut self) -> Result<(), String> {
+        for _ in 0..100 {
+            let mut changed = false;
+            let entries: Vec<u32> = self.summaries.keys().copied().collect();
+            for e in entries {
+                let image = self.image;
+                let s = flow::analyse(image, e, &mut |t| self.facts(t))?;
+                changed |= s.facts != self.summaries[&e].facts;
+                self.summaries.insert(e, s);
+            }
+            if !changed {
+                return Ok(());
+            }
+        }
+        Err("the analysis of recursive functions does not settle".into())
+    }
+
+    /// Whether some analysed call goes through a pointer the analysis
+    /// could not resolve.
+    pub fn has_unknown_calls(&self) -> bool {
+        self.summaries
+            .values()
+            .any(|s| s.sites.iter().any(|site| site.callee == Callee::Unknown))
+    }
+
+    /// Every analysed function.
+    pub fn summaries(&self) -> impl Iterator<Item = &Summary> {
+        self.summaries.values()
+    }
+
+    /// How deep the stack goes below `node`. Fails on recursion that
+    /// grows the stack, naming the cycle. (A cycle that adds nothing, such
+    /// as a waker's tail call through a function pointer, is harmless.)
+    pub fn depth(&mut self, node: Node) -> Result<Depth, String> {
+        let key = (node, 0);
+        if !self.depths.contains_key(&key) {
+            let mut t = Tarjan::default();
+            self.connect(key, &mut t)?;
+        }
+        Ok(self.depths[&key].0)
+    }
+
+    /// The calls out of a node: to nodes with the panic handler's runs on
+    /// the path counted. A panic inside the panic handler (the logger's
+    /// re-entrancy check) finds the handler's flag set and goes straight
+    /// to the end state, so the handler runs at most twice on one path:
+    /// the second run counts in full (more than its path to the end
+    /// state), a third is not followed.
+    fn edges(&mut self, key: Key) -> Result<Vec<Edge>, String> {
+        let (node, panics) = key;
+        let mut edges = Vec::new();
+        let to = |g: &Graph, c: Node| {
+            let inner = panics + u8::from(g.is_panic_handler(c));
+            (inner <= 2).then_some((c, inner))
+        };
+        match node {
+            Node::AnyPointer => {
+                let taken: Vec<u32> = self.image.address_taken.iter().copied().collect();
+                for t in taken {
+                    self.facts(t)?;
+                    if let Some(k) = to(self, Node::Fn(t)) {
+                        edges.push(Edge { at: 0, depth: 0, fresh: false, to: k });
+                    }
+                }
+            }
+            Node::Fn(entry) => {
+                self.facts(entry)?;
+                for site in &self.summaries[&entry].sites {
+                    let callees: Vec<Node> = match &site.callee {
+                        Callee::Known(ts) => ts.iter().map(|&t| Node::Fn(t)).collect(),
+                        Callee::Unknown => vec![Node::AnyPointer],
+                    };
+                    for c in callees {
+                        if let Some(k) = to(self, c) {
+                            edges.push(Edge {
+                                at: site.at,
+                                depth: site.depth,
+                                fresh: site.fresh,
+                                to: k,
+                            });
+                        }
+                    }
+                }
+            }
+        }
+        Ok(edges)
+    }
+
+    /// Tarjan's strongly connected components over the calls from `v`;
+    /// each component's depth is set once the components it calls have
+    /// theirs.
+    fn connect(&mut self, v: Key, t: &mut Tarjan) -> Result<(), String> {
+        let index = t.next;
+        t.next += 1;
+        t.index.insert(v, index);
+        t.low.insert(v, index);
+        t.stack.push(v);
+        let edges = self.edges(v)?;
+        for e in &edges {
+            let w = e.to;
+            if self.depths.contains_key(&w) {
+                continue;
+            }
+            match t.index.get(&w) {
+                None => {
+                    self.connect(w, t)?;
+                    let lw = t.low[&w];
+                    let lv = t.low.get_mut(&v).expect("on the stack");
+                    *lv = (*lv).min(lw);
+                }
+                Some(&iw) if t.stack.contains(&w) => {
+                    let lv = t.low.get_mut(&v).expect("on the stack");
+                    *lv = (*lv).min(iw);
+                }
+                Some(_) => {}
+            }
+        }
+        t.edges.insert(v, edges);
+        if t.low[&v] != index {
+            return Ok(());
+        }
+        let mut members = Vec::new();
+        while let Some(w) = t.stack.pop() {
+            members.push(w);
+            if w == v {
+                break;
+            }
+        }
+        self.settle(&members, t)
+    }
+
+    /// Sets the depth of one strongly connected component: the deepest of
+    /// its members' own frames and of its calls out, once the calls inside
+    /// it are shown to add nothing.
+    fn settle(&mut self, members: &[Key], t: &Tarjan) -> Result<(), String> {
+        let mut d = Depth::default();
+        // Where the deepest goes: (member, call address, callee key).
+        let mut best_below: Option<(Key, u32, Key)> = None;
+        let mut best_fresh: Option<(Key, u32, Key, bool)> = None;
+        for &m in members {
+            if let Node::Fn(f) = m.0 {
+                let s = &self.summaries[&f];
+                d.below = d.below.max(s.frame);
+                d.fresh = d.fresh.max(s.fresh_frame.unwrap_or(0));
+            }
+        }
+        for &m in members {
+            for e in &t.edges[&m] {
+                if members.contains(&e.to) {
+                    if (e.depth > 0 || e.fresh) && !members.iter().any(|k| k.0 == Node::AnyPointer) {
+                        return Err(self.recursion(members, t, m, e));
+                    }
+                    continue;
+                }
+                let cd = self.depths[&e.to].0;
+                let total = e.depth.saturating_add(cd.below);
+                if e.fresh {
+                    if total > d.fresh {
+                        d.fresh = total;
+                        best_fresh = Some((m, e.at, e.to, true));
+                    }
+                } else if total > d.below {
+                    d.below = total;
+                    best_below = Some((m, e.at, e.to));
+                }
+                if cd.fresh > d.fresh {
+                    d.fresh = cd.fresh;
+                    best_fresh = Some((m, e.at, e.to, false));
+                }
+            }
+        }
+        for &m in members {
+            // A member other than the one with the deepest call reaches it
+            // through the component, adding nothing.
+            let via = Via {
+                below: best_below.map(|(b, at, to)| if b == m { (at, to) } else { (0, b) }),
+                fresh: best_fresh.map(|(b, at, to, started)| {
+                    if b == m {
+                        (at, to, started)
+                    } else {
+                        (0, b, false)
+                    }
+                }),
+            };
+            self.depths.insert(m, (d, via));
+        }
+        Ok(())
+    }
+
+    /// The error for a cycle through the call `e` out of `from` that
+    /// grows the stack: the cycle's functions.
+    fn recursion(&self, members: &[Key], t: &Tarjan, from: Key, e: &Edge) -> String {
+        // Breadth-first from the callee back to `from`, inside the component.
+        let mut prev: BTreeMap<Key, Key> = BTreeMap::new();
+        let mut queue = std::collections::VecDeque::from([e.to]);
+        while let Some(k) = queue.pop_front() {
+            if k == from {
+                break;
+            }
+            for n in &t.edges[&k] {
+                if members.contains(&n.to) && n.to != e.to && !prev.contains_key(&n.to) {
+                    prev.insert(n.to, k);
+                    queue.push_back(n.to);
+                }
+            }
+        }
+        let mut cycle = vec![from];
+        let mut k = from;
+        while let Some(&p) = prev.get(&k) {
+            cycle.push(p);
+            k = p;
+            if cycle.len() > members.len() + 1 {
+                break;
+            }
+        }
+        if e.to != from {
+            cycle.push(e.to);
+        }
+        cycle.reverse();
+        cycle.push(e.to);
+        let names: Vec<String> = cycle.iter().map(|k| self.node_name(k.0)).collect();
+        format!(
+            "recursion: {} (the stack it needs has no bound; {} calls {} with {} B of frame)",
+            names.join(" → "),
+            self.node_name(from.0),
+            self.node_name(e.to.0),
+            e.depth
+        )
+    }
+
+    fn is_panic_handler(&self, n: Node) -> bool {
+        match n {
+            Node::Fn(a) => self.image.functions.get(&a).is_some_and(|name| {
+                name == "rust_begin_unwind" || name.ends_with("::rust_begin_unwind")
+            }),
+            Node::AnyPointer => false,
+        }
+    }
+
+    /// The functions of the deepest path below `node` (`fresh`: of the
+    /// deepest path on a restarted stack).
+    pub fn path(&self, node: Node, fresh: bool) -> Vec<Node> {
+        let mut path = vec![node];
+        let mut key = (node, 0u8);
+        let mut fresh = fresh;
+        while path.len() < 64 {
+            let Some((_, via)) = self.depths.get(&key) else { break };
+            let next = if fresh {
+                match via.fresh {
+                    Some((_, c, started)) => {
+                        if started {
+                            fresh = false;
+                        }
+                        c
+                    }
+                    None => break,
+                }
+            } else {
+                match via.below {
+                    Some((_, c)) => c,
+                    None => break,
+                }
+            };
+            if next.0 != key.0 {
+                path.push(next.0);
+            }
+            key = next;
+        }
+        path
+    }
+
+    /// A node's name.
+    pub fn node_name(&self, n: Node) -> String {
+        match n {
+            Node::Fn(a) => self.image.name(a),
+            Node::AnyPointer => "(any function pointer)".into(),
+        }
+    }
+}
+
+/// A node with the panic handler's runs on the path to it.
+type Key = (Node, u8);
+
+/// A call between nodes.
+#[derive(Clone, Copy, Debug)]
+struct Edge {
+    /// The call's address (0 for a pointer's possible target).
+    at: u32,
+    /// The caller's frame depth at the call.
+    depth: u32,
+    /// On a restarted stack.
+    fresh: bool,
+    /// The callee.
+    to: Key,
+}
+
+/// Tarjan's bookkeeping.
+#[derive(Default)]
+struct Tarjan {
+    next: u32,
+    index: BTreeMap<Key, u32>,
+    low: BTreeMap<Key, u32>,
+    stack: Vec<Key>,
+    edges: BTreeMap<Key, Vec<Edge>>,
+}

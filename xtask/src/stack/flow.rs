@@ -8,7 +8,7 @@
 //! `movt`, words read from read-only memory), and the constant stores
 //! (which set interrupt priorities).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use super::image::Image;
 use super::insn::{Insn, Op, Reg, Regs, TableBase, LR, PC, SP};
@@ -191,6 +191,11 @@ pub struct Summary {
     pub stores: Vec<Store>,
     /// What a call to it means for its caller.
     pub facts: Facts,
+    /// Functions whose addresses it stores to memory, passes to a call or
+    /// returns: they may be called through a pointer elsewhere.
+    pub escapes: BTreeSet<u32>,
+    /// The literal-pool words it loads as constants.
+    pub literals: BTreeSet<u32>,
 }
 
 /// Analyses the function at `entry`; `callee` gives what is known of the
@@ -220,6 +225,8 @@ pub fn analyse(
         stores: BTreeMap::new(),
         writes: Regs::NONE,
         saves: Regs::NONE,
+        escapes: BTreeSet::new(),
+        literals: BTreeSet::new(),
         tail_clobbers: Regs::NONE,
         restoring_tail_clobbers: Regs::NONE,
         returns: false,
@@ -271,6 +278,8 @@ pub fn analyse(
                 .minus(Regs::NONE.with(SP).with(PC)),
             returns: f.returns,
         },
+        escapes: f.escapes,
+        literals: f.literals,
     })
 }
 
@@ -284,6 +293,8 @@ struct Walk<'a> {
     stores: BTreeMap<u32, Vec<Store>>,
     writes: Regs,
     saves: Regs,
+    escapes: BTreeSet<u32>,
+    literals: BTreeSet<u32>,
     /// What the functions tail-called at depth 0 may change.
     tail_clobbers: Regs,
     /// What the functions tail-called with the frame still in place may
@@ -382,6 +393,21 @@ impl Walk<'_> {
             let way = |it| (next, State { it, ..s.clone() });
             return Ok(vec![way(Track::Then), way(Track::Else)]);
         }
+        // Function addresses leaving the registers: stored, passed to a
+        // call, returned.
+        let leaving = match insn.op {
+            Op::Call(_) | Op::CallReg(_) | Op::JumpReg(_) => Regs(0b1111),
+            Op::Jump(t) if t != self.entry && self.image.functions.contains_key(&t) => Regs(0b1111),
+            Op::Return | Op::PopReturn { .. } => Regs(0b11),
+            _ => Regs::NONE,
+        };
+        for r in insn.stored.or(leaving).iter() {
+            if let Val::Consts(vs) = &s.regs[usize::from(r)] {
+                let image = self.image;
+                self.escapes
+                    .extend(vs.iter().filter_map(|&v| image.function_address(v)));
+            }
+        }
         let mut out = s.clone();
         for r in insn.writes.iter() {
             out.regs[usize::from(r)] = Val::Top;
@@ -473,6 +499,7 @@ impl Walk<'_> {
                 return Ok(targets.into_iter().map(|t| (t, out.clone())).collect());
             }
             Op::LoadLiteral { dst, addr } => {
+                self.literals.insert(*addr);
                 out.regs[usize::from(*dst)] = match self.image.word(*addr) {
                     Some(w) => Val::one(w),
                     None => Val::Top,
@@ -564,7 +591,10 @@ impl Walk<'_> {
         for r in facts.clobbers.with(LR).iter() {
             out.regs[usize::from(r)] = Val::Top;
         }
-        self.writes = self.writes.or(facts.clobbers);
+        // A callee that never returns changes nothing its caller sees.
+        if facts.returns {
+            self.writes = self.writes.or(facts.clobbers);
+        }
         let mut succ = Vec::new();
         if let Some(n) = insn.next {
             if facts.returns && !self.image.functions.contains_key(&n) {
@@ -587,7 +617,9 @@ impl Walk<'_> {
     ) -> Result<Vec<(u32, State)>, String> {
         let facts = self.facts(&c, callee)?;
         self.site(insn, s, c)?;
-        if s.depth > 0 {
+        if !facts.returns {
+            // Nothing to see for the caller.
+        } else if s.depth > 0 {
             self.restoring_tail_clobbers = self.restoring_tail_clobbers.or(facts.clobbers);
         } else {
             self.tail_clobbers = self.tail_clobbers.or(facts.clobbers);

@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use super::flow::{self, Callee, Facts, Summary};
 use super::image::Image;
+use super::pointer::Class;
 
 /// A node of the call graph.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -13,8 +14,9 @@ pub enum Node {
     /// A function, by entry address.
     Fn(u32),
     /// A call through a function pointer the analysis could not resolve:
-    /// any function whose address the image stores.
-    AnyPointer,
+    /// a function whose address the image stores or passes around, of
+    /// those the call's place allows ([`Class`]).
+    Pointer(Class),
 }
 
 /// How deep the stack goes below a node.
@@ -43,6 +45,10 @@ pub struct Graph<'a> {
     in_progress: BTreeSet<u32>,
     /// Each node's depth, by the panic handler's runs on its path.
     depths: BTreeMap<Key, (Depth, Via)>,
+    /// The functions a call through an unresolved pointer may reach.
+    taken: BTreeSet<u32>,
+    /// Assumptions the depths rest on, for the report.
+    pub notes: Vec<String>,
 }
 
 impl<'a> Graph<'a> {
@@ -53,6 +59,8 @@ impl<'a> Graph<'a> {
             summaries: BTreeMap::new(),
             in_progress: BTreeSet::new(),
             depths: BTreeMap::new(),
+            taken: BTreeSet::new(),
+            notes: Vec::new(),
         }
     }
 
@@ -107,6 +115,44 @@ impl<'a> Graph<'a> {
         Err("the analysis of recursive functions does not settle".into())
     }
 
+    /// Analyses every function a call through an unresolved pointer may
+    /// reach, and what they call, until the set is complete, with the
+    /// facts of recursive functions settled ([`Graph::stabilise`]).
+    ///
+    /// Such a call may reach a function whose address is stored in the
+    /// image's data (vtables, tables of functions), or that some analysed
+    /// code stores, passes to a call or returns, or whose address sits in
+    /// a literal pool that no analysed code loads as a constant. A function
+    /// whose address the code only loads to call it is not among them.
+    pub fn close(&mut self) -> Result<(), String> {
+        loop {
+            self.stabilise()?;
+            if !self.has_unknown_calls() {
+                return Ok(());
+            }
+            let mut loaded = BTreeSet::new();
+            let mut taken = self.image.data_refs.clone();
+            for s in self.summaries.values() {
+                loaded.extend(s.literals.iter().copied());
+                taken.extend(s.escapes.iter().copied());
+            }
+            for &(at, f) in &self.image.pool_refs {
+                if !loaded.contains(&at) {
+                    taken.insert(f);
+                }
+            }
+            let before = self.summaries.len();
+            for &t in &taken {
+                self.facts(t)?;
+            }
+            let grown = taken != self.taken || self.summaries.len() != before;
+            self.taken = taken;
+            if !grown {
+                return self.stabilise();
+            }
+        }
+    }
+
     /// Whether some analysed call goes through a pointer the analysis
     /// could not resolve.
     pub fn has_unknown_calls(&self) -> bool {
@@ -146,8 +192,13 @@ impl<'a> Graph<'a> {
             (inner <= 2).then_some((c, inner))
         };
         match node {
-            Node::AnyPointer => {
-                let taken: Vec<u32> = self.image.address_taken.iter().copied().collect();
+            Node::Pointer(class) => {
+                let taken: Vec<u32> = self
+                    .taken
+                    .iter()
+                    .copied()
+                    .filter(|t| class.may_reach(self.image.aliases.get(t).map_or(&[][..], |v| v)))
+                    .collect();
                 for t in taken {
                     self.facts(t)?;
                     if let Some(k) = to(self, Node::Fn(t)) {
@@ -160,7 +211,10 @@ impl<'a> Graph<'a> {
                 for site in &self.summaries[&entry].sites {
                     let callees: Vec<Node> = match &site.callee {
                         Callee::Known(ts) => ts.iter().map(|&t| Node::Fn(t)).collect(),
-                        Callee::Unknown => vec![Node::AnyPointer],
+                        Callee::Unknown => {
+                            let frames = self.image.call_frames.get(&site.at);
+                            vec![Node::Pointer(Class::of(frames.map_or(&[][..], |v| v)))]
+                        }
                     };
                     for c in callees {
                         if let Some(k) = to(self, c) {
@@ -236,12 +290,22 @@ impl<'a> Graph<'a> {
                 d.fresh = d.fresh.max(s.fresh_frame.unwrap_or(0));
             }
         }
+        // Calls inside the component that grow the stack: recursion, an
+        // error, except in the formatting machinery of `core::fmt`.
+        let mut growth = 0u32;
+        for &m in members {
+            let mut most = 0;
+            for e in t.edges[&m].iter().filter(|e| members.contains(&e.to)) {
+                if e.fresh || (e.depth > 0 && !self.is_formatting(m.0)) {
+                    return Err(self.recursion(members, t, m, e));
+                }
+                most = most.max(e.depth);
+            }
+            growth = growth.saturating_add(most);
+        }
         for &m in members {
             for e in &t.edges[&m] {
                 if members.contains(&e.to) {
-                    if (e.depth > 0 || e.fresh) && !members.iter().any(|k| k.0 == Node::AnyPointer) {
-                        return Err(self.recursion(members, t, m, e));
-                    }
                     continue;
                 }
                 let cd = self.depths[&e.to].0;
@@ -259,6 +323,29 @@ impl<'a> Graph<'a> {
                     d.fresh = cd.fresh;
                     best_fresh = Some((m, e.at, e.to, false));
                 }
+            }
+        }
+        if growth > 0 {
+            // Each turn around the component is a simple cycle, growing
+            // the stack by at most `growth`; a path makes at most
+            // `FORMAT_NESTING` turns, plus a simple path in and out.
+            let extra = growth.saturating_mul(FORMAT_NESTING + 1);
+            d.below = d.below.saturating_add(extra);
+            if d.fresh > 0 {
+                d.fresh = d.fresh.saturating_add(extra);
+            }
+            let names: Vec<String> = members
+                .iter()
+                .filter(|m| matches!(m.0, Node::Fn(_)))
+                .map(|m| super::short(&self.node_name(m.0)))
+                .collect();
+            let note = format!(
+                "formatting nests at most {FORMAT_NESTING} deep through function pointers \
+                 ({}): +{extra} B",
+                names.join(", ")
+            );
+            if !self.notes.contains(&note) {
+                self.notes.push(note);
             }
         }
         for &m in members {
@@ -296,28 +383,43 @@ impl<'a> Graph<'a> {
                 }
             }
         }
-        let mut cycle = vec![from];
+        // from → e.to → … → from
+        let mut back = vec![from];
         let mut k = from;
-        while let Some(&p) = prev.get(&k) {
-            cycle.push(p);
-            k = p;
-            if cycle.len() > members.len() + 1 {
-                break;
+        while k != e.to {
+            match prev.get(&k) {
+                Some(&p) => {
+                    back.push(p);
+                    k = p;
+                }
+                None => break,
             }
         }
-        if e.to != from {
-            cycle.push(e.to);
-        }
-        cycle.reverse();
-        cycle.push(e.to);
-        let names: Vec<String> = cycle.iter().map(|k| self.node_name(k.0)).collect();
+        back.push(from);
+        back.reverse();
+        back.pop();
+        back.insert(0, from);
+        let names: Vec<String> = back.iter().map(|k| self.node_name(k.0)).collect();
         format!(
-            "recursion: {} (the stack it needs has no bound; {} calls {} with {} B of frame)",
+            "recursion: {} (the stack it needs has no bound; {} makes the call with {} B of frame)",
             names.join(" → "),
             self.node_name(from.0),
-            self.node_name(e.to.0),
             e.depth
         )
+    }
+
+    /// Whether a node is part of `core::fmt`'s formatting (a formatter
+    /// method or a formatting trait's implementation): calls through
+    /// pointers among these nest as deep as the value formatted.
+    fn is_formatting(&self, n: Node) -> bool {
+        match n {
+            Node::Fn(a) => self
+                .image
+                .functions
+                .get(&a)
+                .is_some_and(|name| name.contains("core::fmt::")),
+            Node::Pointer(_) => true,
+        }
     }
 
     fn is_panic_handler(&self, n: Node) -> bool {
@@ -325,7 +427,7 @@ impl<'a> Graph<'a> {
             Node::Fn(a) => self.image.functions.get(&a).is_some_and(|name| {
                 name == "rust_begin_unwind" || name.ends_with("::rust_begin_unwind")
             }),
-            Node::AnyPointer => false,
+            Node::Pointer(_) => false,
         }
     }
 
@@ -365,10 +467,15 @@ impl<'a> Graph<'a> {
     pub fn node_name(&self, n: Node) -> String {
         match n {
             Node::Fn(a) => self.image.name(a),
-            Node::AnyPointer => "(any function pointer)".into(),
+            Node::Pointer(c) => c.name().into(),
         }
     }
 }
+
+/// How many times formatting may nest through function pointers (a
+/// formatting trait's implementation formatting its fields): the values
+/// the firmware formats with `core::fmt` hold at most a few levels.
+pub const FORMAT_NESTING: u32 = 4;
 
 /// A node with the panic handler's runs on the path to it.
 type Key = (Node, u8);

@@ -40,12 +40,22 @@ pub struct Image {
     pub insns: BTreeMap<u32, Insn>,
     /// Each function's start (Thumb bit cleared) and name, demangled.
     pub functions: BTreeMap<u32, String>,
+    /// Every name of each function (identical code folded by the linker
+    /// has several).
+    pub aliases: BTreeMap<u32, Vec<String>>,
+    /// For each call through a register: the functions it lies in,
+    /// innermost first, inlined ones included (from the debug
+    /// information; empty without it).
+    pub call_frames: BTreeMap<u32, Vec<String>>,
     /// The read-only loaded sections: address and contents.
     rom: Vec<(u32, Vec<u8>)>,
-    /// Functions whose address is stored somewhere in the image's data
-    /// (literal pools, read-only data, initialised statics): what a call
-    /// through a register may reach. The vector table does not count.
-    pub address_taken: BTreeSet<u32>,
+    /// Functions whose address is stored in the image's data (read-only
+    /// data, initialised statics: vtables, tables of functions). The
+    /// vector table does not count.
+    pub data_refs: BTreeSet<u32>,
+    /// Function addresses in the literal pools of the code: the pool
+    /// word's address and the function.
+    pub pool_refs: Vec<(u32, u32)>,
     /// The vector table's words (the initial SP, then the handlers).
     pub vectors: Vec<u32>,
     /// The stack region.
@@ -81,15 +91,16 @@ impl Image {
 
     fn from_parts(file: &object::File, disassembly: &str, ram: Range<u32>) -> Result<Image, String> {
         let mut functions = BTreeMap::new();
+        let mut aliases: BTreeMap<u32, Vec<String>> = BTreeMap::new();
         let mut symbol = BTreeMap::new();
         for sym in file.symbols() {
             let Ok(name) = sym.name() else { continue };
             let addr = u32::try_from(sym.address()).map_err(|_| "a 64-bit address")?;
             symbol.entry(name.to_string()).or_insert(addr);
             if sym.kind() == SymbolKind::Text && !name.starts_with('$') {
-                functions
-                    .entry(addr & !1)
-                    .or_insert_with(|| format!("{:#}", rustc_demangle::demangle(name)));
+                let name = format!("{:#}", rustc_demangle::demangle(name));
+                functions.entry(addr & !1).or_insert_with(|| name.clone());
+                aliases.entry(addr & !1).or_insert_with(Vec::new).push(name);
             }
         }
         let mut rom = Vec::new();
@@ -123,28 +134,37 @@ impl Image {
         let mut image = Image {
             insns: BTreeMap::new(),
             functions,
+            aliases,
+            call_frames: BTreeMap::new(),
             rom,
-            address_taken: BTreeSet::new(),
+            data_refs: BTreeSet::new(),
+            pool_refs: Vec::new(),
             vectors,
             stack,
         };
         let pool_words = image.parse_disassembly(disassembly)?;
-        // Function addresses stored as data: Thumb addresses (bit 0 set)
-        // of a function's first instruction.
-        let mut taken = BTreeSet::new();
-        let candidates = data.iter().flat_map(|d| words(d)).chain(pool_words);
-        for w in candidates {
-            if w & 1 == 1 && image.functions.contains_key(&(w & !1)) {
-                taken.insert(w & !1);
-            }
-        }
-        image.address_taken = taken;
+        image.data_refs = data
+            .iter()
+            .flat_map(|d| words(d))
+            .filter_map(|w| image.function_address(w))
+            .collect();
+        image.pool_refs = pool_words
+            .into_iter()
+            .filter_map(|(at, w)| Some((at, image.function_address(w)?)))
+            .collect();
+        image.call_frames = call_frames(file, &image.insns)?;
         Ok(image)
     }
 
+    /// The function a word points to: a Thumb address (bit 0 set) of a
+    /// function's first instruction.
+    pub fn function_address(&self, w: u32) -> Option<u32> {
+        (w & 1 == 1 && self.functions.contains_key(&(w & !1))).then_some(w & !1)
+    }
+
     /// Reads the instructions; returns the words of the data inside the
-    /// code (literal pools).
-    fn parse_disassembly(&mut self, text: &str) -> Result<Vec<u32>, String> {
+    /// code (literal pools) with their addresses.
+    fn parse_disassembly(&mut self, text: &str) -> Result<Vec<(u32, u32)>, String> {
         let mut pool_words = Vec::new();
         // The IT block being read: instructions left, and their else bits.
         let mut it_left = 0u8;
@@ -161,10 +181,16 @@ impl Image {
                     });
                     it_left = it_left.saturating_sub(1);
                     it_slot = it_slot.saturating_add(1);
-                    let (op, cond, writes, sets_flags) =
+                    let (op, cond, writes, sets_flags, stored) =
                         match insn::decode(addr, &mnemonic, &operands, in_it) {
                             Ok(d) => d,
-                            Err(e) => (Op::Unknown(e), in_it, insn::Regs::ALL, true),
+                            Err(e) => (
+                                Op::Unknown(e),
+                                in_it,
+                                insn::Regs::ALL,
+                                true,
+                                insn::Regs::ALL,
+                            ),
                         };
                     if let Op::It { count, elses } = op {
                         it_left = count;
@@ -182,6 +208,7 @@ impl Image {
                             cond,
                             it,
                             sets_flags,
+                            stored,
                             writes,
                             next: None,
                             text: format!("{mnemonic} {operands}").trim().to_string(),
@@ -193,7 +220,7 @@ impl Image {
                     last = None;
                     if addr % 4 == 0 {
                         if let Some(w) = self.word(addr) {
-                            pool_words.push(w);
+                            pool_words.push((addr, w));
                         }
                     }
                 }
@@ -237,6 +264,41 @@ impl Image {
             None => format!("{addr:#x}"),
         }
     }
+}
+
+/// The inlined and enclosing functions of each call through a register,
+/// innermost first, from the debug information (none without it).
+fn call_frames(
+    file: &object::File,
+    insns: &BTreeMap<u32, Insn>,
+) -> Result<BTreeMap<u32, Vec<String>>, String> {
+    use addr2line::gimli;
+    let load = |id: gimli::SectionId| -> Result<gimli::EndianSlice<'_, gimli::LittleEndian>, gimli::Error> {
+        let data = file
+            .section_by_name(id.name())
+            .and_then(|s| s.data().ok())
+            .unwrap_or(&[]);
+        Ok(gimli::EndianSlice::new(data, gimli::LittleEndian))
+    };
+    let dwarf = gimli::Dwarf::load(load).map_err(|e| format!("debug information: {e}"))?;
+    let context =
+        addr2line::Context::from_dwarf(dwarf).map_err(|e| format!("debug information: {e}"))?;
+    let mut out = BTreeMap::new();
+    for insn in insns.values() {
+        if !matches!(insn.op, Op::CallReg(_) | Op::JumpReg(_)) {
+            continue;
+        }
+        let mut names = Vec::new();
+        if let Ok(mut frames) = context.find_frames(u64::from(insn.addr)).skip_all_loads() {
+            while let Ok(Some(frame)) = frames.next() {
+                if let Some(f) = frame.function.as_ref().and_then(|f| f.demangle().ok()) {
+                    names.push(f.into_owned());
+                }
+            }
+        }
+        out.insert(insn.addr, names);
+    }
+    Ok(out)
 }
 
 /// Little-endian words of a byte slice.

@@ -143,6 +143,8 @@ pub struct Insn {
     pub it: Option<ItSlot>,
     /// Whether it may change the condition flags.
     pub sets_flags: bool,
+    /// The registers whose values it stores to memory.
+    pub stored: Regs,
     /// The registers it writes (as well as what `op` describes; written
     /// registers lose any constant value they held).
     pub writes: Regs,
@@ -229,8 +231,9 @@ const TWO_DESTS: &[&str] = &[
 pub type DecodeError = String;
 
 /// A decoded instruction: what it does, whether it is conditional, the
-/// registers it writes, whether it may change the flags.
-pub type Decoded = (Op, bool, Regs, bool);
+/// registers it writes, whether it may change the flags, the registers
+/// whose values it stores to memory.
+pub type Decoded = (Op, bool, Regs, bool, Regs);
 
 /// Decodes one instruction. `in_it` says whether it lies in an IT block
 /// (its mnemonic then carries a condition suffix, stripped here).
@@ -521,7 +524,13 @@ pub fn decode(
         return err("writes PC in a form the stack analysis does not know");
     }
     let sets_flags = matches!(m, "cmp" | "cmn" | "tst" | "teq") || m.ends_with('s');
-    Ok((op, cond, writes.minus(Regs::NONE.with(SP).with(PC)), sets_flags))
+    Ok((
+        op,
+        cond,
+        writes.minus(Regs::NONE.with(SP).with(PC)),
+        sets_flags,
+        stored_regs(m, &ops),
+    ))
 }
 
 /// `base` without its condition suffix, if it has one.
@@ -577,6 +586,28 @@ fn generic_writes(m: &str, ops: &[String]) -> Regs {
         }
     }
     writes
+}
+
+/// The registers whose values a store writes to memory.
+fn stored_regs(m: &str, ops: &[String]) -> Regs {
+    let regs = |range: std::ops::Range<usize>| {
+        ops.get(range)
+            .unwrap_or(&[])
+            .iter()
+            .filter_map(|o| reg(o))
+            .fold(Regs::NONE, Regs::with)
+    };
+    match m {
+        "str" | "strb" | "strh" => regs(0..1),
+        "strd" => regs(0..2),
+        "strex" | "strexb" | "strexh" => regs(1..2),
+        "strexd" => regs(1..3),
+        _ if m == "push" || m.starts_with("stm") => ops
+            .last()
+            .and_then(|o| reg_list(o))
+            .unwrap_or(Regs::NONE),
+        _ => Regs::NONE,
+    }
 }
 
 /// Splits operands at the commas outside `[]` and `{}`.
@@ -752,15 +783,15 @@ mod tests {
         assert_eq!(op("blx", "r5"), Op::CallReg(5));
         assert_eq!(op("bx", "lr"), Op::Return);
         assert_eq!(op("bx", "r1"), Op::JumpReg(1));
-        let (o, cond, _, _) = decode(0x100, "bhi.w", "0x800071a <f+0x56e>", false).unwrap();
+        let (o, cond, _, _, _) = decode(0x100, "bhi.w", "0x800071a <f+0x56e>", false).unwrap();
         assert_eq!((o, cond), (Op::Jump(0x0800_071a), true));
-        let (o, cond, _, _) = decode(0x100, "blt", "0x200 <f>", false).unwrap();
+        let (o, cond, _, _, _) = decode(0x100, "blt", "0x200 <f>", false).unwrap();
         assert_eq!((o, cond), (Op::Jump(0x200), true));
-        let (o, cond, _, _) = decode(0x100, "bls", "0x200 <f>", true).unwrap();
+        let (o, cond, _, _, _) = decode(0x100, "bls", "0x200 <f>", true).unwrap();
         assert_eq!((o, cond), (Op::Jump(0x200), true));
-        let (o, cond, _, _) = decode(0x100, "blls", "0x200 <f>", true).unwrap();
+        let (o, cond, _, _, _) = decode(0x100, "blls", "0x200 <f>", true).unwrap();
         assert_eq!((o, cond), (Op::Call(0x200), true));
-        let (o, cond, _, _) = decode(0x100, "popne", "{r4, pc}", true).unwrap();
+        let (o, cond, _, _, _) = decode(0x100, "popne", "{r4, pc}", true).unwrap();
         assert_eq!((o, cond), (Op::PopReturn { bytes: 8 }, true));
         assert_eq!(
             op("tbh", "[r1, r0, lsl #1]"),
@@ -806,11 +837,11 @@ mod tests {
                 bytes: 1
             }
         );
-        let (_, _, w, _) = decode(0x100, "ldm", "r2!, {r3}", false).unwrap();
+        let (_, _, w, _, _) = decode(0x100, "ldm", "r2!, {r3}", false).unwrap();
         assert_eq!(w, Regs::NONE.with(2).with(3));
-        let (_, _, w, _) = decode(0x100, "umull", "r8, r9, r0, r1", false).unwrap();
+        let (_, _, w, _, _) = decode(0x100, "umull", "r8, r9, r0, r1", false).unwrap();
         assert_eq!(w, Regs::NONE.with(8).with(9));
-        let (_, _, w, _) = decode(0x100, "str", "r1, [r0], #4", false).unwrap();
+        let (_, _, w, _, _) = decode(0x100, "str", "r1, [r0], #4", false).unwrap();
         assert_eq!(w, Regs::NONE.with(0));
     }
 

@@ -23,6 +23,7 @@ mod flow;
 mod graph;
 mod image;
 mod insn;
+mod pointer;
 
 use std::fmt::Write as _;
 use std::ops::Range;
@@ -120,6 +121,8 @@ pub struct Report {
     pub worst_terms: Vec<String>,
     /// The NVIC's priority bits, for display.
     nvic_prio_bits: u8,
+    /// Assumptions the figures rest on beyond the code itself.
+    pub notes: Vec<String>,
 }
 
 /// Analyses the image at `elf` for `chip`, with the disassembler `objdump`.
@@ -148,12 +151,7 @@ fn analyse_image(image: &Image, chip: &Chip) -> Result<Report, String> {
     for (h, _) in &handlers {
         graph.facts(*h)?;
     }
-    if graph.has_unknown_calls() {
-        for &t in &image.address_taken {
-            graph.facts(t)?;
-        }
-    }
-    graph.stabilise()?;
+    graph.close()?;
     let priorities = priority_bytes(&graph);
     let mut entries = Vec::new();
     let thread = graph.depth(Node::Fn(reset))?;
@@ -195,6 +193,7 @@ fn analyse_image(image: &Image, chip: &Chip) -> Result<Report, String> {
         worst,
         worst_terms,
         nvic_prio_bits: chip.nvic_prio_bits,
+        notes: graph.notes.clone(),
     })
 }
 
@@ -383,6 +382,9 @@ impl Report {
             self.stack.top,
             self.margin()
         );
+        for n in &self.notes {
+            let _ = writeln!(s, "assumed: {n}");
+        }
         s
     }
 }

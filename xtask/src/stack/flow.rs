@@ -26,6 +26,8 @@ enum Val {
     Consts(Vec<u32>),
     /// An address in the frame: the entry SP minus this many bytes.
     Stack(i64),
+    /// PRIMASK as read (`mrs`): whether interrupts were masked.
+    Mask(bool),
 }
 
 impl Val {
@@ -100,6 +102,8 @@ struct State {
     fresh: bool,
     /// The IT block's way.
     it: Track,
+    /// Interrupts masked (PRIMASK set): no preemption here.
+    masked: bool,
     regs: [Val; 16],
 }
 
@@ -121,6 +125,8 @@ impl State {
             depth: self.depth,
             fresh: self.fresh,
             it: self.it,
+            // Masked only if masked on both ways.
+            masked: self.masked && other.masked,
             regs,
         })
     }
@@ -145,6 +151,8 @@ pub struct Site {
     pub depth: u32,
     /// On a fresh stack (after `msr msp`).
     pub fresh: bool,
+    /// With interrupts masked.
+    pub masked: bool,
     /// Whom it calls.
     pub callee: Callee,
 }
@@ -185,6 +193,9 @@ pub struct Summary {
     pub frame: u32,
     /// The deepest its own frame goes on a fresh stack, if it starts one.
     pub fresh_frame: Option<u32>,
+    /// The deepest its own frame goes where interrupts may preempt it
+    /// (`None`: nowhere).
+    pub open_frame: Option<u32>,
     /// Its calls and tail calls.
     pub sites: Vec<Site>,
     /// Its stores to constant addresses.
@@ -198,11 +209,12 @@ pub struct Summary {
     pub literals: BTreeSet<u32>,
 }
 
-/// Analyses the function at `entry`; `callee` gives what is known of the
-/// functions it calls.
+/// Analyses the function at `entry`, entered with interrupts masked or
+/// not; `callee` gives what is known of the functions it calls.
 pub fn analyse(
     image: &Image,
     entry: u32,
+    masked: bool,
     callee: &mut dyn FnMut(u32) -> Result<Facts, String>,
 ) -> Result<Summary, String> {
     let mut states: BTreeMap<(u32, Track), State> = BTreeMap::new();
@@ -213,14 +225,17 @@ pub fn analyse(
             depth: 0,
             fresh: false,
             it: Track::Out,
+            masked,
             regs: std::array::from_fn(|_| Val::Top),
         },
     );
     let mut f = Walk {
         image,
         entry,
+        entry_masked: masked,
         frame: 0,
         fresh_frame: None,
+        open_frame: None,
         sites: BTreeMap::new(),
         stores: BTreeMap::new(),
         writes: Regs::NONE,
@@ -266,6 +281,7 @@ pub fn analyse(
     Ok(Summary {
         frame: f.frame,
         fresh_frame: f.fresh_frame,
+        open_frame: f.open_frame,
         sites: f.sites.into_values().collect(),
         stores: f.stores.into_values().flatten().collect(),
         facts: Facts {
@@ -287,8 +303,10 @@ pub fn analyse(
 struct Walk<'a> {
     image: &'a Image,
     entry: u32,
+    entry_masked: bool,
     frame: u32,
     fresh_frame: Option<u32>,
+    open_frame: Option<u32>,
     sites: BTreeMap<u32, Site>,
     stores: BTreeMap<u32, Vec<Store>>,
     writes: Regs,
@@ -355,6 +373,7 @@ impl Walk<'_> {
                 at: insn.addr,
                 depth,
                 fresh: s.fresh,
+                masked: s.masked,
                 callee,
             },
         );
@@ -381,6 +400,10 @@ impl Walk<'_> {
             None => Track::Out,
         };
         let s = &State { it: track, ..s.clone() };
+        if !s.masked && !s.fresh {
+            let d = u32::try_from(s.depth.max(0)).unwrap_or(u32::MAX);
+            self.open_frame = Some(self.open_frame.unwrap_or(0).max(d));
+        }
         if runs == Some(false) {
             return Ok(insn.next.map(|n| (n, s.clone())).into_iter().collect());
         }
@@ -449,6 +472,20 @@ impl Walk<'_> {
                 out.depth = 0;
                 out.fresh = true;
             }
+            Op::Mask(m) => out.masked = *m,
+            Op::SetMask(r) => {
+                // A value the analysis cannot follow is a critical
+                // section's saved state (critical-section's `release`, the
+                // logger's): it restores interrupts as they were when the
+                // section began, in the context this function was entered
+                // in.
+                out.masked = match reg(*r) {
+                    Val::Mask(m) => *m,
+                    Val::Consts(vs) => vs.iter().all(|v| v & 1 == 1),
+                    _ => self.entry_masked,
+                };
+            }
+            Op::ReadMask(r) => out.regs[usize::from(*r)] = Val::Mask(s.masked),
             Op::PopReturn { .. } | Op::Return => {
                 if !s.fresh {
                     self.returns = true;

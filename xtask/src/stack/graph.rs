@@ -1,8 +1,8 @@
 //! The call graph: each function analysed once (callees first, so that a
 //! caller knows which registers a call preserves), then the deepest path
-//! below each function, failing on recursion.
+//! below each function, failing on recursion that grows the stack.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
 use super::flow::{self, Callee, Facts, Summary};
 use super::image::Image;
@@ -24,31 +24,60 @@ pub enum Node {
 pub struct Depth {
     /// Bytes below the node's entry SP, its callees included.
     pub below: u32,
+    /// The deepest of those where an interrupt may preempt (`None`: it
+    /// runs with interrupts masked throughout).
+    pub open: Option<u32>,
     /// Bytes below the top of the stack on paths that restart the stack
     /// (`msr msp`), 0 if none.
     pub fresh: u32,
 }
 
-/// Where a node's deepest path goes next: the call's address and the
-/// callee (for `fresh`, also whether the call is the one on the
-/// restarted stack).
+/// A node in context: the panic handler's runs on the path to it, and
+/// whether it is entered with interrupts masked.
+type Key = (Node, u8, bool);
+
+/// Where a node's deepest paths go next (the callee's key), for
+/// [`Graph::path`]: the deepest, the deepest preemptible, the deepest on a
+/// restarted stack (and whether that call is the one restarting it).
 #[derive(Clone, Copy, Debug, Default)]
 struct Via {
-    below: Option<(u32, Key)>,
-    fresh: Option<(u32, Key, bool)>,
+    below: Option<Key>,
+    open: Option<Key>,
+    fresh: Option<(Key, bool)>,
+}
+
+/// A call between nodes.
+#[derive(Clone, Copy, Debug)]
+struct Edge {
+    /// The caller's frame depth at the call.
+    depth: u32,
+    /// On a restarted stack.
+    fresh: bool,
+    /// The callee.
+    to: Key,
+}
+
+/// Tarjan's bookkeeping.
+#[derive(Default)]
+struct Tarjan {
+    next: u32,
+    index: BTreeMap<Key, u32>,
+    low: BTreeMap<Key, u32>,
+    stack: Vec<Key>,
+    edges: BTreeMap<Key, Vec<Edge>>,
 }
 
 /// The analysed functions of one image.
 pub struct Graph<'a> {
     image: &'a Image,
+    /// Each function entered with interrupts enabled.
     summaries: BTreeMap<u32, Summary>,
+    /// Each function entered with interrupts masked (analysed on demand).
+    masked: BTreeMap<u32, Summary>,
     in_progress: BTreeSet<u32>,
-    /// Each node's depth, by the panic handler's runs on its path.
     depths: BTreeMap<Key, (Depth, Via)>,
     /// The functions a call through an unresolved pointer may reach.
     taken: BTreeSet<u32>,
-    /// Assumptions the depths rest on, for the report.
-    pub notes: Vec<String>,
 }
 
 impl<'a> Graph<'a> {
@@ -57,10 +86,10 @@ impl<'a> Graph<'a> {
         Graph {
             image,
             summaries: BTreeMap::new(),
+            masked: BTreeMap::new(),
             in_progress: BTreeSet::new(),
             depths: BTreeMap::new(),
             taken: BTreeSet::new(),
-            notes: Vec::new(),
         }
     }
 
@@ -87,7 +116,7 @@ impl<'a> Graph<'a> {
         }
         self.in_progress.insert(entry);
         let image = self.image;
-        let summary = flow::analyse(image, entry, &mut |t| self.facts(t));
+        let summary = flow::analyse(image, entry, false, &mut |t| self.facts(t));
         self.in_progress.remove(&entry);
         let summary = summary?;
         let facts = summary.facts;
@@ -104,7 +133,7 @@ impl<'a> Graph<'a> {
             let entries: Vec<u32> = self.summaries.keys().copied().collect();
             for e in entries {
                 let image = self.image;
-                let s = flow::analyse(image, e, &mut |t| self.facts(t))?;
+                let s = flow::analyse(image, e, false, &mut |t| self.facts(t))?;
                 changed |= s.facts != self.summaries[&e].facts;
                 self.summaries.insert(e, s);
             }
@@ -166,11 +195,26 @@ impl<'a> Graph<'a> {
         self.summaries.values()
     }
 
-    /// How deep the stack goes below `node`. Fails on recursion that
-    /// grows the stack, naming the cycle. (A cycle that adds nothing, such
-    /// as a waker's tail call through a function pointer, is harmless.)
+    /// The summary of a function entered with interrupts masked or not.
+    fn summary(&mut self, entry: u32, masked: bool) -> Result<&Summary, String> {
+        self.facts(entry)?;
+        if !masked {
+            return Ok(&self.summaries[&entry]);
+        }
+        if !self.masked.contains_key(&entry) {
+            let image = self.image;
+            let s = flow::analyse(image, entry, true, &mut |t| self.facts(t))?;
+            self.masked.insert(entry, s);
+        }
+        Ok(&self.masked[&entry])
+    }
+
+    /// How deep the stack goes below `node`, entered with interrupts
+    /// enabled. Fails on recursion that grows the stack, naming the
+    /// cycle. (A cycle that adds nothing, such as a waker's tail call
+    /// through a function pointer, is harmless.)
     pub fn depth(&mut self, node: Node) -> Result<Depth, String> {
-        let key = (node, 0);
+        let key = (node, 0, false);
         if !self.depths.contains_key(&key) {
             let mut t = Tarjan::default();
             self.connect(key, &mut t)?;
@@ -185,30 +229,34 @@ impl<'a> Graph<'a> {
     /// the second run counts in full (more than its path to the end
     /// state), a third is not followed.
     fn edges(&mut self, key: Key) -> Result<Vec<Edge>, String> {
-        let (node, panics) = key;
+        let (node, panics, masked) = key;
         let mut edges = Vec::new();
-        let to = |g: &Graph, c: Node| {
+        let to = |g: &Graph, c: Node, masked: bool| {
             let inner = panics + u8::from(g.is_panic_handler(c));
-            (inner <= 2).then_some((c, inner))
+            (inner <= 2).then_some((c, inner, masked))
         };
         match node {
             Node::Pointer(class) => {
+                let image = self.image;
                 let taken: Vec<u32> = self
                     .taken
                     .iter()
                     .copied()
-                    .filter(|t| class.may_reach(self.image.aliases.get(t).map_or(&[][..], |v| v)))
+                    .filter(|t| class.may_reach(image.aliases.get(t).map_or(&[][..], |v| v)))
                     .collect();
                 for t in taken {
-                    self.facts(t)?;
-                    if let Some(k) = to(self, Node::Fn(t)) {
-                        edges.push(Edge { at: 0, depth: 0, fresh: false, to: k });
+                    if let Some(k) = to(self, Node::Fn(t), masked) {
+                        edges.push(Edge {
+                            depth: 0,
+                            fresh: false,
+                            to: k,
+                        });
                     }
                 }
             }
             Node::Fn(entry) => {
-                self.facts(entry)?;
-                for site in &self.summaries[&entry].sites {
+                let sites = self.summary(entry, masked)?.sites.clone();
+                for site in &sites {
                     let callees: Vec<Node> = match &site.callee {
                         Callee::Known(ts) => ts.iter().map(|&t| Node::Fn(t)).collect(),
                         Callee::Unknown => {
@@ -217,9 +265,8 @@ impl<'a> Graph<'a> {
                         }
                     };
                     for c in callees {
-                        if let Some(k) = to(self, c) {
+                        if let Some(k) = to(self, c, site.masked) {
                             edges.push(Edge {
-                                at: site.at,
                                 depth: site.depth,
                                 fresh: site.fresh,
                                 to: k,
@@ -247,18 +294,16 @@ impl<'a> Graph<'a> {
             if self.depths.contains_key(&w) {
                 continue;
             }
-            match t.index.get(&w) {
+            let low = match t.index.get(&w) {
                 None => {
                     self.connect(w, t)?;
-                    let lw = t.low[&w];
-                    let lv = t.low.get_mut(&v).expect("on the stack");
-                    *lv = (*lv).min(lw);
+                    t.low[&w]
                 }
-                Some(&iw) if t.stack.contains(&w) => {
-                    let lv = t.low.get_mut(&v).expect("on the stack");
-                    *lv = (*lv).min(iw);
-                }
-                Some(_) => {}
+                Some(&iw) if t.stack.contains(&w) => iw,
+                Some(_) => continue,
+            };
+            if let Some(lv) = t.low.get_mut(&v) {
+                *lv = (*lv).min(low);
             }
         }
         t.edges.insert(v, edges);
@@ -280,32 +325,26 @@ impl<'a> Graph<'a> {
     /// it are shown to add nothing.
     fn settle(&mut self, members: &[Key], t: &Tarjan) -> Result<(), String> {
         let mut d = Depth::default();
-        // Where the deepest goes: (member, call address, callee key).
-        let mut best_below: Option<(Key, u32, Key)> = None;
-        let mut best_fresh: Option<(Key, u32, Key, bool)> = None;
+        // The member with the deepest of each kind, and the callee.
+        let mut via: (Option<(Key, Key)>, Option<(Key, Key)>, Option<(Key, Key, bool)>) =
+            (None, None, None);
         for &m in members {
             if let Node::Fn(f) = m.0 {
-                let s = &self.summaries[&f];
+                let s = self.summary(f, m.2)?;
                 d.below = d.below.max(s.frame);
                 d.fresh = d.fresh.max(s.fresh_frame.unwrap_or(0));
+                d.open = max_open(d.open, s.open_frame);
+            } else if !m.2 {
+                // Entering a function through a pointer, unmasked.
+                d.open = max_open(d.open, Some(0));
             }
-        }
-        // Calls inside the component that grow the stack: recursion, an
-        // error, except in the formatting machinery of `core::fmt`.
-        let mut growth = 0u32;
-        for &m in members {
-            let mut most = 0;
-            for e in t.edges[&m].iter().filter(|e| members.contains(&e.to)) {
-                if e.fresh || (e.depth > 0 && !self.is_formatting(m.0)) {
-                    return Err(self.recursion(members, t, m, e));
-                }
-                most = most.max(e.depth);
-            }
-            growth = growth.saturating_add(most);
         }
         for &m in members {
             for e in &t.edges[&m] {
                 if members.contains(&e.to) {
+                    if e.depth > 0 || e.fresh {
+                        return Err(self.recursion(members, t, m, e));
+                    }
                     continue;
                 }
                 let cd = self.depths[&e.to].0;
@@ -313,55 +352,39 @@ impl<'a> Graph<'a> {
                 if e.fresh {
                     if total > d.fresh {
                         d.fresh = total;
-                        best_fresh = Some((m, e.at, e.to, true));
+                        via.2 = Some((m, e.to, true));
                     }
-                } else if total > d.below {
-                    d.below = total;
-                    best_below = Some((m, e.at, e.to));
+                } else {
+                    if total > d.below {
+                        d.below = total;
+                        via.0 = Some((m, e.to));
+                    }
+                    if let Some(o) = cd.open {
+                        let open = e.depth.saturating_add(o);
+                        if d.open.is_none_or(|d| open > d) {
+                            d.open = Some(open);
+                            via.1 = Some((m, e.to));
+                        }
+                    }
                 }
                 if cd.fresh > d.fresh {
                     d.fresh = cd.fresh;
-                    best_fresh = Some((m, e.at, e.to, false));
+                    via.2 = Some((m, e.to, false));
                 }
-            }
-        }
-        if growth > 0 {
-            // Each turn around the component is a simple cycle, growing
-            // the stack by at most `growth`; a path makes at most
-            // `FORMAT_NESTING` turns, plus a simple path in and out.
-            let extra = growth.saturating_mul(FORMAT_NESTING + 1);
-            d.below = d.below.saturating_add(extra);
-            if d.fresh > 0 {
-                d.fresh = d.fresh.saturating_add(extra);
-            }
-            let names: Vec<String> = members
-                .iter()
-                .filter(|m| matches!(m.0, Node::Fn(_)))
-                .map(|m| super::short(&self.node_name(m.0)))
-                .collect();
-            let note = format!(
-                "formatting nests at most {FORMAT_NESTING} deep through function pointers \
-                 ({}): +{extra} B",
-                names.join(", ")
-            );
-            if !self.notes.contains(&note) {
-                self.notes.push(note);
             }
         }
         for &m in members {
             // A member other than the one with the deepest call reaches it
             // through the component, adding nothing.
-            let via = Via {
-                below: best_below.map(|(b, at, to)| if b == m { (at, to) } else { (0, b) }),
-                fresh: best_fresh.map(|(b, at, to, started)| {
-                    if b == m {
-                        (at, to, started)
-                    } else {
-                        (0, b, false)
-                    }
-                }),
+            let pick = |v: Option<(Key, Key)>| v.map(|(b, to)| if b == m { to } else { b });
+            let v = Via {
+                below: pick(via.0),
+                open: pick(via.1),
+                fresh: via
+                    .2
+                    .map(|(b, to, started)| if b == m { (to, started) } else { (b, false) }),
             };
-            self.depths.insert(m, (d, via));
+            self.depths.insert(m, (d, v));
         }
         Ok(())
     }
@@ -371,7 +394,7 @@ impl<'a> Graph<'a> {
     fn recursion(&self, members: &[Key], t: &Tarjan, from: Key, e: &Edge) -> String {
         // Breadth-first from the callee back to `from`, inside the component.
         let mut prev: BTreeMap<Key, Key> = BTreeMap::new();
-        let mut queue = std::collections::VecDeque::from([e.to]);
+        let mut queue = VecDeque::from([e.to]);
         while let Some(k) = queue.pop_front() {
             if k == from {
                 break;
@@ -383,43 +406,25 @@ impl<'a> Graph<'a> {
                 }
             }
         }
-        // from → e.to → … → from
-        let mut back = vec![from];
+        // The path from the callee back to `from`, then the call itself.
+        let mut cycle = vec![from];
         let mut k = from;
-        while k != e.to {
-            match prev.get(&k) {
-                Some(&p) => {
-                    back.push(p);
-                    k = p;
-                }
-                None => break,
-            }
+        while let Some(&p) = prev.get(&k) {
+            cycle.push(p);
+            k = p;
         }
-        back.push(from);
-        back.reverse();
-        back.pop();
-        back.insert(0, from);
-        let names: Vec<String> = back.iter().map(|k| self.node_name(k.0)).collect();
+        if k != e.to {
+            cycle.push(e.to);
+        }
+        cycle.push(from);
+        cycle.reverse();
+        let names: Vec<String> = cycle.iter().map(|k| self.node_name(k.0)).collect();
         format!(
             "recursion: {} (the stack it needs has no bound; {} makes the call with {} B of frame)",
             names.join(" → "),
             self.node_name(from.0),
             e.depth
         )
-    }
-
-    /// Whether a node is part of `core::fmt`'s formatting (a formatter
-    /// method or a formatting trait's implementation): calls through
-    /// pointers among these nest as deep as the value formatted.
-    fn is_formatting(&self, n: Node) -> bool {
-        match n {
-            Node::Fn(a) => self
-                .image
-                .functions
-                .get(&a)
-                .is_some_and(|name| name.contains("core::fmt::")),
-            Node::Pointer(_) => true,
-        }
     }
 
     fn is_panic_handler(&self, n: Node) -> bool {
@@ -431,30 +436,31 @@ impl<'a> Graph<'a> {
         }
     }
 
-    /// The functions of the deepest path below `node` (`fresh`: of the
-    /// deepest path on a restarted stack).
-    pub fn path(&self, node: Node, fresh: bool) -> Vec<Node> {
+    /// The functions of a deepest path below `node`: the deepest, the
+    /// deepest preemptible one (`open`), or the deepest on a restarted
+    /// stack (`fresh`).
+    pub fn path(&self, node: Node, kind: PathKind) -> Vec<Node> {
         let mut path = vec![node];
-        let mut key = (node, 0u8);
-        let mut fresh = fresh;
+        let mut key = (node, 0u8, false);
+        let mut fresh = kind == PathKind::Fresh;
         while path.len() < 64 {
-            let Some((_, via)) = self.depths.get(&key) else { break };
+            let Some((_, via)) = self.depths.get(&key) else {
+                break;
+            };
             let next = if fresh {
                 match via.fresh {
-                    Some((_, c, started)) => {
-                        if started {
-                            fresh = false;
-                        }
-                        c
+                    Some((c, started)) => {
+                        fresh = !started;
+                        Some(c)
                     }
-                    None => break,
+                    None => None,
                 }
+            } else if kind == PathKind::Open {
+                via.open
             } else {
-                match via.below {
-                    Some((_, c)) => c,
-                    None => break,
-                }
+                via.below
             };
+            let Some(next) = next else { break };
             if next.0 != key.0 {
                 path.push(next.0);
             }
@@ -472,33 +478,21 @@ impl<'a> Graph<'a> {
     }
 }
 
-/// How many times formatting may nest through function pointers (a
-/// formatting trait's implementation formatting its fields): the values
-/// the firmware formats with `core::fmt` hold at most a few levels.
-pub const FORMAT_NESTING: u32 = 4;
-
-/// A node with the panic handler's runs on the path to it.
-type Key = (Node, u8);
-
-/// A call between nodes.
-#[derive(Clone, Copy, Debug)]
-struct Edge {
-    /// The call's address (0 for a pointer's possible target).
-    at: u32,
-    /// The caller's frame depth at the call.
-    depth: u32,
-    /// On a restarted stack.
-    fresh: bool,
-    /// The callee.
-    to: Key,
+/// Which of a node's deepest paths.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathKind {
+    /// The deepest.
+    Below,
+    /// The deepest where interrupts may preempt.
+    Open,
+    /// The deepest on a restarted stack.
+    Fresh,
 }
 
-/// Tarjan's bookkeeping.
-#[derive(Default)]
-struct Tarjan {
-    next: u32,
-    index: BTreeMap<Key, u32>,
-    low: BTreeMap<Key, u32>,
-    stack: Vec<Key>,
-    edges: BTreeMap<Key, Vec<Edge>>,
+fn max_open(a: Option<u32>, b: Option<u32>) -> Option<u32> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.max(b)),
+        (a, None) => a,
+        (None, b) => b,
+    }
 }

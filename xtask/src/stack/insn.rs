@@ -118,6 +118,13 @@ pub enum Op {
         index: Option<Reg>,
         bytes: u8,
     },
+    /// `cpsid i`/`cpsid f` (true), `cpsie` (false): interrupts masked or
+    /// not.
+    Mask(bool),
+    /// `msr primask, rN`: interrupts masked as bit 0 of a register says.
+    SetMask(Reg),
+    /// `mrs rD, primask`: whether interrupts are masked, into a register.
+    ReadMask(Reg),
     /// `it`: the next `count` instructions are conditional; bit `i` of
     /// `elses` set when the instruction `i` after it runs when the
     /// condition fails (an `e` in `itte`).
@@ -367,6 +374,19 @@ pub fn decode(
             Some(r) => Op::JumpReg(r),
             None => return err("a PC update of an unknown form"),
         },
+        "cpsid" | "cpsie" => Op::Mask(m == "cpsid"),
+        "msr" if matches!(ops.first().map(String::as_str), Some("primask" | "faultmask")) => {
+            match ops.get(1).and_then(|o| reg(o)) {
+                Some(r) => Op::SetMask(r),
+                None => return err("a PRIMASK update of an unknown form"),
+            }
+        }
+        "mrs" if ops.get(1).map(String::as_str) == Some("primask") => {
+            match ops.first().and_then(|o| reg(o)) {
+                Some(r) => Op::ReadMask(r),
+                None => return err("a PRIMASK read of an unknown form"),
+            }
+        }
         "msr" if ops.first().map(String::as_str) == Some("msp") => {
             match ops.get(1).and_then(|o| reg(o)) {
                 Some(r) => Op::ResetStack(r),
@@ -767,6 +787,10 @@ mod tests {
         assert_eq!(op("mov", "sp, r7"), Op::SetSp { src: 7, add: 0 });
         assert_eq!(op("sub.w", "sp, r7, #0x10"), Op::SetSp { src: 7, add: -16 });
         assert_eq!(op("msr", "msp, r2"), Op::ResetStack(2));
+        assert_eq!(op("cpsid", "i"), Op::Mask(true));
+        assert_eq!(op("cpsie", "i"), Op::Mask(false));
+        assert_eq!(op("msr", "primask, r4"), Op::SetMask(4));
+        assert_eq!(op("mrs", "r4, primask"), Op::ReadMask(4));
     }
 
     #[test]

@@ -29,7 +29,7 @@ use std::fmt::Write as _;
 use std::ops::Range;
 use std::path::Path;
 
-use graph::{Depth, Graph, Node};
+use graph::{Depth, Graph, Node, PathKind};
 pub use image::StackRegion;
 use image::Image;
 
@@ -63,31 +63,27 @@ const NVIC_IPR: u32 = 0xE000_E400;
 const SCB_SHPR: u32 = 0xE000_ED18;
 
 /// A preemption level.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Level {
     /// Thread mode: Reset, `init`, `idle`.
     Thread,
-    /// A configurable priority (the byte written, 0 highest), or `None`
-    /// when the image writes one the analysis cannot read (then it counts
-    /// as a level of its own, above all others).
+    /// A configurable priority: the byte the code writes (0 highest), or
+    /// `None` (with the vector) when it writes one the analysis cannot
+    /// read; such a level counts as above all configurable ones.
     Priority(Option<u8>, usize),
-    /// HardFault (-1) and NMI (-2).
+    /// HardFault (-1) and NMI (-2): above all, and PRIMASK does not mask
+    /// them.
     Fixed(i8),
 }
 
 impl Level {
-    /// Whether this level may preempt `other`. Unknown priorities may
-    /// preempt anything.
-    fn preempts(self, other: Level) -> bool {
-        match (self, other) {
-            (_, Level::Thread) => self != Level::Thread,
-            (Level::Fixed(a), Level::Fixed(b)) => a < b,
-            (Level::Fixed(_), _) => true,
-            (Level::Priority(None, _), Level::Priority(..)) => self != other,
-            (Level::Priority(Some(a), _), Level::Priority(Some(b), _)) => a < b,
-            (Level::Priority(Some(_), _), Level::Priority(None, _)) => false,
-            (Level::Priority(..) | Level::Thread, Level::Fixed(_)) => false,
-            (Level::Thread, Level::Priority(..)) => false,
+    /// Its place from the lowest priority up.
+    fn rank(self) -> u32 {
+        match self {
+            Level::Thread => 0,
+            Level::Priority(Some(b), _) => 1 + (255 - u32::from(b)),
+            Level::Priority(None, v) => 1000 + v as u32,
+            Level::Fixed(f) => 2000 + f.unsigned_abs() as u32,
         }
     }
 }
@@ -115,14 +111,12 @@ pub struct Report {
     pub stack: StackRegion,
     /// Every entry, thread mode first.
     pub entries: Vec<Entry>,
-    /// The worst case, bytes, and how it adds up.
+    /// The worst case, bytes.
     pub worst: u32,
-    /// The terms of [`Report::worst`].
+    /// How [`Report::worst`] adds up.
     pub worst_terms: Vec<String>,
     /// The NVIC's priority bits, for display.
     nvic_prio_bits: u8,
-    /// Assumptions the figures rest on beyond the code itself.
-    pub notes: Vec<String>,
 }
 
 /// Analyses the image at `elf` for `chip`, with the disassembler `objdump`.
@@ -158,7 +152,7 @@ fn analyse_image(image: &Image, chip: &Chip) -> Result<Report, String> {
     entries.push(entry(&graph, "Reset (boot, init, idle)", 1, Level::Thread, reset, thread));
     for (h, vectors) in &handlers {
         let depth = graph.depth(Node::Fn(*h))?;
-        let mut levels: Vec<(Level, usize)> = Vec::new();
+        let mut levels: Vec<(Level, Vec<usize>)> = Vec::new();
         for &v in vectors {
             let level = match v {
                 2 => Level::Fixed(-2),
@@ -177,13 +171,16 @@ fn analyse_image(image: &Image, chip: &Chip) -> Result<Report, String> {
                 }
             };
             match levels.iter_mut().find(|(l, _)| *l == level) {
-                Some((_, n)) => *n += 1,
-                None => levels.push((level, 1)),
+                Some((_, vs)) => vs.push(v),
+                None => levels.push((level, vec![v])),
             }
         }
-        for (level, n) in levels {
-            let name = image.name(*h);
-            entries.push(entry(&graph, &name, n, level, *h, depth));
+        for (level, vs) in levels {
+            let mut name = image.name(*h);
+            if vs.len() == 1 && !image.name(*h).ends_with(&vector_name(vs[0])) && vs[0] >= 16 {
+                name = format!("{name} (IRQ {})", vs[0] - 16);
+            }
+            entries.push(entry(&graph, &name, vs.len(), level, *h, depth));
         }
     }
     let (worst, worst_terms) = worst_case(&entries);
@@ -193,19 +190,34 @@ fn analyse_image(image: &Image, chip: &Chip) -> Result<Report, String> {
         worst,
         worst_terms,
         nvic_prio_bits: chip.nvic_prio_bits,
-        notes: graph.notes.clone(),
     })
 }
 
+/// The core exceptions' names, by vector number.
+fn vector_name(v: usize) -> String {
+    match v {
+        2 => "NonMaskableInt".into(),
+        3 => "HardFault".into(),
+        11 => "SVCall".into(),
+        14 => "PendSV".into(),
+        15 => "SysTick".into(),
+        _ => String::new(),
+    }
+}
+
 fn entry(graph: &Graph, name: &str, vectors: usize, level: Level, h: u32, depth: Depth) -> Entry {
-    let fresh = depth.fresh > depth.below;
+    let kind = if depth.fresh > depth.below {
+        PathKind::Fresh
+    } else {
+        PathKind::Below
+    };
     Entry {
         name: name.to_string(),
         vectors,
         level,
         depth,
         path: graph
-            .path(Node::Fn(h), fresh)
+            .path(Node::Fn(h), kind)
             .into_iter()
             .map(|n| graph.node_name(n))
             .collect(),
@@ -236,53 +248,102 @@ fn priority_bytes(graph: &Graph) -> std::collections::BTreeMap<u32, Option<u8>> 
     bytes
 }
 
-/// The worst case over all entries: thread mode's deepest, plus an
-/// exception frame and the deepest handler of each preemption level above
-/// it; and, for an entry that restarts the stack, its depth on the fresh
-/// stack plus the levels that may preempt it.
+/// One preemption level's deepest handlers.
+struct LevelDepth<'a> {
+    level: Level,
+    /// The exception frame it costs (none for thread mode).
+    frame: u32,
+    below: (u32, &'a str),
+    open: Option<(u32, &'a str)>,
+}
+
+/// The worst case over all entries. The stack holds at most one handler
+/// per preemption level, each preempted (if at all) where interrupts are
+/// enabled: for each level taken as the top one, its deepest path plus,
+/// for every level below it, an exception frame and that level's deepest
+/// preemptible point; HardFault and NMI preempt anything, masked or not.
+/// An entry that restarts the stack counts from the top, plus the levels
+/// that may preempt it.
 fn worst_case(entries: &[Entry]) -> (u32, Vec<String>) {
-    let mut levels: Vec<(Level, u32, &str)> = Vec::new();
-    for e in entries.iter().filter(|e| e.level != Level::Thread) {
-        match levels.iter_mut().find(|(l, _, _)| *l == e.level) {
-            Some((_, d, n)) => {
-                if e.depth.below > *d {
-                    *d = e.depth.below;
-                    *n = &e.name;
-                }
-            }
-            None => levels.push((e.level, e.depth.below, &e.name)),
-        }
-    }
-    let above = |l: Level| -> (u32, Vec<String>) {
-        let mut sum = 0u32;
-        let mut terms = Vec::new();
-        for (lv, d, name) in levels.iter().rev() {
-            if lv.preempts(l) {
-                sum += EXCEPTION_FRAME + d;
-                terms.push(format!("{} ({EXCEPTION_FRAME} + {d})", short(name)));
-            }
-        }
-        (sum, terms)
-    };
-    let mut worst = 0;
-    let mut worst_terms = Vec::new();
+    let mut levels: Vec<LevelDepth> = Vec::new();
     for e in entries {
-        let (own, fresh) = if e.level == Level::Thread {
-            (e.depth.below.max(e.depth.fresh), false)
-        } else if e.depth.fresh > 0 {
-            (e.depth.fresh, true)
-        } else {
-            continue;
+        let i = match levels.iter().position(|l| l.level == e.level) {
+            Some(i) => i,
+            None => {
+                levels.push(LevelDepth {
+                    level: e.level,
+                    frame: if e.level == Level::Thread {
+                        0
+                    } else {
+                        EXCEPTION_FRAME
+                    },
+                    below: (0, &e.name),
+                    open: None,
+                });
+                levels.len() - 1
+            }
         };
-        let (sum, mut terms) = above(e.level);
-        if own + sum > worst {
-            worst = own + sum;
-            let how = if fresh { " (fresh stack)" } else { "" };
-            terms.insert(0, format!("{}{how} {own}", short(&e.name)));
-            worst_terms = terms;
+        let l = &mut levels[i];
+        if e.depth.below >= l.below.0 {
+            l.below = (e.depth.below, &e.name);
+        }
+        if let Some(o) = e.depth.open {
+            if l.open.is_none_or(|(d, _)| o > d) {
+                l.open = Some((o, &e.name));
+            }
         }
     }
-    (worst, worst_terms)
+    levels.sort_by_key(|l| l.level.rank());
+    let fixed: Vec<&LevelDepth> = levels
+        .iter()
+        .filter(|l| matches!(l.level, Level::Fixed(_)))
+        .collect();
+    let mut worst = 0;
+    let mut terms = Vec::new();
+    let mut consider = |total: u32, t: Vec<String>| {
+        if total > worst {
+            worst = total;
+            terms = t;
+        }
+    };
+    for (k, top) in levels.iter().enumerate() {
+        if matches!(top.level, Level::Fixed(_)) {
+            continue;
+        }
+        let mut total = 0;
+        let mut t = Vec::new();
+        for l in &levels[..k] {
+            if let Some((o, name)) = l.open {
+                total += l.frame + o;
+                t.push(term(l.frame, o, name, " preemptible"));
+            }
+        }
+        total += top.frame + top.below.0;
+        t.push(term(top.frame, top.below.0, top.below.1, ""));
+        for f in &fixed {
+            total += f.frame + f.below.0;
+            t.push(term(f.frame, f.below.0, f.below.1, ""));
+        }
+        consider(total, t);
+    }
+    for e in entries.iter().filter(|e| e.depth.fresh > 0) {
+        let mut total = e.depth.fresh;
+        let mut t = vec![format!("{} {} (fresh stack)", short(&e.name), e.depth.fresh)];
+        for f in fixed.iter().filter(|f| f.level.rank() > e.level.rank()) {
+            total += f.frame + f.below.0;
+            t.push(term(f.frame, f.below.0, f.below.1, ""));
+        }
+        consider(total, t);
+    }
+    (worst, terms)
+}
+
+fn term(frame: u32, depth: u32, name: &str, what: &str) -> String {
+    if frame == 0 {
+        format!("{} {depth}{what}", short(name))
+    } else {
+        format!("{} {frame}+{depth}{what}", short(name))
+    }
 }
 
 /// A function name without its hash, generic arguments and leading
@@ -349,7 +410,7 @@ impl Report {
         let mut s = String::new();
         let _ = writeln!(
             s,
-            "| entry | priority | worst depth | deepest path |\n|---|---|---|---|"
+            "| entry | priority | deepest | preemptible | deepest path |\n|---|---|---|---|---|"
         );
         for e in &self.entries {
             let vectors = if e.vectors > 1 {
@@ -358,13 +419,14 @@ impl Report {
                 String::new()
             };
             let depth = if e.depth.fresh > e.depth.below {
-                format!("{} B (fresh stack)", e.depth.fresh)
+                format!("{} B fresh stack", e.depth.fresh)
             } else {
                 format!("{} B", e.depth.below)
             };
+            let open = e.depth.open.map_or("never".into(), |o| format!("{o} B"));
             let _ = writeln!(
                 s,
-                "| {}{vectors} | {} | {depth} | {} |",
+                "| {}{vectors} | {} | {depth} | {open} | {} |",
                 short(&e.name),
                 self.priority(e.level),
                 shorten_path(&e.path)
@@ -373,8 +435,8 @@ impl Report {
         let required = required_margin(self.stack_size());
         let _ = writeln!(
             s,
-            "\nworst case {} B = {} (+{EXCEPTION_FRAME} B exception frame per level); \
-             stack {} B ({:#x}..{:#x}); margin {} B, required {required} B",
+            "\nworst case {} B = {} (exception frames {EXCEPTION_FRAME} B); stack {} B \
+             ({:#x}..{:#x}); margin {} B, required {required} B",
             self.worst,
             self.worst_terms.join(" + "),
             self.stack_size(),
@@ -382,9 +444,6 @@ impl Report {
             self.stack.top,
             self.margin()
         );
-        for n in &self.notes {
-            let _ = writeln!(s, "assumed: {n}");
-        }
         s
     }
 }

@@ -518,7 +518,7 @@ pub fn decode(
                 count: (m.len() - 1) as u8,
                 elses: m
                     .bytes()
-                    .skip(3)
+                    .skip(2)
                     .enumerate()
                     .filter(|(_, b)| *b == b'e')
                     .fold(0, |acc, (i, _)| acc | (1 << (i + 1))),

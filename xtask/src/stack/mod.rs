@@ -463,3 +463,6 @@ fn shorten_path(path: &[String]) -> String {
         names[n - 3..].join(" > ")
     )
 }
+
+#[cfg(test)]
+mod tests;

@@ -14,6 +14,9 @@
 /// Where a call through a pointer lies, for the targets it may reach.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Class {
+    /// Anywhere (no debug information to tell): any function that may be
+    /// called through a pointer.
+    Any,
     /// Outside formatting code: any function that may be called through
     /// a pointer, except those taking a `&mut Formatter`.
     Plain,
@@ -27,11 +30,10 @@ pub enum Class {
 
 impl Class {
     /// The class of a call whose enclosing functions (innermost first) are
-    /// `frames`. Without debug information: [`Class::Formatting`], the
-    /// widest.
+    /// `frames`; [`Class::Any`] without them.
     pub fn of(frames: &[String]) -> Class {
         let Some(innermost) = frames.first() else {
-            return Class::Formatting;
+            return Class::Any;
         };
         let writes = ["<core::fmt::Formatter>::", "<core::fmt::PostPadding>::"]
             .iter()
@@ -50,7 +52,7 @@ impl Class {
     /// (several when the linker folded identical code).
     pub fn may_reach(self, names: &[String]) -> bool {
         match self {
-            Class::Formatting => true,
+            Class::Any | Class::Formatting => true,
             Class::Plain => !names.iter().all(|n| takes_formatter(n)),
             Class::FormatterWrite => names.iter().any(|n| {
                 n.contains(" as core::fmt::Write>::") || n.starts_with("core::fmt::Write::")
@@ -61,8 +63,9 @@ impl Class {
     /// A name for reports.
     pub fn name(self) -> &'static str {
         match self {
-            Class::Plain => "(function pointer)",
-            Class::Formatting => "(formatting function pointer)",
+            Class::Any => "(function pointer)",
+            Class::Plain => "(function pointer, outside formatting)",
+            Class::Formatting => "(function pointer, in formatting)",
             Class::FormatterWrite => "(formatter's writer)",
         }
     }
@@ -109,7 +112,7 @@ mod tests {
 
     #[test]
     fn classes_of_calls() {
-        assert_eq!(Class::of(&[]), Class::Formatting);
+        assert_eq!(Class::of(&[]), Class::Any);
         assert_eq!(
             Class::of(&names(&["<core::task::wake::Waker>::wake", "SysTick"])),
             Class::Plain

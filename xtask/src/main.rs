@@ -423,6 +423,9 @@ fn qemu(args: &[String]) -> Result {
         .wait_exit(Duration::from_secs(30))
         .map_err(|e| e.to_string())?;
     let report = write_qemu_report(&logs, seconds)?;
+    // The run's measured stack depth against the static analysis.
+    let stack = stack::analyse(&elf, &llvm_tool("llvm-objdump")?, &Board::Qemu.chip())?;
+    eprintln!("xtask: {}", stack::check_measured(&stack, &logs)?);
     if status.success() && logs.iter().any(|l| l.contains("drum: Running")) {
         eprintln!("xtask: the firmware ended its run: {status}");
         eprintln!("xtask: run report (open it in a browser):");

@@ -448,6 +448,41 @@ impl Report {
     }
 }
 
+/// Compares the analysis of an image with what a run of it measured: the
+/// QEMU board paints its stack at reset and logs `stack: N B used of M B`.
+/// The static worst case must cover every measured depth, and the stack
+/// the firmware sees must be the one analysed. Returns a line for the log.
+pub fn check_measured(report: &Report, logs: &[String]) -> Result<String, String> {
+    let mut deepest = None;
+    for line in logs.iter().filter(|l| l.contains(" stack: ")) {
+        let used = qemu_tests::number_after(line, "stack: ");
+        let size = qemu_tests::number_after(line, "B used of ");
+        let (Some(used), Some(size)) = (used, size) else {
+            return Err(format!("cannot read the stack line `{line}`"));
+        };
+        if size != f64::from(report.stack_size()) {
+            return Err(format!(
+                "the firmware's stack is {size} B, the analysis read {} B from the image",
+                report.stack_size()
+            ));
+        }
+        if used > f64::from(report.worst) {
+            return Err(format!(
+                "the run used {used} B of stack, more than the static worst case {} B: \
+                 the analysis misses a path",
+                report.worst
+            ));
+        }
+        deepest = Some(deepest.map_or(used, |d: f64| d.max(used)));
+    }
+    let deepest = deepest.ok_or("the run logged no `stack:` line")?;
+    Ok(format!(
+        "stack: {deepest} B measured in this run, static worst case {} B, stack {} B",
+        report.worst,
+        report.stack_size()
+    ))
+}
+
 /// A path's names, shortened; long paths keep their first two and last
 /// three functions.
 fn shorten_path(path: &[String]) -> String {

@@ -14,7 +14,9 @@ fn fixtures() -> PathBuf {
 /// Assembles and links `name.s` into an ELF (a `no_std` crate holding it
 /// as `global_asm!`).
 fn build(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("xtask-stack-{}-{name}", std::process::id()));
+    static BUILDS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("xtask-stack-{}-{n}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let source = fixtures().join(format!("{name}.s"));
     let main = dir.join("main.rs");
@@ -127,3 +129,15 @@ fn the_margin_rule() {
     assert_eq!(super::required_margin(4_096), 1_024);
 }
 
+
+#[test]
+fn measured_depths_within_the_static_worst_case() {
+    let r = run("basic").unwrap();
+    let log = |used: u32, size: u32| vec![format!("0.000 INFO  stack: {used} B used of {size} B")];
+    assert!(super::check_measured(&r, &log(1200, 4096)).is_ok());
+    let over = super::check_measured(&r, &log(1600, 4096)).unwrap_err();
+    assert!(over.contains("misses a path"), "{over}");
+    let other = super::check_measured(&r, &log(1200, 4000)).unwrap_err();
+    assert!(other.contains("4096"), "{other}");
+    assert!(super::check_measured(&r, &[]).is_err());
+}

@@ -41,9 +41,9 @@ type Key = (Node, u8, bool);
 /// restarted stack (and whether that call is the one restarting it).
 #[derive(Clone, Copy, Debug, Default)]
 struct Via {
-    below: Option<Key>,
-    open: Option<Key>,
-    fresh: Option<(Key, bool)>,
+    below: Option<(Key, u32)>,
+    open: Option<(Key, u32)>,
+    fresh: Option<(Key, u32, bool)>,
 }
 
 /// A call between nodes.
@@ -326,8 +326,8 @@ impl<'a> Graph<'a> {
     fn settle(&mut self, members: &[Key], t: &Tarjan) -> Result<(), String> {
         let mut d = Depth::default();
         // The member with the deepest of each kind, and the callee.
-        let mut via: (Option<(Key, Key)>, Option<(Key, Key)>, Option<(Key, Key, bool)>) =
-            (None, None, None);
+        type Best = Option<(Key, Key, u32)>;
+        let mut via: (Best, Best, Option<(Key, Key, u32, bool)>) = (None, None, None);
         for &m in members {
             if let Node::Fn(f) = m.0 {
                 let s = self.summary(f, m.2)?;
@@ -352,37 +352,41 @@ impl<'a> Graph<'a> {
                 if e.fresh {
                     if total > d.fresh {
                         d.fresh = total;
-                        via.2 = Some((m, e.to, true));
+                        via.2 = Some((m, e.to, e.depth, true));
                     }
                 } else {
                     if total > d.below {
                         d.below = total;
-                        via.0 = Some((m, e.to));
+                        via.0 = Some((m, e.to, e.depth));
                     }
                     if let Some(o) = cd.open {
                         let open = e.depth.saturating_add(o);
                         if d.open.is_none_or(|d| open > d) {
                             d.open = Some(open);
-                            via.1 = Some((m, e.to));
+                            via.1 = Some((m, e.to, e.depth));
                         }
                     }
                 }
                 if cd.fresh > d.fresh {
                     d.fresh = cd.fresh;
-                    via.2 = Some((m, e.to, false));
+                    via.2 = Some((m, e.to, e.depth, false));
                 }
             }
         }
         for &m in members {
             // A member other than the one with the deepest call reaches it
             // through the component, adding nothing.
-            let pick = |v: Option<(Key, Key)>| v.map(|(b, to)| if b == m { to } else { b });
+            let pick = |v: Best| v.map(|(b, to, d)| if b == m { (to, d) } else { (b, 0) });
             let v = Via {
                 below: pick(via.0),
                 open: pick(via.1),
-                fresh: via
-                    .2
-                    .map(|(b, to, started)| if b == m { (to, started) } else { (b, false) }),
+                fresh: via.2.map(|(b, to, d, started)| {
+                    if b == m {
+                        (to, d, started)
+                    } else {
+                        (b, 0, false)
+                    }
+                }),
             };
             self.depths.insert(m, (d, v));
         }
@@ -436,36 +440,48 @@ impl<'a> Graph<'a> {
         }
     }
 
-    /// The functions of a deepest path below `node`: the deepest, the
-    /// deepest preemptible one (`open`), or the deepest on a restarted
-    /// stack (`fresh`).
-    pub fn path(&self, node: Node, kind: PathKind) -> Vec<Node> {
-        let mut path = vec![node];
+    /// The functions of a deepest path below `node` (the deepest, the
+    /// deepest preemptible one, or the deepest on a restarted stack), each
+    /// with the bytes it adds: its frame's depth at the call to the next,
+    /// or the deepest its own frame goes for the last.
+    pub fn path(&self, node: Node, kind: PathKind) -> Vec<(Node, u32)> {
+        let mut path: Vec<(Node, u32)> = Vec::new();
         let mut key = (node, 0u8, false);
         let mut fresh = kind == PathKind::Fresh;
+        let mut own = 0;
         while path.len() < 64 {
             let Some((_, via)) = self.depths.get(&key) else {
                 break;
             };
             let next = if fresh {
-                match via.fresh {
-                    Some((c, started)) => {
-                        fresh = !started;
-                        Some(c)
-                    }
-                    None => None,
-                }
+                via.fresh.map(|(c, d, started)| {
+                    fresh = !started;
+                    (c, d)
+                })
             } else if kind == PathKind::Open {
                 via.open
             } else {
                 via.below
             };
-            let Some(next) = next else { break };
+            let Some((next, d)) = next else { break };
+            own += d;
             if next.0 != key.0 {
-                path.push(next.0);
+                path.push((key.0, own));
+                own = 0;
             }
             key = next;
         }
+        let last = match key.0 {
+            Node::Fn(f) => self.summaries.get(&f).map_or(0, |s| {
+                if kind == PathKind::Fresh {
+                    s.fresh_frame.unwrap_or(s.frame)
+                } else {
+                    s.frame
+                }
+            }),
+            Node::Pointer(_) => 0,
+        };
+        path.push((key.0, own + last));
         path
     }
 

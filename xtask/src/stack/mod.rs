@@ -100,8 +100,8 @@ pub struct Entry {
     /// How deep its stack goes.
     pub depth: Depth,
     /// Its deepest path's functions (on a restarted stack if that is the
-    /// deeper).
-    pub path: Vec<String>,
+    /// deeper), each with the bytes it adds.
+    pub path: Vec<(String, u32)>,
 }
 
 /// The analysis of one image.
@@ -219,7 +219,7 @@ fn entry(graph: &Graph, name: &str, vectors: usize, level: Level, h: u32, depth:
         path: graph
             .path(Node::Fn(h), kind)
             .into_iter()
-            .map(|n| graph.node_name(n))
+            .map(|(n, d)| (graph.node_name(n), d))
             .collect(),
     }
 }
@@ -483,20 +483,31 @@ pub fn check_measured(report: &Report, logs: &[String]) -> Result<String, String
     ))
 }
 
-/// A path's names, shortened; long paths keep their first two and last
-/// three functions.
-fn shorten_path(path: &[String]) -> String {
-    let names: Vec<String> = path.iter().map(|n| short(n)).collect();
-    if names.len() <= 6 {
-        return names.join(" > ");
+/// A path, shortened: its first and last functions, the panic handler,
+/// and those adding at least a tenth of the path's bytes (with what they
+/// add); "…" for the others.
+fn shorten_path(path: &[(String, u32)]) -> String {
+    let total: u32 = path.iter().map(|(_, d)| d).sum();
+    let mut out: Vec<String> = Vec::new();
+    let mut skipped = false;
+    for (i, (name, d)) in path.iter().enumerate() {
+        let big = *d > 0 && *d >= total / 10;
+        let keep = i == 0 || i + 1 == path.len() || big || name.ends_with("rust_begin_unwind");
+        if !keep {
+            skipped = true;
+            continue;
+        }
+        if skipped {
+            out.push("…".into());
+            skipped = false;
+        }
+        if big {
+            out.push(format!("{} {d}", short(name)));
+        } else {
+            out.push(short(name));
+        }
     }
-    let n = names.len();
-    format!(
-        "{} > … ({} more) > {}",
-        names[..2].join(" > "),
-        n - 5,
-        names[n - 3..].join(" > ")
-    )
+    out.join(" > ")
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 //! cargo xtask report CAPTURE.txt   a field capture (probe-rs run's decoded defmt) into a run report
 //! cargo xtask test                 all host tests, then the firmware in QEMU driven from tests/
 //! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
-//! cargo xtask size                 flash and RAM of both boards against their budgets
+//! cargo xtask size                 flash, RAM and the static stack worst case of every image
 //! cargo xtask flash                build and flash a real board with probe-rs
 //! cargo xtask bench [--only tables] regenerate docs/PERFORMANCE.md (QEMU instruction counts, sizes)
 //! cargo xtask plan --spacing 7cm --speed 0.51km/h [--gear low2] [--arr N]

@@ -250,7 +250,10 @@ pub fn analyse(
     while let Some(key) = work.pop() {
         steps += 1;
         if steps > 200_000 {
-            return Err(format!("{}: the analysis does not converge", image.name(entry)));
+            return Err(format!(
+                "{}: the analysis does not converge",
+                image.name(entry)
+            ));
         }
         let state = states[&key].clone();
         let at = key.0;
@@ -399,7 +402,10 @@ impl Walk<'_> {
             Some(_) => s.it,
             None => Track::Out,
         };
-        let s = &State { it: track, ..s.clone() };
+        let s = &State {
+            it: track,
+            ..s.clone()
+        };
         if !s.masked && !s.fresh {
             let d = u32::try_from(s.depth.max(0)).unwrap_or(u32::MAX);
             self.open_frame = Some(self.open_frame.unwrap_or(0).max(d));
@@ -412,7 +418,9 @@ impl Walk<'_> {
             None => insn.cond,
         };
         if let Op::It { .. } = insn.op {
-            let next = insn.next.ok_or_else(|| self.err(insn, "an IT block without instructions"))?;
+            let next = insn
+                .next
+                .ok_or_else(|| self.err(insn, "an IT block without instructions"))?;
             let way = |it| (next, State { it, ..s.clone() });
             return Ok(vec![way(Track::Then), way(Track::Else)]);
         }
@@ -439,7 +447,11 @@ impl Walk<'_> {
         let fall = |st: State| insn.next.map(|n| (n, st)).into_iter().collect::<Vec<_>>();
         // Successors when the instruction ends the path (a return, a tail
         // call): the next instruction only if it was conditional.
-        let skip = if conditional { fall(s.clone()) } else { Vec::new() };
+        let skip = if conditional {
+            fall(s.clone())
+        } else {
+            Vec::new()
+        };
         let reg = |r: Reg| &s.regs[usize::from(r)];
         let konst = |r: Reg| match reg(r) {
             Val::Consts(vs) => vs.iter().copied().max(),
@@ -456,7 +468,10 @@ impl Walk<'_> {
             Op::GrowBy(r) => match konst(*r) {
                 Some(n) => out.depth += i64::from(n),
                 None => {
-                    return Err(self.err(insn, "the stack grows by an amount the analysis cannot bound"))
+                    return Err(self.err(
+                        insn,
+                        "the stack grows by an amount the analysis cannot bound",
+                    ))
                 }
             },
             Op::Shrink { bytes } => out.depth -= i64::from(*bytes),
@@ -466,7 +481,11 @@ impl Walk<'_> {
             },
             Op::SetSp { src, add } => match reg(*src) {
                 Val::Stack(d) => out.depth = d - i64::from(*add),
-                _ => return Err(self.err(insn, "SP is set from a register the analysis cannot follow")),
+                _ => {
+                    return Err(
+                        self.err(insn, "SP is set from a register the analysis cannot follow")
+                    )
+                }
             },
             Op::ResetStack(_) => {
                 out.depth = 0;
@@ -509,7 +528,13 @@ impl Walk<'_> {
                     let c = Callee::Known(vec![*t]);
                     return self.tail(insn, s, c, callee, skip);
                 }
-                let mut succ = vec![(*t, State { it: Track::Out, ..out })];
+                let mut succ = vec![(
+                    *t,
+                    State {
+                        it: Track::Out,
+                        ..out
+                    },
+                )];
                 if conditional {
                     succ.extend(fall(s.clone()));
                 }
@@ -685,7 +710,9 @@ impl Walk<'_> {
         let mut targets = Vec::new();
         let mut at = table;
         while at + width <= end {
-            let Some(b) = image.bytes(at, width) else { break };
+            let Some(b) = image.bytes(at, width) else {
+                break;
+            };
             let entry = if halfwords {
                 u32::from(u16::from_le_bytes([b[0], b[1]]))
             } else {

@@ -327,7 +327,8 @@ impl<'a> Graph<'a> {
         let mut d = Depth::default();
         // The member with the deepest of each kind, and the callee.
         type Best = Option<(Key, Key, u32)>;
-        let mut via: (Best, Best, Option<(Key, Key, u32, bool)>) = (None, None, None);
+        type BestFresh = Option<(Key, Key, u32, bool)>;
+        let mut via: (Best, Best, BestFresh) = (None, None, None);
         for &m in members {
             if let Node::Fn(f) = m.0 {
                 let s = self.summary(f, m.2)?;

@@ -89,7 +89,11 @@ impl Image {
         Image::from_parts(&file, &text, ram).map_err(|e| format!("{}: {e}", elf.display()))
     }
 
-    fn from_parts(file: &object::File, disassembly: &str, ram: Range<u32>) -> Result<Image, String> {
+    fn from_parts(
+        file: &object::File,
+        disassembly: &str,
+        ram: Range<u32>,
+    ) -> Result<Image, String> {
         let mut functions = BTreeMap::new();
         let mut aliases: BTreeMap<u32, Vec<String>> = BTreeMap::new();
         let mut symbol = BTreeMap::new();
@@ -100,7 +104,7 @@ impl Image {
             if sym.kind() == SymbolKind::Text && !name.starts_with('$') {
                 let name = format!("{:#}", rustc_demangle::demangle(name));
                 functions.entry(addr & !1).or_insert_with(|| name.clone());
-                aliases.entry(addr & !1).or_insert_with(Vec::new).push(name);
+                aliases.entry(addr & !1).or_default().push(name);
             }
         }
         let mut rom = Vec::new();

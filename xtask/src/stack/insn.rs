@@ -273,7 +273,9 @@ pub fn decode(
     };
     let writes = generic_writes(m, &ops);
     let op = match m {
-        "push" | "stmdb" | "stmfd" if m == "push" || ops.first().map(String::as_str) == Some("sp!") => {
+        "push" | "stmdb" | "stmfd"
+            if m == "push" || ops.first().map(String::as_str) == Some("sp!") =>
+        {
             let list = reg_list(ops.last().map(String::as_str).unwrap_or(""))
                 .ok_or_else(|| format!("{addr:#x}: `{text}`: register list"))?;
             Op::Grow {
@@ -305,7 +307,11 @@ pub fn decode(
                 Op::Shrink { bytes }
             }
         }
-        "str" | "strd" if ops.last().is_some_and(|o| o.starts_with("[sp, #-") && o.ends_with("]!")) => {
+        "str" | "strd"
+            if ops
+                .last()
+                .is_some_and(|o| o.starts_with("[sp, #-") && o.ends_with("]!")) =>
+        {
             let bytes = parse_imm(&ops[ops.len() - 1][5..ops[ops.len() - 1].len() - 2])
                 .and_then(|v| u32::try_from(v.unsigned_abs()).ok())
                 .ok_or_else(|| format!("{addr:#x}: `{text}`: offset"))?;
@@ -337,8 +343,8 @@ pub fn decode(
             };
             match (src, parse_imm(last), reg(last)) {
                 (SP, Some(n), _) => {
-                    let bytes = u32::try_from(n)
-                        .map_err(|_| format!("{addr:#x}: `{text}`: negative"))?;
+                    let bytes =
+                        u32::try_from(n).map_err(|_| format!("{addr:#x}: `{text}`: negative"))?;
                     if grow {
                         Op::Grow {
                             bytes,
@@ -375,7 +381,12 @@ pub fn decode(
             None => return err("a PC update of an unknown form"),
         },
         "cpsid" | "cpsie" => Op::Mask(m == "cpsid"),
-        "msr" if matches!(ops.first().map(String::as_str), Some("primask" | "faultmask")) => {
+        "msr"
+            if matches!(
+                ops.first().map(String::as_str),
+                Some("primask" | "faultmask")
+            ) =>
+        {
             match ops.get(1).and_then(|o| reg(o)) {
                 Some(r) => Op::SetMask(r),
                 None => return err("a PRIMASK update of an unknown form"),
@@ -513,7 +524,10 @@ pub fn decode(
                 },
             }
         }
-        _ if m.starts_with("it") && m[2..].bytes().all(|b| b == b't' || b == b'e') && m.len() <= 5 => {
+        _ if m.starts_with("it")
+            && m[2..].bytes().all(|b| b == b't' || b == b'e')
+            && m.len() <= 5 =>
+        {
             Op::It {
                 count: (m.len() - 1) as u8,
                 elses: m
@@ -595,8 +609,8 @@ fn generic_writes(m: &str, ops: &[String]) -> Regs {
         if let Some(r) = o.strip_suffix('!').and_then(reg) {
             writes = writes.with(r);
         }
-        if o.starts_with('[') {
-            let base = o[1..].split([',', ']']).next().map(str::trim).and_then(reg);
+        if let Some(inner) = o.strip_prefix('[') {
+            let base = inner.split([',', ']']).next().map(str::trim).and_then(reg);
             let post_indexed = o.ends_with(']') && !o.contains(',') && i + 1 < ops.len();
             if let Some(b) = base {
                 if o.ends_with("]!") || post_indexed {
@@ -622,10 +636,9 @@ fn stored_regs(m: &str, ops: &[String]) -> Regs {
         "strd" => regs(0..2),
         "strex" | "strexb" | "strexh" => regs(1..2),
         "strexd" => regs(1..3),
-        _ if m == "push" || m.starts_with("stm") => ops
-            .last()
-            .and_then(|o| reg_list(o))
-            .unwrap_or(Regs::NONE),
+        _ if m == "push" || m.starts_with("stm") => {
+            ops.last().and_then(|o| reg_list(o)).unwrap_or(Regs::NONE)
+        }
         _ => Regs::NONE,
     }
 }
@@ -772,9 +785,18 @@ mod tests {
                 saves: Regs(0b0100_0000_1111_0000)
             }
         );
-        assert!(matches!(op("push.w", "{r8, r9, r10, r11}"), Op::Grow { bytes: 16, .. }));
-        assert!(matches!(op("stmdb", "sp!, {r4-r11}"), Op::Grow { bytes: 32, .. }));
-        assert!(matches!(op("str", "r11, [sp, #-4]!"), Op::Grow { bytes: 4, .. }));
+        assert!(matches!(
+            op("push.w", "{r8, r9, r10, r11}"),
+            Op::Grow { bytes: 16, .. }
+        ));
+        assert!(matches!(
+            op("stmdb", "sp!, {r4-r11}"),
+            Op::Grow { bytes: 32, .. }
+        ));
+        assert!(matches!(
+            op("str", "r11, [sp, #-4]!"),
+            Op::Grow { bytes: 4, .. }
+        ));
         assert_eq!(op("sub", "sp, #0x10"), grow(16));
         assert_eq!(op("sub.w", "sp, sp, #0x400"), grow(1024));
         assert_eq!(op("subw", "sp, sp, #1234"), grow(1234));
@@ -795,7 +817,11 @@ mod tests {
 
     #[test]
     fn unknown_stack_writes_are_errors() {
-        for (m, ops) in [("ldr", "sp, [r0]"), ("ldr", "pc, [r0, #4]"), ("add", "pc, r0")] {
+        for (m, ops) in [
+            ("ldr", "sp, [r0]"),
+            ("ldr", "pc, [r0, #4]"),
+            ("add", "pc, r0"),
+        ] {
             let e = decode(0x0800_0100, m, ops, false).unwrap_err();
             assert!(e.contains("0x8000100"), "{e}");
         }
@@ -824,7 +850,13 @@ mod tests {
                 halfwords: true
             }
         );
-        assert_eq!(op("itte", "ne"), Op::It { count: 3, elses: 0b100 });
+        assert_eq!(
+            op("itte", "ne"),
+            Op::It {
+                count: 3,
+                elses: 0b100
+            }
+        );
         assert_eq!(op("it", "eq"), Op::It { count: 1, elses: 0 });
     }
 

@@ -30,8 +30,8 @@ use std::ops::Range;
 use std::path::Path;
 
 use graph::{Depth, Graph, Node, PathKind};
-pub use image::StackRegion;
 use image::Image;
+pub use image::StackRegion;
 
 /// What the hardware stacks on exception entry: eight words, plus a word
 /// of padding to align the frame to 8 bytes (no FPU on the Cortex-M3, so
@@ -149,7 +149,14 @@ fn analyse_image(image: &Image, chip: &Chip) -> Result<Report, String> {
     let priorities = priority_bytes(&graph);
     let mut entries = Vec::new();
     let thread = graph.depth(Node::Fn(reset))?;
-    entries.push(entry(&graph, "Reset (boot, init, idle)", 1, Level::Thread, reset, thread));
+    entries.push(entry(
+        &graph,
+        "Reset (boot, init, idle)",
+        1,
+        Level::Thread,
+        reset,
+        thread,
+    ));
     for (h, vectors) in &handlers {
         let depth = graph.depth(Node::Fn(*h))?;
         let mut levels: Vec<(Level, Vec<usize>)> = Vec::new();
@@ -328,7 +335,11 @@ fn worst_case(entries: &[Entry]) -> (u32, Vec<String>) {
     }
     for e in entries.iter().filter(|e| e.depth.fresh > 0) {
         let mut total = e.depth.fresh;
-        let mut t = vec![format!("{} {} (fresh stack)", short(&e.name), e.depth.fresh)];
+        let mut t = vec![format!(
+            "{} {} (fresh stack)",
+            short(&e.name),
+            e.depth.fresh
+        )];
         for f in fixed.iter().filter(|f| f.level.rank() > e.level.rank()) {
             total += f.frame + f.below.0;
             t.push(term(f.frame, f.below.0, f.below.1, ""));

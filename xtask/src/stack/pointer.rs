@@ -73,7 +73,8 @@ impl Class {
 
 /// The formatting traits whose `fmt` takes a `&mut Formatter`.
 const FORMATTING_TRAITS: [&str; 9] = [
-    "Debug", "Display", "LowerHex", "UpperHex", "Octal", "Binary", "LowerExp", "UpperExp", "Pointer",
+    "Debug", "Display", "LowerHex", "UpperHex", "Octal", "Binary", "LowerExp", "UpperExp",
+    "Pointer",
 ];
 
 /// Whether a function (by its demangled name) takes a `&mut Formatter`:
@@ -95,7 +96,10 @@ fn strip_hash(name: &str) -> &str {
         _ => name,
     };
     match name.rfind("::h") {
-        Some(i) if name[i + 3..].len() == 16 && name[i + 3..].bytes().all(|b| b.is_ascii_hexdigit()) => {
+        Some(i)
+            if name[i + 3..].len() == 16
+                && name[i + 3..].bytes().all(|b| b.is_ascii_hexdigit()) =>
+        {
             &name[..i]
         }
         _ => name,
@@ -118,11 +122,16 @@ mod tests {
             Class::Plain
         );
         assert_eq!(
-            Class::of(&names(&["<core::fmt::Formatter>::padding", "<core::fmt::Formatter>::pad"])),
+            Class::of(&names(&[
+                "<core::fmt::Formatter>::padding",
+                "<core::fmt::Formatter>::pad"
+            ])),
             Class::FormatterWrite
         );
         assert_eq!(
-            Class::of(&names(&["<&dyn core::fmt::Debug as core::fmt::Debug>::fmt"])),
+            Class::of(&names(&[
+                "<&dyn core::fmt::Debug as core::fmt::Debug>::fmt"
+            ])),
             Class::Formatting
         );
         assert_eq!(

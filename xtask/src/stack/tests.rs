@@ -32,10 +32,27 @@ fn build(name: &str) -> PathBuf {
     let elf = dir.join(name);
     let out = Command::new("rustc")
         .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["--edition", "2021", "--crate-type", "bin", "--target", "thumbv7m-none-eabi"])
-        .args(["-C", "panic=abort", "-C", "opt-level=1", "-C", "debuginfo=0"])
+        .args([
+            "--edition",
+            "2021",
+            "--crate-type",
+            "bin",
+            "--target",
+            "thumbv7m-none-eabi",
+        ])
+        .args([
+            "-C",
+            "panic=abort",
+            "-C",
+            "opt-level=1",
+            "-C",
+            "debuginfo=0",
+        ])
         .arg("-C")
-        .arg(format!("link-arg=-T{}", fixtures().join("link.ld").display()))
+        .arg(format!(
+            "link-arg=-T{}",
+            fixtures().join("link.ld").display()
+        ))
         .arg("-o")
         .arg(&elf)
         .arg(&main)
@@ -80,15 +97,25 @@ fn frames_calls_priorities_and_preemption() {
     assert_eq!((reset.depth.below, reset.depth.open), (104, Some(16)));
     assert_eq!(
         reset.path,
-        [("Reset".to_string(), 0), ("init".into(), 64), ("leaf".into(), 40)]
+        [
+            ("Reset".to_string(), 0),
+            ("init".into(), 64),
+            ("leaf".into(), 40)
+        ]
     );
     let irq0 = entry(&r, "Irq0");
-    assert_eq!((irq0.level, irq0.depth.below), (Level::Priority(Some(0xe0), 0), 176));
+    assert_eq!(
+        (irq0.level, irq0.depth.below),
+        (Level::Priority(Some(0xe0), 0), 176)
+    );
     let irq1 = entry(&r, "Irq1");
     assert_eq!(irq1.level, Level::Priority(Some(0xc0), 0));
     assert_eq!((irq1.depth.below, irq1.depth.open), (1216, Some(208)));
     let systick = entry(&r, "SysTick");
-    assert_eq!((systick.level, systick.depth.below), (Level::Priority(Some(0x80), 0), 8));
+    assert_eq!(
+        (systick.level, systick.depth.below),
+        (Level::Priority(Some(0x80), 0), 8)
+    );
     for fatal in ["HardFault", "NMI"] {
         let e = entry(&r, fatal);
         assert_eq!((e.depth.below, e.depth.fresh), (0, 72), "{fatal}");
@@ -117,7 +144,10 @@ fn a_call_through_an_unresolved_pointer_reaches_every_stored_function() {
 fn recursion_through_a_pointer_is_an_error_naming_the_functions() {
     let e = run("pointer-recursion").unwrap_err();
     assert!(e.contains("recursion"), "{e}");
-    assert!(e.contains("run") && e.contains("again") && e.contains("(function pointer)"), "{e}");
+    assert!(
+        e.contains("run") && e.contains("again") && e.contains("(function pointer)"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -131,7 +161,6 @@ fn the_margin_rule() {
     assert_eq!(super::required_margin(15_656), 1_565);
     assert_eq!(super::required_margin(4_096), 1_024);
 }
-
 
 #[test]
 fn measured_depths_within_the_static_worst_case() {

@@ -1,23 +1,27 @@
 //! Static stack analysis of a firmware image (`cargo xtask size`).
 //!
-//! From the ELF alone: every entry in the vector table (Reset with the
+//! From the ELF alone ([`analyse`]: its path, and the chip's RAM to check
+//! the stack against): every entry in the vector table (Reset with the
 //! boot, `init` and `idle`; each interrupt and exception handler, RTIC's
 //! hardware tasks and software-task dispatchers among them) is analysed
-//! down its call graph. The worst case is Reset's deepest path (RTIC 2
-//! enables the interrupts inside `init`, so tasks may preempt any point of
-//! it), plus, for each preemption level in use, an exception frame and the
-//! deepest handler of that level. The handlers' priorities are the constant
-//! bytes the image's code stores to the NVIC's and the SCB's priority
-//! registers (RTIC writes them in `main` before `init`); an entry nothing
-//! writes keeps the reset value 0, the highest configurable priority.
+//! down its call graph ([`graph`]). The handlers' priorities are the
+//! constant bytes the image's code stores to the NVIC's and the SCB's
+//! priority registers (RTIC writes them in `main` before `init`); an entry
+//! nothing writes keeps the reset value 0, the highest configurable
+//! priority. The worst case stacks, below the deepest path of the topmost
+//! level, each lower level at its deepest point where interrupts are
+//! enabled, with an exception frame per level ([`worst_case`]).
 //!
 //! Stable Rust has no `-Z emit-stack-sizes` (LLVM's `.stack_sizes`), and
-//! `-C llvm-args=-stack-size-section` is accepted but emits nothing, so
-//! frames come from the code itself: LLVM's disassembler (`llvm-objdump`
-//! of the pinned toolchain's llvm-tools) and a data-flow pass over each
-//! function ([`flow`]). The analysis fails, naming the function, where it
-//! cannot bound the stack: recursion, a call through a function pointer
-//! that may reach recursion, a stack-pointer update it does not know.
+//! `-C llvm-args=-stack-size-section` is accepted but emits nothing (the
+//! linked image's bytes stay the same), so frames come from the code
+//! itself: LLVM's disassembler (`llvm-objdump` of the pinned toolchain's
+//! llvm-tools: the decoder of the compiler that wrote the code) and a
+//! data-flow pass over each function ([`flow`]). Calls through pointers it
+//! cannot resolve reach what [`pointer`] allows. The analysis fails,
+//! naming the function, where it cannot bound the stack: recursion that
+//! grows it, a stack-pointer update it does not know, a frame sized at run
+//! time.
 
 mod flow;
 mod graph;
@@ -184,8 +188,10 @@ fn analyse_image(image: &Image, chip: &Chip) -> Result<Report, String> {
         }
         for (level, vs) in levels {
             let mut name = image.name(*h);
-            if vs.len() == 1 && !image.name(*h).ends_with(&vector_name(vs[0])) && vs[0] >= 16 {
-                name = format!("{name} (IRQ {})", vs[0] - 16);
+            // A handler shared by several vectors (the default one): name
+            // the vector when it is alone at its level.
+            if vectors.len() > 1 && vs.len() == 1 {
+                name = format!("{name} ({})", vector_name(vs[0]));
             }
             entries.push(entry(&graph, &name, vs.len(), level, *h, depth));
         }
@@ -200,15 +206,20 @@ fn analyse_image(image: &Image, chip: &Chip) -> Result<Report, String> {
     })
 }
 
-/// The core exceptions' names, by vector number.
+/// A vector's name: the core exception's, or the interrupt's number.
 fn vector_name(v: usize) -> String {
     match v {
         2 => "NonMaskableInt".into(),
         3 => "HardFault".into(),
+        4 => "MemoryManagement".into(),
+        5 => "BusFault".into(),
+        6 => "UsageFault".into(),
         11 => "SVCall".into(),
+        12 => "DebugMonitor".into(),
         14 => "PendSV".into(),
         15 => "SysTick".into(),
-        _ => String::new(),
+        v if v >= 16 => format!("IRQ {}", v - 16),
+        v => format!("exception {v}"),
     }
 }
 

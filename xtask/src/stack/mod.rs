@@ -18,7 +18,7 @@
 //! itself: LLVM's disassembler (`llvm-objdump` of the pinned toolchain's
 //! llvm-tools: the decoder of the compiler that wrote the code) and a
 //! data-flow pass over each function ([`flow`]). Calls through pointers it
-//! cannot resolve reach what [`pointer`] allows. The analysis fails,
+//! cannot resolve reach what [`mod@pointer`] allows. The analysis fails,
 //! naming the function, where it cannot bound the stack: recursion that
 //! grows it, a stack-pointer update it does not know, a frame sized at run
 //! time.

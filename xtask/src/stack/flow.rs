@@ -518,9 +518,6 @@ impl Walk<'_> {
             }
             Op::CallReg(r) => {
                 let c = self.targets(reg(*r));
-                if std::env::var_os("STACK_DEBUG").is_some() && c == Callee::Unknown {
-                    eprintln!("{:#x} {:?} {:?}", insn.addr, s.it, s.regs);
-                }
                 return self.call(insn, s, out, c, conditional, callee);
             }
             Op::Jump(t) => {
@@ -552,9 +549,6 @@ impl Walk<'_> {
                         .ok_or_else(|| self.err(insn, "a jump table at an unknown address"))?,
                 };
                 let targets = self.table_targets(insn, table, *halfwords);
-                if std::env::var_os("STACK_DEBUG").is_some() {
-                    eprintln!("table {:#x} at {table:#x}: {targets:x?}", insn.addr);
-                }
                 if targets.is_empty() {
                     return Err(self.err(insn, "a jump table the analysis cannot read"));
                 }

@@ -237,14 +237,7 @@ impl<'a> Graph<'a> {
         };
         match node {
             Node::Pointer(class) => {
-                let image = self.image;
-                let taken: Vec<u32> = self
-                    .taken
-                    .iter()
-                    .copied()
-                    .filter(|t| class.may_reach(image.aliases.get(t).map_or(&[][..], |v| v)))
-                    .collect();
-                for t in taken {
+                for t in self.pointer_targets(class) {
                     if let Some(k) = to(self, Node::Fn(t), masked) {
                         edges.push(Edge {
                             depth: 0,
@@ -261,7 +254,16 @@ impl<'a> Graph<'a> {
                         Callee::Known(ts) => ts.iter().map(|&t| Node::Fn(t)).collect(),
                         Callee::Unknown => {
                             let frames = self.image.call_frames.get(&site.at);
-                            vec![Node::Pointer(Class::of(frames.map_or(&[][..], |v| v)))]
+                            let class = Class::of(frames.map_or(&[][..], |v| v));
+                            if self.pointer_targets(class).is_empty() {
+                                return Err(format!(
+                                    "{}: a call through a register the analysis cannot \
+                                     resolve, and no function of the image may be called \
+                                     through a pointer from there",
+                                    self.image.name(site.at)
+                                ));
+                            }
+                            vec![Node::Pointer(class)]
                         }
                     };
                     for c in callees {
@@ -430,6 +432,17 @@ impl<'a> Graph<'a> {
             self.node_name(from.0),
             e.depth
         )
+    }
+
+    /// The functions a call through an unresolved pointer of this class
+    /// may reach.
+    fn pointer_targets(&self, class: Class) -> Vec<u32> {
+        let image = self.image;
+        self.taken
+            .iter()
+            .copied()
+            .filter(|t| class.may_reach(image.aliases.get(t).map_or(&[][..], |v| v)))
+            .collect()
     }
 
     fn is_panic_handler(&self, n: Node) -> bool {

@@ -173,3 +173,12 @@ fn measured_depths_within_the_static_worst_case() {
     assert!(other.contains("4096"), "{other}");
     assert!(super::check_measured(&r, &[]).is_err());
 }
+
+#[test]
+fn an_unresolved_call_with_nothing_to_reach_is_an_error_naming_the_function() {
+    let e = run("unresolved").unwrap_err();
+    assert!(
+        e.contains("dispatch+0x2") && e.contains("cannot resolve"),
+        "{e}"
+    );
+}

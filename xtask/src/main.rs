@@ -6,7 +6,7 @@
 //! cargo xtask report CAPTURE.txt   a field capture (probe-rs run's decoded defmt) into a run report
 //! cargo xtask test                 all host tests, then the firmware in QEMU driven from tests/
 //! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
-//! cargo xtask size                 flash and RAM of both boards against their budgets
+//! cargo xtask size                 flash, RAM and the static stack worst case of every image
 //! cargo xtask flash                build and flash a real board with probe-rs
 //! cargo xtask bench [--only tables] regenerate docs/PERFORMANCE.md (QEMU instruction counts, sizes)
 //! cargo xtask plan --spacing 7cm --speed 0.51km/h [--gear low2] [--arr N]
@@ -22,6 +22,7 @@ use qemu_tests::{images, workspace_root, BootOptions};
 mod bench;
 mod plan;
 mod report;
+mod stack;
 
 type Result<T = ()> = std::result::Result<T, String>;
 
@@ -154,6 +155,27 @@ impl Board {
 
     fn elf(self) -> PathBuf {
         images::elf_path(self.image_name())
+    }
+
+    /// The chip it runs on, for the stack analysis: its RAM (the board's
+    /// `memory*.x`) and the NVIC's priority bits.
+    fn chip(self) -> stack::Chip {
+        let ram = match self {
+            Board::Stm32f103 | Board::Stm32f103ProfileB | Board::Stm32f103DriveLink => 20 * 1024,
+            Board::Qemu => QEMU_RAM_SIZE as u32,
+        };
+        stack::Chip {
+            ram: 0x2000_0000..0x2000_0000 + ram,
+            nvic_prio_bits: 4,
+        }
+    }
+
+    /// Whether `cargo xtask size` holds its stack to the margin rule
+    /// ([`stack::required_margin`]): the boards the firmware ships on. The
+    /// QEMU board's RAM is the emulated machine's 8 KB; its figures are
+    /// shown beside what its tests measure.
+    fn enforces_stack_margin(self) -> bool {
+        !matches!(self, Board::Qemu)
     }
 
     fn build(self) -> Result<PathBuf> {
@@ -401,6 +423,9 @@ fn qemu(args: &[String]) -> Result {
         .wait_exit(Duration::from_secs(30))
         .map_err(|e| e.to_string())?;
     let report = write_qemu_report(&logs, seconds)?;
+    // The run's measured stack depth against the static analysis.
+    let stack = stack::analyse(&elf, &llvm_tool("llvm-objdump")?, &Board::Qemu.chip())?;
+    eprintln!("xtask: {}", stack::check_measured(&stack, &logs)?);
     if status.success() && logs.iter().any(|l| l.contains("drum: Running")) {
         eprintln!("xtask: the firmware ended its run: {status}");
         eprintln!("xtask: run report (open it in a browser):");
@@ -825,6 +850,26 @@ fn size() -> Result {
         }
         if ram > ram_budget {
             over.push(format!("{}: RAM {ram} B > {ram_budget} B", board.name()));
+        }
+    }
+    let objdump = llvm_tool("llvm-objdump")?;
+    for board in Board::ALL {
+        let elf = board.elf();
+        let started = Instant::now();
+        let report = stack::analyse(&elf, &objdump, &board.chip())
+            .map_err(|e| format!("stack analysis, board {}: {e}", board.name()))?;
+        println!(
+            "\n### Stack: {} ({:.1} s)\n\n{}",
+            board.name(),
+            started.elapsed().as_secs_f64(),
+            report.table()
+        );
+        if let Err(e) = report.check_margin() {
+            if board.enforces_stack_margin() {
+                over.push(format!("{}: {e}", board.name()));
+            } else {
+                println!("not enforced for this board: {e}");
+            }
         }
     }
     if !over.is_empty() {

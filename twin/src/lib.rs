@@ -296,18 +296,7 @@ impl Twin {
             .clone()
             .unwrap_or_else(|| vec![0xFF; FLASH_SIZE as usize]);
         if options.flash.is_none() {
-            // Program the image's loadable sections (by load address).
-            for seg in file.segments() {
-                use object::ObjectSegment;
-                let (addr, _) = seg.file_range();
-                let _ = addr;
-                let paddr = seg.address();
-                let bytes = seg.data().map_err(|e| Error::Elf(e.to_string()))?;
-                let _ = (paddr, bytes);
-            }
-            for sec in file.sections() {
-                let _ = sec;
-            }
+            // Program the image's loadable segments (by load address).
             load_flash(&data, &mut flash)?;
         }
         let mut symbols = Vec::new();
@@ -320,6 +309,32 @@ impl Twin {
                 symbols.push((name.to_string(), s.address() as u32, s.size()));
             }
         }
+        Self::build(Some(elf), flash, symbols, rtt, options)
+    }
+
+    /// A fresh twin running a bare program: `image` is programmed at the
+    /// start of the flash (its vector table first), the rest erased; no
+    /// symbols, no RTT log. For the models' own tests.
+    pub fn from_program(image: &[u8], options: Options) -> Result<Self, Error> {
+        if image.len() > FLASH_SIZE as usize {
+            return Err(Error::Elf("program larger than the flash".into()));
+        }
+        let mut flash = vec![0xFF; FLASH_SIZE as usize];
+        flash[..image.len()].copy_from_slice(image);
+        let options = Options {
+            decode_logs: false,
+            ..options
+        };
+        Self::build(None, flash, Vec::new(), None, options)
+    }
+
+    fn build(
+        elf: Option<&Path>,
+        flash: Vec<u8>,
+        symbols: Vec<(String, u32, u64)>,
+        rtt: Option<u32>,
+        options: Options,
+    ) -> Result<Self, Error> {
         let state = State {
             now: 0,
             cost: 9,
@@ -352,10 +367,13 @@ impl Twin {
         map_peripherals(&mut uc)?;
         add_hooks(&mut uc)?;
         let vector_sp = u32::from_le_bytes(flash[0..4].try_into().unwrap_or([0; 4]));
-        let log = LogSink::start(elf, options.decode_logs, options.echo_logs)?;
+        let log = match elf {
+            Some(elf) => LogSink::start(elf, options.decode_logs, options.echo_logs)?,
+            None => LogSink::start(Path::new(""), false, false)?,
+        };
         let mut twin = Self {
             uc,
-            elf_path: elf.to_path_buf(),
+            elf_path: elf.map(Path::to_path_buf).unwrap_or_default(),
             vector_sp,
             rtt,
             symbols,

@@ -405,3 +405,64 @@ fn the_outputs_are_driven_low_before_the_watchdog_starts() {
         }
     }
 }
+
+/// The safe state at boot writes TIM1's (and profile B's TIM4's) compare
+/// mode, compare value and break register before those timers' clocks are
+/// on: the chip ignores them (RM0008 §7.3.7, §7.3.8: without its clock a
+/// peripheral's registers are not written, they read 0). The outputs must
+/// not need them: until `init` switches the timers on (their clock and
+/// an APB reset pulse, RM0008 §7.3.4) and hands the pins to them, the GPIO
+/// writes alone drive PA8, PB12, PA1 (and PB6) low. Checked from power-on
+/// to the watchdog's start, while the crystal is still starting.
+#[test]
+fn the_boot_safe_state_holds_the_outputs_without_the_timer_writes_made_before_their_clocks() {
+    const TIM1: u32 = 0x4001_2C00;
+    const TIM4: u32 = 0x4000_0800;
+    for image in [Image::ProfileA, Image::ProfileB] {
+        let mut twin = load(image);
+        let started = twin
+            .run_until(50, |t| t.state().bus.iwdg.started_at.is_some())
+            .expect("run");
+        assert!(started, "{image:?}: the watchdog never started");
+        let bus = &twin.state().bus;
+        let mut timers = vec![("TIM1", 0, TIM1)];
+        if image == Image::ProfileB {
+            timers.push(("TIM4", 3, TIM4));
+        }
+        for &(name, i, base) in &timers {
+            assert!(
+                !bus.clock_enabled(base),
+                "{image:?}: {name}'s clock already on"
+            );
+            let t = &bus.tim[i];
+            let dropped: Vec<u32> = bus
+                .dropped_writes
+                .iter()
+                .filter(|w| w.addr & !0x3FF == base)
+                .map(|w| w.addr - base)
+                .collect();
+            eprintln!("{image:?}: {name} writes lost before its clock: offsets {dropped:#x?}");
+            // CCMR1 (0x18) and CCR1 (0x34) written by the safe state, lost.
+            assert!(
+                dropped.contains(&0x18) && dropped.contains(&0x34),
+                "{image:?}: {name} writes before its clock: {dropped:#x?}"
+            );
+            assert_eq!(
+                (t.ccmr[0], t.ccr[0], t.bdtr),
+                (0, 0, 0),
+                "{image:?}: {name} CCMR1, CCR1, BDTR hold their reset values"
+            );
+        }
+        let mut outputs = vec![('A', 8), ('B', 12), ('A', 1)];
+        if image == Image::ProfileB {
+            outputs.push(('B', 6));
+        }
+        for (port, pin) in outputs {
+            assert_eq!(
+                twin.pin(port, pin),
+                twin::Level::Low,
+                "{image:?} P{port}{pin} with the timers unclocked"
+            );
+        }
+    }
+}

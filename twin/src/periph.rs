@@ -628,7 +628,8 @@ impl Timer {
         }
         let elapsed = now - self.t + self.frac;
         self.t = now;
-        if !self.running() {
+        if !self.running() || clk_hz == 0 {
+            // Stopped, or no clock (RCC enable bit off, held in reset).
             self.frac = 0;
             return;
         }
@@ -685,7 +686,7 @@ impl Timer {
 
     /// Time of the next update event, if the counter runs.
     fn next_update(&self, clk_hz: u64) -> Ticks {
-        if !self.running() || self.arr_act == 0 {
+        if !self.running() || self.arr_act == 0 || clk_hz == 0 {
             return NEVER;
         }
         let div = u64::from(self.psc_act) + 1;
@@ -995,6 +996,15 @@ impl Usart {
         self.line_log = log;
     }
 
+    /// An APB reset pulse (RCC_APBxRSTR): the registers back to their
+    /// reset values; bytes already on their way on the RX line still come
+    /// (the line is outside the chip).
+    fn peripheral_reset(&mut self) {
+        let line = std::mem::take(&mut self.rx_line);
+        self.reset();
+        self.rx_line = line;
+    }
+
     fn log(&mut self, e: LineEvent) {
         if self.record {
             self.line_log.push(e);
@@ -1013,6 +1023,10 @@ impl Usart {
     }
 
     fn advance(&mut self, now: Ticks, pclk: u64) {
+        if pclk == 0 {
+            // No clock (RCC enable bit off, held in reset): nothing moves.
+            return;
+        }
         // Transmitter.
         while let Some((b, done)) = self.tx_shift {
             if done > now {
@@ -1247,6 +1261,14 @@ impl SysTick {
         self.val
     }
 
+    /// CSR (COUNTFLAG included, not cleared) and CVR as they are at `now`,
+    /// without touching the timer (a debugger's read).
+    pub fn peek(&self, now: Ticks, c: &Clocks) -> (u32, u32) {
+        let mut st = self.clone();
+        st.advance(now, c);
+        (st.ctrl | u32::from(st.countflag) << 16, st.val)
+    }
+
     /// CSR written: counting restarts from the current value.
     pub fn restart(&mut self, now: Ticks) {
         self.t = now;
@@ -1400,6 +1422,66 @@ pub struct Bus {
     traced: Vec<(usize, u32, Level)>,
     /// The recorded level changes of the traced pins, in time order.
     pub pin_log: Vec<PinEvent>,
+    /// Writes the silicon ignores because the peripheral's clock is off
+    /// or it is held in reset (the first [`DROPPED_WRITES_KEPT`]).
+    pub dropped_writes: Vec<DroppedWrite>,
+}
+
+/// How many dropped writes [`Bus::dropped_writes`] keeps.
+pub const DROPPED_WRITES_KEPT: usize = 256;
+
+/// A write to a peripheral whose clock was off (RM0008 §7.3.6–§7.3.8) or
+/// that was held in reset (§7.3.4, §7.3.5): the chip ignores it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DroppedWrite {
+    /// When.
+    pub at: Ticks,
+    /// The register's address.
+    pub addr: u32,
+    /// The value written.
+    pub value: u32,
+}
+
+/// The RCC bits that clock and reset a peripheral (RM0008 §7.3.4–§7.3.8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gate {
+    /// Bit n of APB1ENR and APB1RSTR.
+    Apb1(u32),
+    /// Bit n of APB2ENR and APB2RSTR.
+    Apb2(u32),
+    /// Bit n of AHBENR (no reset register on the medium-density parts).
+    Ahb(u32),
+}
+
+/// The clock gate of the peripheral at `base`; `None` for those with no
+/// enable bit (RCC, FLASH interface, IWDG, EXTI, the core's registers).
+pub fn gate(base: u32) -> Option<Gate> {
+    use Gate::*;
+    Some(match base {
+        addr::TIM2 => Apb1(0),
+        addr::TIM3 => Apb1(1),
+        addr::TIM4 => Apb1(2),
+        0x4000_2C00 => Apb1(11), // WWDG
+        0x4000_3800 => Apb1(14), // SPI2
+        addr::USART2 => Apb1(17),
+        0x4000_4800 => Apb1(18), // USART3
+        0x4000_5400 => Apb1(21), // I2C1
+        0x4000_5800 => Apb1(22), // I2C2
+        0x4000_5C00 => Apb1(23), // USB
+        0x4000_6400 => Apb1(25), // CAN
+        0x4000_6C00 => Apb1(27), // BKP
+        0x4000_7000 => Apb1(28), // PWR
+        addr::AFIO => Apb2(0),
+        0x4001_0800..=0x4001_1800 => Apb2(2 + (base - addr::GPIOA) / 0x400),
+        0x4001_2400 => Apb2(9),  // ADC1
+        0x4001_2800 => Apb2(10), // ADC2
+        addr::TIM1 => Apb2(11),
+        0x4001_3000 => Apb2(12), // SPI1
+        addr::USART1 => Apb2(14),
+        0x4002_0000 => Ahb(0), // DMA1
+        0x4002_3000 => Ahb(6), // CRC
+        _ => return None,
+    })
 }
 
 /// A traced pin's level change (a GPIO register write or a reset changed
@@ -1476,6 +1558,71 @@ impl Bus {
             clock_stopped: false,
             traced: Vec::new(),
             pin_log: Vec::new(),
+            dropped_writes: Vec::new(),
+        }
+    }
+
+    /// Whether the peripheral at `base` has its clock (RM0008 §7.3.6–§7.3.8:
+    /// "When the peripheral clock is not active, the peripheral register
+    /// values may not be readable by software and the returned value is
+    /// always 0x0"; writes are ignored).
+    pub fn clock_enabled(&self, base: u32) -> bool {
+        match gate(base) {
+            Some(Gate::Apb1(b)) => self.rcc.apb1enr & (1 << b) != 0,
+            Some(Gate::Apb2(b)) => self.rcc.apb2enr & (1 << b) != 0,
+            Some(Gate::Ahb(b)) => self.rcc.ahbenr & (1 << b) != 0,
+            None => true,
+        }
+    }
+
+    /// Whether the peripheral at `base` is held in reset by its APBxRSTR bit.
+    pub fn held_in_reset(&self, base: u32) -> bool {
+        match gate(base) {
+            Some(Gate::Apb1(b)) => self.rcc.apb1rstr & (1 << b) != 0,
+            Some(Gate::Apb2(b)) => self.rcc.apb2rstr & (1 << b) != 0,
+            _ => false,
+        }
+    }
+
+    /// Whether the peripheral at `base` runs (clocked, not held in reset).
+    fn active(&self, base: u32) -> bool {
+        self.clock_enabled(base) && !self.held_in_reset(base)
+    }
+
+    /// Returns every peripheral whose APBxRSTR bit is set to its reset
+    /// values (RM0008 §7.3.4, §7.3.5); it stays there while the bit is set.
+    fn apply_peripheral_resets(&mut self, now: Ticks) {
+        for (i, base) in [addr::TIM1, addr::TIM2, addr::TIM3, addr::TIM4]
+            .into_iter()
+            .enumerate()
+        {
+            if self.held_in_reset(base) {
+                self.tim[i].reset(now);
+            }
+        }
+        for (i, base) in [addr::USART1, addr::USART2].into_iter().enumerate() {
+            if self.held_in_reset(base) {
+                self.usart[i].peripheral_reset();
+            }
+        }
+        for p in 0..5 {
+            if self.held_in_reset(addr::GPIOA + 0x400 * p as u32) {
+                self.gpio[p] = Gpio::new();
+            }
+        }
+        if self.held_in_reset(addr::AFIO) {
+            self.afio = Afio::default();
+        }
+        self.check_traced(now);
+    }
+
+    fn drop_write(&mut self, a: u32, v: u32, now: Ticks) {
+        if self.dropped_writes.len() < DROPPED_WRITES_KEPT {
+            self.dropped_writes.push(DroppedWrite {
+                at: now,
+                addr: a,
+                value: v,
+            });
         }
     }
 
@@ -1578,7 +1725,13 @@ impl Bus {
         }
     }
 
+    /// TIMx's kernel clock, 0 while its RCC clock is off or it is held in
+    /// reset (the counter stands still).
     fn tim_clk(&self, i: usize) -> u64 {
+        const BASE: [u32; 4] = [addr::TIM1, addr::TIM2, addr::TIM3, addr::TIM4];
+        if !self.active(BASE[i]) {
+            return 0;
+        }
         let c = self.clocks();
         if i == 0 {
             c.tim_apb2
@@ -1587,18 +1740,36 @@ impl Bus {
         }
     }
 
+    /// USARTn's PCLK, 0 while its clock is off or it is held in reset.
+    fn usart_clk(&self, i: usize) -> u64 {
+        let c = self.clocks();
+        match i {
+            0 if self.active(addr::USART1) => c.pclk2,
+            1 if self.active(addr::USART2) => c.pclk1,
+            _ => 0,
+        }
+    }
+
     /// Brings the model behind `base` up to `now` before a register access
     /// (the others are advanced by the scheduler; a GPIO access advances
     /// all, for the AF outputs and EXTI).
     fn advance_for(&mut self, base: u32, now: Ticks) {
-        let c = self.clocks();
         match base {
-            addr::TIM1 => self.tim[0].advance(now, c.tim_apb2),
-            addr::TIM2 => self.tim[1].advance(now, c.tim_apb1),
-            addr::TIM3 => self.tim[2].advance(now, c.tim_apb1),
-            addr::TIM4 => self.tim[3].advance(now, c.tim_apb1),
-            addr::USART1 => self.usart[0].advance(now, c.pclk2),
-            addr::USART2 => self.usart[1].advance(now, c.pclk1),
+            addr::TIM1 | addr::TIM2 | addr::TIM3 | addr::TIM4 => {
+                let i = match base {
+                    addr::TIM1 => 0,
+                    addr::TIM2 => 1,
+                    addr::TIM3 => 2,
+                    _ => 3,
+                };
+                let clk = self.tim_clk(i);
+                self.tim[i].advance(now, clk);
+            }
+            addr::USART1 | addr::USART2 => {
+                let i = usize::from(base == addr::USART2);
+                let clk = self.usart_clk(i);
+                self.usart[i].advance(now, clk);
+            }
             addr::RCC => self.rcc.update_switch(now),
             addr::FLASH | addr::IWDG | addr::AFIO | addr::EXTI => {}
             _ => self.advance(now),
@@ -1621,8 +1792,10 @@ impl Bus {
             let clk = self.tim_clk(i);
             self.tim[i].advance(now, clk);
         }
-        self.usart[0].advance(now, c.pclk2);
-        self.usart[1].advance(now, c.pclk1);
+        for i in 0..2 {
+            let clk = self.usart_clk(i);
+            self.usart[i].advance(now, clk);
+        }
         self.systick.advance(now, &c);
         self.rcc.update_switch(now);
         self.sample_exti();
@@ -1642,8 +1815,10 @@ impl Bus {
                 t = t.min(tim.next_update(self.tim_clk(i)));
             }
         }
-        for u in &self.usart {
-            t = t.min(u.next_event());
+        for (i, u) in self.usart.iter().enumerate() {
+            if self.usart_clk(i) != 0 {
+                t = t.min(u.next_event());
+            }
         }
         t = t.min(self.systick.next_event(&c));
         if self.rcc.cr & (1 << 16) != 0 && !self.rcc.hse_dead {
@@ -1775,6 +1950,9 @@ impl Bus {
     /// `filter` says whether the capture is taken after the IC1F delay.
     pub fn hall_edge(&mut self, now: Ticks) {
         self.advance(now);
+        if self.tim_clk(1) == 0 {
+            return;
+        }
         let t = &self.tim[1];
         let falling = t.ccer & 2 != 0;
         if falling {
@@ -1787,6 +1965,9 @@ impl Bus {
         let off = a & 0x3FF;
         let base = a & !0x3FF;
         self.advance_for(base, now);
+        if !self.clock_enabled(base) {
+            return 0;
+        }
         match base {
             addr::TIM2 => self.tim[1].read(off),
             addr::TIM3 => self.tim[2].read(off),
@@ -1842,6 +2023,10 @@ impl Bus {
         let off = a & 0x3FF;
         let base = a & !0x3FF;
         self.advance_for(base, now);
+        if !self.active(base) {
+            self.drop_write(a, v, now);
+            return;
+        }
         let c = self.clocks();
         match base {
             addr::TIM2 => self.tim[1].write(off, v),
@@ -1884,7 +2069,15 @@ impl Bus {
                 }
                 self.check_traced(now);
             }
-            addr::RCC => self.rcc.write(off, v, now),
+            addr::RCC => {
+                // Everything up to now on the clocks, enables and resets in
+                // force before the write.
+                self.advance(now);
+                self.rcc.write(off, v, now);
+                if matches!(off, 0x0C | 0x10) {
+                    self.apply_peripheral_resets(now);
+                }
+            }
             addr::FLASH => {
                 if let Some(cmd) = self.flash.write(off, v) {
                     self.flash_cmd = Some(cmd);

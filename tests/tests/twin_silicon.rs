@@ -5,7 +5,7 @@
 //! (DS5319) say the chip does. No firmware image needed; each runs a few
 //! milliseconds of firmware time (well under a second on the host).
 
-use qemu_tests::thumb::{Cond, Program};
+use qemu_tests::thumb::{Cond, Program, SP};
 use twin::{Options, Twin, RAM_BASE, RAM_SIZE, TICKS_PER_S};
 
 /// Where the programs keep their results (word i at `RESULTS + 4 i`).
@@ -21,6 +21,9 @@ const TIM1_BDTR: u32 = 0x4001_2C44;
 const USART1: u32 = 0x4001_3800;
 const GPIOC_CRH: u32 = 0x4001_1004;
 const AFIO_EXTICR1: u32 = 0x4001_0008;
+const NVIC_ISER0: u32 = 0xE000_E100;
+const NVIC_ISPR0: u32 = 0xE000_E200;
+const SCB_CCR: u32 = 0xE000_ED14;
 
 /// Stores `reg` into result word `i`.
 fn keep(p: &mut Program, reg: u8, i: u16) {
@@ -149,4 +152,63 @@ fn an_apb_reset_pulse_returns_the_peripherals_to_their_reset_values() {
         assert_eq!(after, reset, "{addr:#010x} after the reset pulse");
     }
     assert_eq!(result(&twin, 16), 0xC0, "USART1_SR after the reset pulse");
+}
+
+/// Exception entry on the F103's Cortex-M3 r1p1 (CPUID 0x411FC231): CCR
+/// resets to 0 (Cortex-M3 TRM r1p1, ARM DDI 0337E; only from r2p0 on does
+/// STKALIGN reset to 1), so the frame is pushed where SP points, 4-byte
+/// aligned; with STKALIGN set it starts on an 8-byte boundary, a padding
+/// word below the old SP flagged by bit 9 of the stacked xPSR (PM0056
+/// §4.4.7; ARMv7-M ARM B1.5.6). Either way SP is back where it was after
+/// the return.
+#[test]
+fn exception_frames_are_aligned_as_ccr_stkalign_says() {
+    let sp4 = RAM_BASE + 0x4FF4; // ≡ 4 (mod 8)
+    let mut p = Program::new();
+    p.vector(16, "irq0").label("reset");
+    keep_word(&mut p, SCB_CCR, 0);
+    p.li(4, RESULTS + 0x10).li(0, sp4).mov(SP, 0);
+    // IRQ 0 enabled and pended: taken at once (PRIMASK is 0 after reset).
+    p.store(NVIC_ISER0, 1)
+        .store(NVIC_ISPR0, 1)
+        .dsb()
+        .isb()
+        .nop();
+    p.mov(0, SP);
+    keep(&mut p, 0, 1);
+    p.store(SCB_CCR, 1 << 9)
+        .dsb()
+        .store(NVIC_ISPR0, 1)
+        .dsb()
+        .isb()
+        .nop();
+    p.mov(0, SP);
+    keep(&mut p, 0, 2);
+    p.halt();
+    // The handler keeps its SP (the frame's address) and the stacked xPSR.
+    p.label("irq0")
+        .mov(0, SP)
+        .str(0, 4, 0)
+        .ldr(1, 0, 28)
+        .str(1, 4, 4)
+        .addi(4, 8)
+        .ret();
+    let twin = run(&mut p, 200);
+    let ccr = result(&twin, 0);
+    let frames = [
+        (result(&twin, 4), result(&twin, 5)),
+        (result(&twin, 6), result(&twin, 7)),
+    ];
+    eprintln!(
+        "CCR at reset {ccr:#x}; frames {frames:#x?}; SP after {:#x}, {:#x}",
+        result(&twin, 1),
+        result(&twin, 2)
+    );
+    assert_eq!(ccr & (1 << 9), 0, "CCR.STKALIGN at reset (r1p1)");
+    assert_eq!(frames[0].0, sp4 - 32, "frame with STKALIGN = 0");
+    assert_eq!(frames[0].1 & (1 << 9), 0, "xPSR bit 9 with STKALIGN = 0");
+    assert_eq!(frames[1].0, sp4 - 4 - 32, "frame with STKALIGN = 1");
+    assert_ne!(frames[1].1 & (1 << 9), 0, "xPSR bit 9 with STKALIGN = 1");
+    assert_eq!(result(&twin, 1), sp4, "SP after the first return");
+    assert_eq!(result(&twin, 2), sp4, "SP after the second return");
 }

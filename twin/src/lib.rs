@@ -169,6 +169,14 @@ pub struct State {
     deadline: Ticks,
     /// Instructions per translated block (start address, bytes).
     block_insns: std::collections::HashMap<(u32, u32), u64>,
+    /// Exceptions entered since the twin was built.
+    pub exception_entries: u64,
+    /// Of those, entries whose frame (the handler's SP) is not 8-byte
+    /// aligned: CCR.STKALIGN = 0 and SP ≡ 4 (mod 8) when the exception came
+    /// (AAPCS wants SP ≡ 0 mod 8 at every function entry, a handler's too).
+    pub frames_not_8_aligned: u64,
+    /// The last exception entry: (exception number, frame address).
+    pub last_entry: Option<(u32, u32)>,
 }
 
 impl State {
@@ -349,6 +357,9 @@ impl Twin {
             touched: false,
             deadline: 0,
             block_insns: std::collections::HashMap::new(),
+            exception_entries: 0,
+            frames_not_8_aligned: 0,
+            last_entry: None,
         };
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::MCLASS | Mode::LITTLE_ENDIAN, state)
             .map_err(uc_err)?;
@@ -829,7 +840,11 @@ impl Twin {
         let xpsr = self.reg(RegisterARM::XPSR);
         let current = self.state().nvic.active.last().copied().unwrap_or(0);
         let mut sp = self.reg(RegisterARM::SP);
-        let align = sp & 4 != 0;
+        // With CCR.STKALIGN the frame starts on an 8-byte boundary (a
+        // padding word, flagged by xPSR bit 9); without it, wherever SP
+        // points (ARMv7-M B1.5.6 PushStack; PM0056 §4.4.7).
+        let stkalign = self.state().nvic.ccr & core::CCR_STKALIGN != 0;
+        let align = stkalign && sp & 4 != 0;
         if align {
             sp -= 4;
         }
@@ -854,6 +869,11 @@ impl Twin {
             let st = self.uc.get_data_mut();
             st.nvic.pending &= !(1u128 << n);
             st.nvic.active.push(n);
+            st.exception_entries += 1;
+            if sp & 7 != 0 {
+                st.frames_not_8_aligned += 1;
+            }
+            st.last_entry = Some((n, sp));
             // Entry latency: 12 cycles on the Cortex-M3.
             st.now += 12 * st.cost;
             if stack_fault {

@@ -466,3 +466,68 @@ fn the_boot_safe_state_holds_the_outputs_without_the_timer_writes_made_before_th
         }
     }
 }
+
+/// Every handler is compiled to the AAPCS, which wants SP ≡ 0 (mod 8) at
+/// each function entry; the core provides it for exception entry only with
+/// SCB_CCR.STKALIGN set (PM0056 §4.4.7), and on the F103's Cortex-M3 r1p1
+/// (CPUID 0x411FC231) that bit resets to 0 (Cortex-M3 TRM r1p1, ARM DDI
+/// 0337E; ARM's ABI advisory IHI 0046B §2.3.3 asks startup code to set it).
+/// Inside many of the image's functions SP is ≡ 4 (mod 8) for a few
+/// instructions (`push {r4, r5, r6, r7, lr}`, 20 bytes, before the rest of
+/// the frame), and on the chip an interrupt can come at any instruction.
+/// The twin takes interrupts between translated blocks, so the probe makes
+/// that moment: in the idle loop (which uses no stack) SP is moved down by
+/// 4 and the Hall capture interrupt (TIM2) is pended; its handler must find
+/// an 8-byte aligned stack. SP is put back afterwards and the board runs on.
+#[test]
+fn handlers_find_an_8_byte_aligned_stack_whatever_sp_the_interrupt_finds() {
+    use twin::RegisterARM;
+    for image in [Image::ProfileA, Image::ProfileB] {
+        let mut twin = boot(image);
+        let sp = twin.reg(RegisterARM::SP);
+        assert_eq!(sp % 8, 0, "{image:?}: SP in the idle loop {sp:#x}");
+        twin.set_reg(RegisterARM::SP, sp - 4).expect("SP");
+        let (entries, misaligned) = {
+            let st = twin.state();
+            (st.exception_entries, st.frames_not_8_aligned)
+        };
+        twin.pend_irq(28);
+        twin.run_ticks(1).expect("run");
+        let (n, frame) = twin.state().last_entry.expect("an exception entry");
+        assert_eq!(n, 16 + 28, "{image:?}: the TIM2 handler");
+        // 20 ms more in the idle loop with that SP: SysTick and the
+        // tasks' interrupts come from there too.
+        twin.run_ms(20).expect("run");
+        let st = twin.state();
+        let (entries, misaligned) = (
+            st.exception_entries - entries,
+            st.frames_not_8_aligned - misaligned,
+        );
+        eprintln!(
+            "{image:?}: idle SP {:#x}; TIM2 frame at {frame:#x}; {entries} exception entries, \
+             {misaligned} of them on a stack not 8-byte aligned; CCR {:#x}",
+            sp - 4,
+            twin.peek(0xE000_ED14)
+        );
+        assert_eq!(frame % 8, 0, "{image:?}: the TIM2 handler's stack");
+        assert_eq!(
+            misaligned, 0,
+            "{image:?}: handlers entered on a 4-byte aligned stack"
+        );
+        let idle = twin
+            .run_until(50, |t| {
+                t.core == CoreState::Sleeping && t.state().nvic.active.is_empty()
+            })
+            .expect("run");
+        assert!(idle, "{image:?}: back in the idle loop");
+        assert_eq!(
+            twin.reg(RegisterARM::SP),
+            sp - 4,
+            "{image:?}: SP after the returns"
+        );
+        twin.set_reg(RegisterARM::SP, sp).expect("SP");
+        twin.run_ms(20).expect("run");
+        assert_eq!(twin.resets.len(), 1, "{image:?}: {:?}", twin.resets);
+        assert!(!twin.lockup(), "{image:?}: locked up");
+    }
+}

@@ -10,17 +10,26 @@ use twin::{Options, Twin, RAM_BASE, RAM_SIZE, TICKS_PER_S};
 
 /// Where the programs keep their results (word i at `RESULTS + 4 i`).
 const RESULTS: u32 = RAM_BASE;
+/// The core clock after reset: the 8 MHz HSI (RM0008 §7.2).
+const HSI_HZ: u64 = 8_000_000;
 
 const RCC: u32 = 0x4002_1000;
+const RCC_CR: u32 = RCC;
 const RCC_APB2RSTR: u32 = RCC + 0x0C;
 const RCC_APB1RSTR: u32 = RCC + 0x10;
 const RCC_APB2ENR: u32 = RCC + 0x18;
 const RCC_APB1ENR: u32 = RCC + 0x1C;
+const RCC_CSR: u32 = RCC + 0x24;
 const TIM2: u32 = 0x4000_0000;
 const TIM1_BDTR: u32 = 0x4001_2C44;
 const USART1: u32 = 0x4001_3800;
 const GPIOC_CRH: u32 = 0x4001_1004;
 const AFIO_EXTICR1: u32 = 0x4001_0008;
+const IWDG: u32 = 0x4000_3000;
+const FLASH_OBR: u32 = 0x4002_201C;
+const SYST_CSR: u32 = 0xE000_E010;
+const SYST_RVR: u32 = 0xE000_E014;
+const SYST_CVR: u32 = 0xE000_E018;
 const NVIC_ISER0: u32 = 0xE000_E100;
 const NVIC_ISPR0: u32 = 0xE000_E200;
 const SCB_CCR: u32 = 0xE000_ED14;
@@ -34,6 +43,13 @@ fn keep(p: &mut Program, reg: u8, i: u16) {
 fn keep_word(p: &mut Program, addr: u32, i: u16) {
     p.load(0, addr);
     keep(p, 0, i);
+}
+
+/// SysTick counting down from 0xFFFFFF on the core clock (PM0056 §4.5).
+fn start_systick(p: &mut Program) {
+    p.store(SYST_RVR, 0x00FF_FFFF)
+        .store(SYST_CVR, 0)
+        .store(SYST_CSR, 0b101);
 }
 
 /// Spins `n` times around a two-instruction loop (label `name`).
@@ -53,6 +69,13 @@ fn run(program: &mut Program, us: u64) -> Twin {
 
 fn result(twin: &Twin, i: u32) -> u32 {
     twin.read_u32(RESULTS + 4 * i).expect("RAM")
+}
+
+/// Core cycles kept by [`poll_timed`] in result `i`: SysTick's 24-bit
+/// down-counter, so the difference is taken modulo 2^24 (read just after
+/// it is started, it still holds 0, 2^24 in effect).
+fn cycles(twin: &Twin, i: u32) -> u32 {
+    result(twin, i) & 0x00FF_FFFF
 }
 
 /// RM0008 §7.3.6–§7.3.8 (RCC_AHBENR, APB2ENR, APB1ENR): "When the
@@ -211,4 +234,135 @@ fn exception_frames_are_aligned_as_ccr_stkalign_says() {
     assert_ne!(frames[1].1 & (1 << 9), 0, "xPSR bit 9 with STKALIGN = 1");
     assert_eq!(result(&twin, 1), sp4, "SP after the first return");
     assert_eq!(result(&twin, 2), sp4, "SP after the second return");
+}
+
+/// FLASH_OBR (RM0008 §3.3.3 / PM0075 §3.3, reset value 0x03FF FFFC): the
+/// option bytes as ST delivers the chip: no read protection, software
+/// watchdog, no reset in Stop or Standby, Data0 = Data1 = 0xFF.
+#[test]
+fn flash_obr_reads_the_option_bytes_of_a_new_chip() {
+    let mut p = Program::new();
+    p.label("reset");
+    keep_word(&mut p, FLASH_OBR, 0);
+    p.halt();
+    let twin = run(&mut p, 50);
+    let obr = result(&twin, 0);
+    // OPTERR 0, RDPRT 0, USER (bits 9:2) 0xFF, Data0 (17:10) 0xFF, Data1
+    // (25:18) 0xFF.
+    let expected = (0xFF << 2) | (0xFF << 10) | (0xFF << 18);
+    assert_eq!(obr, expected, "FLASH_OBR {obr:#x}");
+}
+
+/// Polls `addr` until `mask` is clear (`until_set` false) or set, the
+/// SysTick cycles it took into result `i` (modulo 2^24: see [`cycles`]),
+/// the last value read into `i+1`.
+fn poll_timed(p: &mut Program, addr: u32, mask: u32, until_set: bool, name: &'static str, i: u16) {
+    p.load(4, SYST_CVR);
+    p.li(1, mask).label(name).load(0, addr).tst(0, 1);
+    p.b_if(if until_set { Cond::Eq } else { Cond::Ne }, name);
+    p.load(5, SYST_CVR).sub(6, 4, 5);
+    keep(p, 6, i);
+    keep(p, 0, i + 1);
+}
+
+/// LSIRDY (RCC_CSR bit 1, RM0008 §7.3.10) is set once the LSI has started,
+/// tSU(LSI) ≤ 85 µs after LSION (DS5319 table 25), not before.
+#[test]
+fn lsirdy_comes_only_after_the_lsi_start_up_time() {
+    let mut p = Program::new();
+    p.label("reset");
+    keep_word(&mut p, RCC_CSR, 0);
+    start_systick(&mut p);
+    p.store(RCC_CSR, 1);
+    poll_timed(&mut p, RCC_CSR, 2, true, "wait", 1);
+    p.halt();
+    let twin = run(&mut p, 500);
+    let us = f64::from(cycles(&twin, 1)) * 1e6 / HSI_HZ as f64;
+    eprintln!(
+        "CSR at reset {:#x}; LSIRDY after {us:.1} µs",
+        result(&twin, 0)
+    );
+    assert_eq!(result(&twin, 0) & 3, 0, "LSION, LSIRDY at reset");
+    assert_ne!(result(&twin, 2) & 2, 0, "LSIRDY in the end");
+    // The start-up time, plus one pass of the polling loop (~10 cycles).
+    assert!((85.0..=85.0 + 3.0).contains(&us), "LSIRDY after {us} µs");
+}
+
+/// IWDG_SR PVU and RVU (RM0008 §19.4.4): set by a write to IWDG_PR or
+/// IWDG_RLR and cleared once the value has reached the LSI domain, "takes
+/// up to 5 RC 40 kHz cycles"; "Prescaler value can be updated only when
+/// PVU bit is reset" (likewise RLR and RVU). The LSI runs here (the IWDG
+/// started it, RM0008 §19.3.2).
+#[test]
+fn iwdg_prescaler_and_reload_updates_are_busy_for_lsi_cycles() {
+    let mut p = Program::new();
+    p.label("reset").store(IWDG, 0xCCCC);
+    p.li(1, 2)
+        .label("lsi")
+        .load(0, RCC_CSR)
+        .tst(0, 1)
+        .b_if(Cond::Eq, "lsi");
+    p.store(IWDG, 0x5555);
+    start_systick(&mut p);
+    p.store(IWDG + 0x04, 3).store(IWDG + 0x04, 5);
+    keep_word(&mut p, IWDG + 0x0C, 0);
+    poll_timed(&mut p, IWDG + 0x0C, 1, false, "pvu", 1);
+    keep_word(&mut p, IWDG + 0x04, 3);
+    p.store(IWDG + 0x08, 0x123);
+    keep_word(&mut p, IWDG + 0x0C, 4);
+    poll_timed(&mut p, IWDG + 0x0C, 2, false, "rvu", 5);
+    keep_word(&mut p, IWDG + 0x08, 7);
+    p.store(IWDG, 0xAAAA).halt();
+    let twin = run(&mut p, 1000);
+    let lsi_cycle_us = 1e6 / twin.state().bus.iwdg.lsi_hz as f64;
+    let busy = |i| f64::from(cycles(&twin, i)) * 1e6 / HSI_HZ as f64 / lsi_cycle_us;
+    eprintln!(
+        "SR after the PR write {:#x}, PVU for {:.2} LSI cycles, PR {}; SR after the RLR write {:#x}, RVU for {:.2} LSI cycles, RLR {:#x}",
+        result(&twin, 0),
+        busy(1),
+        result(&twin, 3),
+        result(&twin, 4),
+        busy(5),
+        result(&twin, 7)
+    );
+    assert_eq!(result(&twin, 0) & 1, 1, "PVU right after the PR write");
+    assert_eq!(result(&twin, 4) & 2, 2, "RVU right after the RLR write");
+    for (what, i) in [("PVU", 1), ("RVU", 5)] {
+        // At least one LSI edge to cross the clock domains, at most five
+        // (plus one pass of the polling loop).
+        let cycles = busy(i);
+        // The program's own instructions around the write add up to 5 µs.
+        let slack = 5.0 / lsi_cycle_us;
+        assert!(
+            (1.0..=5.0 + slack).contains(&cycles),
+            "{what} for {cycles} LSI cycles"
+        );
+    }
+    assert_eq!(result(&twin, 3), 3, "PR: the second write, while PVU, lost");
+    assert_eq!(result(&twin, 7), 0x123, "RLR");
+}
+
+/// RCC_CR (RM0008 §7.3.1): HSEBYP is read/write, "can be written only if
+/// the HSE oscillator is disabled". With the oscillator bypassed the HSE
+/// needs a clock on OSC_IN; the board has a crystal there, so HSERDY never
+/// comes.
+#[test]
+fn rcc_cr_keeps_hsebyp() {
+    let mut p = Program::new();
+    p.label("reset").store(RCC_CR, 0x83 | (1 << 18));
+    keep_word(&mut p, RCC_CR, 0);
+    p.store(RCC_CR, 0x83 | (1 << 18) | (1 << 16));
+    // 3 ms, more than the crystal's 2 ms start-up.
+    spin(&mut p, 12_000, "wait");
+    keep_word(&mut p, RCC_CR, 1);
+    // HSEBYP cannot be cleared while the HSE is on.
+    p.store(RCC_CR, 0x83 | (1 << 16));
+    keep_word(&mut p, RCC_CR, 2);
+    p.halt();
+    let twin = run(&mut p, 4000);
+    let cr: Vec<u32> = (0..3).map(|i| result(&twin, i)).collect();
+    eprintln!("RCC_CR {cr:#x?}");
+    assert_ne!(cr[0] & (1 << 18), 0, "HSEBYP written with the HSE off");
+    assert_eq!(cr[1] & (1 << 17), 0, "HSERDY with a bypassed crystal");
+    assert_ne!(cr[2] & (1 << 18), 0, "HSEBYP cleared with the HSE on");
 }

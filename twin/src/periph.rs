@@ -135,6 +135,13 @@ pub struct Rcc {
 const HSE_STARTUP: Ticks = 2 * TICKS_PER_S / 1000;
 /// PLL lock time (datasheet tLOCK ≤ 200 µs).
 const PLL_LOCK: Ticks = 200 * TICKS_PER_S / 1_000_000;
+/// LSI start-up time, the maximum of the datasheet (DS5319 table 25,
+/// tSU(LSI) ≤ 85 µs): LSIRDY is set this long after the LSI is switched on.
+pub const LSI_STARTUP: Ticks = 85 * TICKS_PER_S / 1_000_000;
+
+/// RCC_CR bits (RM0008 §7.3.1).
+const CR_HSEON: u32 = 1 << 16;
+const CR_HSEBYP: u32 = 1 << 18;
 
 impl Rcc {
     fn new(csr: u32, hse_dead: bool) -> Self {
@@ -155,8 +162,13 @@ impl Rcc {
         }
     }
 
+    /// HSERDY: the crystal has started. With HSEBYP the oscillator is
+    /// bypassed and OSC_IN must carry an external clock; the board has a
+    /// crystal there, so nothing ever comes (RM0008 §7.2.1).
     fn hse_ready(&self, now: Ticks) -> bool {
-        !self.hse_dead && self.hse_on_at.is_some_and(|t| now >= t + HSE_STARTUP)
+        !self.hse_dead
+            && self.cr & CR_HSEBYP == 0
+            && self.hse_on_at.is_some_and(|t| now >= t + HSE_STARTUP)
     }
 
     fn pll_ready(&self, now: Ticks) -> bool {
@@ -253,7 +265,8 @@ impl Rcc {
             0x18 => self.apb2enr,
             0x1C => self.apb1enr,
             0x20 => self.bdcr,
-            0x24 => self.csr | 0x2, // LSIRDY: the LSI runs (the IWDG forces it on)
+            // LSIRDY is added by the bus (the IWDG also starts the LSI).
+            0x24 => self.csr & !0x2,
             _ => 0,
         }
     }
@@ -261,8 +274,14 @@ impl Rcc {
     fn write(&mut self, off: u32, v: u32, now: Ticks) {
         match off {
             0x00 => {
-                let rw = 0x0109_00F9; // HSION, HSITRIM, HSEON, HSEBYP, CSSON, PLLON
+                // HSION, HSITRIM, HSEON, HSEBYP, CSSON, PLLON; HSEBYP "can be
+                // written only if the HSE oscillator is disabled" (§7.3.1).
                 let old = self.cr;
+                let rw = if old & CR_HSEON == 0 {
+                    0x010D_00F9
+                } else {
+                    0x0109_00F9
+                };
                 self.cr = (self.cr & !rw) | (v & rw);
                 if self.cr & (1 << 16) != 0 && old & (1 << 16) == 0 {
                     self.hse_on_at = Some(now);
@@ -383,8 +402,11 @@ impl FlashCtl {
             0x0C => self.sr,
             0x10 => self.cr,
             0x14 => self.ar,
-            0x1C => 0x03FF_FFFC & 0x1C, // OBR: RDPRT off, software watchdog, nRST_STOP/STDBY
-            0x20 => 0xFFFF_FFFF,        // WRPR: no page write-protected
+            // OBR (RM0008 §3.3.3 / PM0075 §3.3 reset value 0x03FF FFFC): the
+            // option bytes as ST delivers the chip: RDPRT off, software
+            // watchdog, no reset in Stop/Standby, Data0 = Data1 = 0xFF.
+            0x1C => 0x03FF_FFFC,
+            0x20 => 0xFFFF_FFFF, // WRPR: no page write-protected
             _ => 0,
         }
     }
@@ -1151,81 +1173,179 @@ impl Usart {
 // IWDG (RM0008 §19)
 // ---------------------------------------------------------------------------
 
-/// The independent watchdog.
+/// The independent watchdog. Its counter and its copies of PR and RLR live
+/// in the LSI (VDD) domain: a write to PR or RLR reaches them "up to 5 RC
+/// 40 kHz cycles" later, meanwhile IWDG_SR shows PVU or RVU and the
+/// register cannot be written again (RM0008 §19.4.4). The twin takes the
+/// five LSI cycles in full, counted from the write or from the LSI's
+/// start-up (DS5319 tSU(LSI)), whichever is later.
 #[derive(Clone, Debug)]
 pub struct Iwdg {
-    /// PR.
+    /// PR in force.
     pub pr: u32,
-    /// RLR.
+    /// RLR in force.
     pub rlr: u32,
+    /// A PR write on its way to the LSI domain: (value, written at).
+    pending_pr: Option<(u32, Ticks)>,
+    /// An RLR write on its way: (value, written at).
+    pending_rlr: Option<(u32, Ticks)>,
     /// Started (0xCCCC), cannot be stopped.
     pub running: bool,
     /// When it was started (the first 0xCCCC key).
     pub started_at: Option<Ticks>,
     unlocked: bool,
-    /// When the counter was last reloaded.
-    reloaded_at: Ticks,
+    /// The counter's value at `count_from`; it counts down from there, one
+    /// step every 4·2^PR LSI cycles.
+    count: u32,
+    count_from: Ticks,
+    /// When the LSI runs (after its start-up time), if it is on.
+    pub lsi_ready_at: Option<Ticks>,
     /// LSI frequency, Hz (30..60 kHz on the F103; 40 kHz nominal).
     pub lsi_hz: u64,
 }
+
+/// LSI cycles a PR or RLR update takes to reach the LSI domain (RM0008
+/// §19.4.4: "up to 5").
+const IWDG_UPDATE_LSI_CYCLES: u64 = 5;
 
 impl Iwdg {
     fn new(lsi_hz: u64) -> Self {
         Self {
             pr: 0,
             rlr: 0xFFF,
+            pending_pr: None,
+            pending_rlr: None,
             running: false,
             started_at: None,
             unlocked: false,
-            reloaded_at: 0,
+            count: 0xFFF,
+            count_from: 0,
+            lsi_ready_at: None,
             lsi_hz,
         }
     }
 
+    fn lsi_cycle(&self) -> Ticks {
+        TICKS_PER_S / self.lsi_hz.max(1)
+    }
+
+    /// One count of the counter at prescaler `pr`: 4·2^PR LSI cycles.
+    fn count_ticks(&self, pr: u32) -> Ticks {
+        (4u64 << pr.min(6)) * self.lsi_cycle()
+    }
+
     /// The timeout from a reload: (RLR + 1) × 4·2^PR LSI periods.
     pub fn timeout_ticks(&self) -> Ticks {
-        let div = 4u64 << self.pr.min(6);
-        (u64::from(self.rlr) + 1) * div * TICKS_PER_S / self.lsi_hz
+        (u64::from(self.rlr) + 1) * self.count_ticks(self.pr)
+    }
+
+    /// When an update written at `at` reaches the LSI domain.
+    fn update_done(&self, at: Ticks) -> Ticks {
+        self.lsi_ready_at.map_or(NEVER, |r| {
+            at.max(r) + IWDG_UPDATE_LSI_CYCLES * self.lsi_cycle()
+        })
+    }
+
+    /// The counter's value at `t` (≥ `count_from`).
+    fn count_at(&self, t: Ticks) -> u32 {
+        let steps = t.saturating_sub(self.count_from) / self.count_ticks(self.pr);
+        self.count
+            .saturating_sub(steps.min(u64::from(u32::MAX)) as u32)
+    }
+
+    /// Applies the updates that have reached the LSI domain by `now`.
+    fn settle(&mut self, now: Ticks) {
+        loop {
+            let pr_done = self.pending_pr.map(|(_, at)| self.update_done(at));
+            let rlr_done = self.pending_rlr.map(|(_, at)| self.update_done(at));
+            match (pr_done, rlr_done) {
+                (Some(p), r) if p <= now && r.is_none_or(|r| p <= r) => {
+                    // The counter goes on from where it is, at the new rate.
+                    if self.running {
+                        self.count = self.count_at(p);
+                        self.count_from = p;
+                    }
+                    self.pr = self.pending_pr.take().map_or(self.pr, |(v, _)| v);
+                }
+                (_, Some(r)) if r <= now => {
+                    self.rlr = self.pending_rlr.take().map_or(self.rlr, |(v, _)| v);
+                }
+                _ => return,
+            }
+        }
+    }
+
+    /// The LSI started (or stopped) at `ready` (its start-up included).
+    pub(crate) fn set_lsi_ready(&mut self, ready: Option<Ticks>, now: Ticks) {
+        self.settle(now);
+        self.lsi_ready_at = ready;
     }
 
     /// When the counter reaches 0 (a system reset).
     pub fn expires_at(&self) -> Ticks {
-        if self.running {
-            self.reloaded_at + self.timeout_ticks()
-        } else {
-            NEVER
+        if !self.running {
+            return NEVER;
+        }
+        let naive = self.count_from + (u64::from(self.count) + 1) * self.count_ticks(self.pr);
+        match self.pending_pr {
+            Some((v, at)) => {
+                let done = self.update_done(at);
+                if done < naive {
+                    let left = u64::from(self.count_at(done)) + 1;
+                    done + left * self.count_ticks(v)
+                } else {
+                    naive
+                }
+            }
+            None => naive,
         }
     }
 
     fn write(&mut self, off: u32, v: u32, now: Ticks) {
+        self.settle(now);
+        let from = self.lsi_ready_at.map_or(now, |r| r.max(now));
         match off {
             0x00 => match v & 0xFFFF {
                 0x5555 => self.unlocked = true,
                 0xAAAA => {
-                    self.reloaded_at = now;
+                    self.count = self.rlr;
+                    self.count_from = from;
                     self.unlocked = false;
                 }
                 0xCCCC => {
                     if !self.running {
+                        // The counter starts from its reset value 0xFFF
+                        // (§19.3.2) once the LSI runs (the bus starts it).
                         self.running = true;
                         self.started_at = Some(now);
-                        self.reloaded_at = now;
+                        self.count = 0xFFF;
+                        self.count_from = from;
                     }
                     self.unlocked = false;
                 }
                 _ => self.unlocked = false,
             },
-            0x04 if self.unlocked => self.pr = v & 7,
-            0x08 if self.unlocked => self.rlr = v & 0xFFF,
+            // "Prescaler value can be updated only when PVU bit is reset".
+            0x04 if self.unlocked && self.pending_pr.is_none() => {
+                self.pending_pr = Some((v & 7, now));
+            }
+            0x08 if self.unlocked && self.pending_rlr.is_none() => {
+                self.pending_rlr = Some((v & 0xFFF, now));
+            }
             _ => {}
         }
     }
 
-    fn read(&self, off: u32) -> u32 {
+    fn read(&mut self, off: u32, now: Ticks) -> u32 {
+        self.settle(now);
         match off {
             0x04 => self.pr,
             0x08 => self.rlr,
-            _ => 0, // SR: updates complete at once
+            // SR: PVU, RVU while an update is on its way.
+            0x0C => {
+                u32::from(self.pending_pr.is_some()) | u32::from(self.pending_rlr.is_some()) << 1
+            }
+            _ => 0,
         }
     }
 }
@@ -1422,6 +1542,8 @@ pub struct Bus {
     traced: Vec<(usize, u32, Level)>,
     /// The recorded level changes of the traced pins, in time order.
     pub pin_log: Vec<PinEvent>,
+    /// When the LSI was switched on (by LSION or by starting the IWDG).
+    lsi_on_at: Option<Ticks>,
     /// Writes the silicon ignores because the peripheral's clock is off
     /// or it is held in reset (the first [`DROPPED_WRITES_KEPT`]).
     pub dropped_writes: Vec<DroppedWrite>,
@@ -1558,6 +1680,7 @@ impl Bus {
             clock_stopped: false,
             traced: Vec::new(),
             pin_log: Vec::new(),
+            lsi_on_at: None,
             dropped_writes: Vec::new(),
         }
     }
@@ -1614,6 +1737,25 @@ impl Bus {
             self.afio = Afio::default();
         }
         self.check_traced(now);
+    }
+
+    /// The LSI runs while LSION is set or the IWDG runs (RM0008 §7.2.5,
+    /// §19.3.2: starting the IWDG forces it on); `iwdg_starting` for the
+    /// 0xCCCC key being written now.
+    fn sync_lsi(&mut self, now: Ticks, iwdg_starting: bool) {
+        let on = self.rcc.csr & 1 != 0 || self.iwdg.running || iwdg_starting;
+        if !on {
+            self.lsi_on_at = None;
+        } else if self.lsi_on_at.is_none() {
+            self.lsi_on_at = Some(now);
+        }
+        let ready = self.lsi_on_at.map(|t| t + LSI_STARTUP);
+        self.iwdg.set_lsi_ready(ready, now);
+    }
+
+    /// LSIRDY (RCC_CSR bit 1): the LSI has run for its start-up time.
+    fn lsi_ready(&self, now: Ticks) -> bool {
+        self.lsi_on_at.is_some_and(|t| now >= t + LSI_STARTUP)
     }
 
     fn drop_write(&mut self, a: u32, v: u32, now: Ticks) {
@@ -1682,6 +1824,7 @@ impl Bus {
         self.dbgmcu_cr = 0;
         self.clock_stopped = false;
         self.flash_cmd = None;
+        self.lsi_on_at = None;
         self.check_traced(now);
     }
 
@@ -1973,7 +2116,7 @@ impl Bus {
             addr::TIM3 => self.tim[2].read(off),
             addr::TIM4 => self.tim[3].read(off),
             addr::TIM1 => self.tim[0].read(off),
-            addr::IWDG => self.iwdg.read(off),
+            addr::IWDG => self.iwdg.read(off, now),
             addr::USART2 => self.usart[1].read(off),
             addr::USART1 => self.usart[0].read(off),
             addr::AFIO => match off {
@@ -2009,7 +2152,14 @@ impl Bus {
                     _ => 0,
                 }
             }
-            addr::RCC => self.rcc.read(off, now),
+            addr::RCC => {
+                let v = self.rcc.read(off, now);
+                if off == 0x24 && self.lsi_ready(now) {
+                    v | 0x2
+                } else {
+                    v
+                }
+            }
             addr::FLASH => self.flash.read(off),
             _ => {
                 self.unmodelled.push((a, false));
@@ -2033,7 +2183,13 @@ impl Bus {
             addr::TIM3 => self.tim[2].write(off, v),
             addr::TIM4 => self.tim[3].write(off, v),
             addr::TIM1 => self.tim[0].write(off, v),
-            addr::IWDG => self.iwdg.write(off, v, now),
+            addr::IWDG => {
+                let starting = off == 0 && v & 0xFFFF == 0xCCCC;
+                if starting {
+                    self.sync_lsi(now, true);
+                }
+                self.iwdg.write(off, v, now);
+            }
             addr::USART2 => self.usart[1].write(off, v, now, c.pclk1),
             addr::USART1 => self.usart[0].write(off, v, now, c.pclk2),
             addr::AFIO => match off {
@@ -2074,8 +2230,10 @@ impl Bus {
                 // force before the write.
                 self.advance(now);
                 self.rcc.write(off, v, now);
-                if matches!(off, 0x0C | 0x10) {
-                    self.apply_peripheral_resets(now);
+                match off {
+                    0x0C | 0x10 => self.apply_peripheral_resets(now),
+                    0x24 => self.sync_lsi(now, false),
+                    _ => {}
                 }
             }
             addr::FLASH => {

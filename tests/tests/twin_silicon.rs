@@ -30,9 +30,11 @@ const FLASH_OBR: u32 = 0x4002_201C;
 const SYST_CSR: u32 = 0xE000_E010;
 const SYST_RVR: u32 = 0xE000_E014;
 const SYST_CVR: u32 = 0xE000_E018;
+const SYST_CALIB: u32 = 0xE000_E01C;
 const NVIC_ISER0: u32 = 0xE000_E100;
 const NVIC_ISPR0: u32 = 0xE000_E200;
 const SCB_CCR: u32 = 0xE000_ED14;
+const DBGMCU_IDCODE: u32 = 0xE004_2000;
 
 /// Stores `reg` into result word `i`.
 fn keep(p: &mut Program, reg: u8, i: u16) {
@@ -365,4 +367,37 @@ fn rcc_cr_keeps_hsebyp() {
     assert_ne!(cr[0] & (1 << 18), 0, "HSEBYP written with the HSE off");
     assert_eq!(cr[1] & (1 << 17), 0, "HSERDY with a bypassed crystal");
     assert_ne!(cr[2] & (1 << 18), 0, "HSEBYP cleared with the HSE on");
+}
+
+/// `Twin::peek` (a debugger's read) shows SysTick's current value, its
+/// calibration value (PM0056 §4.5.4: TENMS = 1 ms of the 9 MHz HCLK/8
+/// reference, SKEW) and DBGMCU_IDCODE (RM0008 §31.6.1: DEV_ID 0x410,
+/// medium density) as the CPU reads them.
+#[test]
+fn peek_reads_what_the_cpu_reads() {
+    let mut p = Program::new();
+    p.label("reset");
+    start_systick(&mut p);
+    spin(&mut p, 100, "wait");
+    // Stopped (ENABLE = 0): the value stays as the CPU reads it.
+    p.store(SYST_CSR, 0b100);
+    keep_word(&mut p, SYST_CVR, 0);
+    keep_word(&mut p, SYST_CALIB, 1);
+    keep_word(&mut p, DBGMCU_IDCODE, 2);
+    p.halt();
+    let twin = run(&mut p, 200);
+    let cpu: Vec<u32> = (0..3).map(|i| result(&twin, i)).collect();
+    let peek: Vec<u32> = [SYST_CVR, SYST_CALIB, DBGMCU_IDCODE]
+        .iter()
+        .map(|&a| twin.peek(a))
+        .collect();
+    eprintln!("CPU {cpu:#x?}, peek {peek:#x?}");
+    assert!(
+        (1..0x00FF_FFFF - 100).contains(&cpu[0]),
+        "SYST_CVR after ~200 cycles: {:#x}",
+        cpu[0]
+    );
+    assert_eq!(cpu[1] & 0x00FF_FFFF, 72_000_000 / 8 / 1000, "TENMS");
+    assert_eq!(cpu[2] & 0xFFF, 0x410, "DEV_ID");
+    assert_eq!(peek, cpu, "SYST_CVR, SYST_CALIB, DBGMCU_IDCODE");
 }

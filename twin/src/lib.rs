@@ -180,6 +180,8 @@ pub struct State {
 }
 
 impl State {
+    /// A CPU read on the private peripheral bus (a read of SYST_CSR clears
+    /// COUNTFLAG, PM0056 §4.5.1).
     fn ppb_read(&mut self, a: u32) -> u32 {
         match a {
             0xE000_E010 => {
@@ -187,13 +189,34 @@ impl State {
                 let st = &mut self.bus.systick;
                 st.ctrl | if st.countflag_take() { 1 << 16 } else { 0 }
             }
-            0xE000_E014 => self.bus.systick.load,
             0xE000_E018 => {
                 self.bus.advance_systick(self.now);
                 self.bus.systick.val()
             }
-            0xE000_E01C => 0x4000_2328, // CALIB: NOREF, 9000 (1 ms at HCLK/8)
-            0xE004_2000 => 0x2003_6410, // DBGMCU_IDCODE: medium density, rev X
+            _ => self.ppb_peek(a),
+        }
+    }
+
+    /// A register of the private peripheral bus as it reads now, without
+    /// side effects (SYST_CSR's COUNTFLAG is shown, not cleared).
+    pub fn ppb_peek(&self, a: u32) -> u32 {
+        match a {
+            0xE000_E010 | 0xE000_E018 => {
+                let (csr, cvr) = self.bus.systick.peek(self.now, &self.bus.clocks());
+                if a == 0xE000_E010 {
+                    csr
+                } else {
+                    cvr
+                }
+            }
+            0xE000_E014 => self.bus.systick.load,
+            // SYST_CALIB (PM0056 §4.5.4): NOREF = 0 (the HCLK/8 reference
+            // is there), SKEW = 1, TENMS = 9000 (1 ms at 72 MHz / 8).
+            0xE000_E01C => 0x4000_2328,
+            // DBGMCU_IDCODE (RM0008 §31.6.1): DEV_ID 0x410 (medium
+            // density), REV_ID 0x2003 (revision Y, 1, 2 or X); bits 14:13
+            // read as 1 on the chip.
+            0xE004_2000 => 0x2003_6410,
             0xE004_2004 => self.bus.dbgmcu_cr,
             0xE000_1004 => self.instructions as u32, // DWT_CYCCNT
             _ => self.nvic.read(a),
@@ -517,12 +540,7 @@ impl Twin {
     pub fn peek(&self, a: u32) -> u32 {
         let st = self.state();
         if (0xE000_0000..0xE010_0000).contains(&a) {
-            match a {
-                0xE000_E010 => st.bus.systick.ctrl,
-                0xE000_E014 => st.bus.systick.load,
-                0xE004_2004 => st.bus.dbgmcu_cr,
-                _ => st.nvic.read(a),
-            }
+            st.ppb_peek(a)
         } else {
             let mut bus = st.bus.clone();
             bus.read(a, st.now)

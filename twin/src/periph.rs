@@ -402,7 +402,7 @@ impl FlashCtl {
             0x0C => self.sr,
             0x10 => self.cr,
             0x14 => self.ar,
-            // OBR (RM0008 §3.3.3 / PM0075 §3.3 reset value 0x03FF FFFC): the
+            // OBR (PM0075, FLASH_OBR: reset value 0x03FF FFFC): the
             // option bytes as ST delivers the chip: RDPRT off, software
             // watchdog, no reset in Stop/Standby, Data0 = Data1 = 0xFF.
             0x1C => 0x03FF_FFFC,
@@ -1315,7 +1315,7 @@ impl Iwdg {
                 0xCCCC => {
                     if !self.running {
                         // The counter starts from its reset value 0xFFF
-                        // (§19.3.2) once the LSI runs (the bus starts it).
+                        // (§19.3) once the LSI runs (the bus starts it).
                         self.running = true;
                         self.started_at = Some(now);
                         self.count = 0xFFF;
@@ -1709,7 +1709,12 @@ impl Bus {
 
     /// Whether the peripheral at `base` runs (clocked, not held in reset).
     fn active(&self, base: u32) -> bool {
-        self.clock_enabled(base) && !self.held_in_reset(base)
+        match gate(base) {
+            Some(Gate::Apb1(b)) => self.apb_active(false, b),
+            Some(Gate::Apb2(b)) => self.apb_active(true, b),
+            Some(Gate::Ahb(b)) => self.rcc.ahbenr & (1 << b) != 0,
+            None => true,
+        }
     }
 
     /// Returns every peripheral whose APBxRSTR bit is set to its reset
@@ -1740,7 +1745,7 @@ impl Bus {
     }
 
     /// The LSI runs while LSION is set or the IWDG runs (RM0008 §7.2.5,
-    /// §19.3.2: starting the IWDG forces it on); `iwdg_starting` for the
+    /// §19.3: starting the IWDG starts the LSI that clocks it); `iwdg_starting` for the
     /// 0xCCCC key being written now.
     fn sync_lsi(&mut self, now: Ticks, iwdg_starting: bool) {
         let on = self.rcc.csr & 1 != 0 || self.iwdg.running || iwdg_starting;
@@ -1871,26 +1876,47 @@ impl Bus {
     /// TIMx's kernel clock, 0 while its RCC clock is off or it is held in
     /// reset (the counter stands still).
     fn tim_clk(&self, i: usize) -> u64 {
-        const BASE: [u32; 4] = [addr::TIM1, addr::TIM2, addr::TIM3, addr::TIM4];
-        if !self.active(BASE[i]) {
-            return 0;
-        }
-        let c = self.clocks();
-        if i == 0 {
-            c.tim_apb2
-        } else {
-            c.tim_apb1
+        self.tim_clk_in(i, &self.clocks())
+    }
+
+    /// [`Bus::tim_clk`] with the clock tree given.
+    fn tim_clk_in(&self, i: usize, c: &Clocks) -> u64 {
+        // TIM1: APB2 bit 11; TIM2..TIM4: APB1 bits 0..2 (RM0008 §7.3.4–§7.3.8).
+        let on = match i {
+            0 => self.apb_active(true, 11),
+            _ => self.apb_active(false, i as u32 - 1),
+        };
+        match (on, i) {
+            (false, _) => 0,
+            (true, 0) => c.tim_apb2,
+            (true, _) => c.tim_apb1,
         }
     }
 
     /// USARTn's PCLK, 0 while its clock is off or it is held in reset.
     fn usart_clk(&self, i: usize) -> u64 {
-        let c = self.clocks();
+        self.usart_clk_in(i, &self.clocks())
+    }
+
+    /// [`Bus::usart_clk`] with the clock tree given.
+    fn usart_clk_in(&self, i: usize, c: &Clocks) -> u64 {
+        // USART1: APB2 bit 14; USART2: APB1 bit 17.
         match i {
-            0 if self.active(addr::USART1) => c.pclk2,
-            1 if self.active(addr::USART2) => c.pclk1,
+            0 if self.apb_active(true, 14) => c.pclk2,
+            1 if self.apb_active(false, 17) => c.pclk1,
             _ => 0,
         }
+    }
+
+    /// Bit `bit` of APB2ENR (`apb2`) or APB1ENR set and of the matching
+    /// reset register clear.
+    fn apb_active(&self, apb2: bool, bit: u32) -> bool {
+        let (en, rst) = if apb2 {
+            (self.rcc.apb2enr, self.rcc.apb2rstr)
+        } else {
+            (self.rcc.apb1enr, self.rcc.apb1rstr)
+        };
+        (en & !rst) >> bit & 1 != 0
     }
 
     /// Brings the model behind `base` up to `now` before a register access
@@ -1932,11 +1958,11 @@ impl Bus {
         }
         let c = self.clocks();
         for i in 0..4 {
-            let clk = self.tim_clk(i);
+            let clk = self.tim_clk_in(i, &c);
             self.tim[i].advance(now, clk);
         }
         for i in 0..2 {
-            let clk = self.usart_clk(i);
+            let clk = self.usart_clk_in(i, &c);
             self.usart[i].advance(now, clk);
         }
         self.systick.advance(now, &c);
@@ -1955,11 +1981,11 @@ impl Bus {
         for i in 0..4 {
             let tim = &self.tim[i];
             if tim.dier & 1 != 0 {
-                t = t.min(tim.next_update(self.tim_clk(i)));
+                t = t.min(tim.next_update(self.tim_clk_in(i, &c)));
             }
         }
         for (i, u) in self.usart.iter().enumerate() {
-            if self.usart_clk(i) != 0 {
+            if self.usart_clk_in(i, &c) != 0 {
                 t = t.min(u.next_event());
             }
         }

@@ -51,7 +51,7 @@ fn brr_for(fck: f64, baud: f64) -> u32 {
     ((usartdiv_x16 / 16) << 4) | (usartdiv_x16 % 16)
 }
 
-/// RTIC on a 4-priority-bit Cortex-M3 (PM0056 §4.2.7: the upper nibble is
+/// RTIC on a 4-priority-bit Cortex-M3 (PM0056 §4.3.7: the upper nibble is
 /// implemented): logical priority p maps to (16 − p) << 4.
 fn nvic_prio(p: u32) -> u32 {
     (16 - p) << 4
@@ -206,7 +206,7 @@ fn check_common(twin: &mut Twin, image: Image) {
         timeout(30e3) * 1e3
     );
 
-    // --- NVIC (PM0056 §4.2.7): the task map of firmware/src/main.rs:
+    // --- NVIC (PM0056 §4.3.7): the task map of firmware/src/main.rs:
     // USART1 (IRQ 37) at 4, TIM2 (IRQ 28) at 3; the software tasks at 2
     // and 1 run on the dispatchers CAN_RX1 (21), CAN_SCE (22), ADC1_2 (18).
     assert_eq!(ipr(twin, 37), nvic_prio(4), "USART1 priority");

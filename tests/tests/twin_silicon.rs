@@ -180,7 +180,8 @@ fn an_apb_reset_pulse_returns_the_peripherals_to_their_reset_values() {
 }
 
 /// Exception entry on the F103's Cortex-M3 r1p1 (CPUID 0x411FC231): CCR
-/// resets to 0 (Cortex-M3 TRM r1p1, ARM DDI 0337E; only from r2p0 on does
+/// resets to 0 (PM0056 §4.4.7: "Reset value: 0x0000 0000 (STM32F1 series)";
+/// Cortex-M3 TRM r1p1, ARM DDI 0337E; only from r2p0 on does
 /// STKALIGN reset to 1), so the frame is pushed where SP points, 4-byte
 /// aligned; with STKALIGN set it starts on an 8-byte boundary, a padding
 /// word below the old SP flagged by bit 9 of the stacked xPSR (PM0056
@@ -238,7 +239,7 @@ fn exception_frames_are_aligned_as_ccr_stkalign_says() {
     assert_eq!(result(&twin, 2), sp4, "SP after the second return");
 }
 
-/// FLASH_OBR (RM0008 §3.3.3 / PM0075 §3.3, reset value 0x03FF FFFC): the
+/// FLASH_OBR (PM0075, the FPEC register FLASH_OBR: reset value 0x03FF FFFC): the
 /// option bytes as ST delivers the chip: no read protection, software
 /// watchdog, no reset in Stop or Standby, Data0 = Data1 = 0xFF.
 #[test]
@@ -294,7 +295,7 @@ fn lsirdy_comes_only_after_the_lsi_start_up_time() {
 /// IWDG_RLR and cleared once the value has reached the LSI domain, "takes
 /// up to 5 RC 40 kHz cycles"; "Prescaler value can be updated only when
 /// PVU bit is reset" (likewise RLR and RVU). The LSI runs here (the IWDG
-/// started it, RM0008 §19.3.2).
+/// started it, RM0008 §19.3).
 #[test]
 fn iwdg_prescaler_and_reload_updates_are_busy_for_lsi_cycles() {
     let mut p = Program::new();

@@ -9,6 +9,7 @@
 
 pub mod drive;
 pub mod images;
+pub mod thumb;
 
 use std::io::{self, BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};

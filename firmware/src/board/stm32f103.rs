@@ -273,6 +273,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
     // (RM0008 §19.4.4, up to `IWDG_UPDATE_POLLS` when it does not run), and
     // until then PA8, PB12 and PA1 would float (reset state, §9.1.1).
     safe_state();
+    align_exception_frames();
     let mut watchdog = Watchdog::start(dp.IWDG);
     // RM0008 §7.3.10 RCC_CSR: IWDGRSTF (bit 29) says the last reset came
     // from the watchdog; RMVF (bit 24) clears the reset flags.
@@ -1124,6 +1125,29 @@ fn debug_freeze(dbgmcu: &pac::DBGMCU) {
             .dbg_iwdg_stop()
             .set_bit()
     });
+}
+
+/// SCB_CCR STKALIGN (bit 9, PM0056 §4.4.7).
+const SCB_CCR_STKALIGN: u32 = 1 << 9;
+
+/// Makes exception entry align the stacked frame, and so every handler's
+/// stack, to 8 bytes (SCB_CCR STKALIGN), as the AAPCS the handlers are
+/// compiled to requires. The F103's Cortex-M3 r1p1 (CPUID 0x411FC231)
+/// resets the bit to 0 (Cortex-M3 TRM r1p1; ARM's ABI advisory IHI 0046B
+/// asks startup code to set it), and neither cortex-m-rt nor RTIC sets it:
+/// an interrupt that comes while SP is 4 mod 8 — inside the many functions
+/// that push five registers before the rest of their frame — would run its
+/// handler on a 4-byte aligned stack.
+fn align_exception_frames() {
+    // SAFETY: a read-modify-write of SCB_CCR in `init` (interrupts off, no
+    // exception active): the next exception entry uses the new alignment.
+    unsafe {
+        (*cortex_m::peripheral::SCB::PTR)
+            .ccr
+            .modify(|r| r | SCB_CCR_STKALIGN);
+    }
+    cortex_m::asm::dsb();
+    cortex_m::asm::isb();
 }
 
 /// Switches the HSE on (RM0008 §7.3.1 RCC_CR HSEON, bit 16) and waits for

@@ -33,10 +33,6 @@ const TARGET: &str = "thumbv7m-none-eabi";
 /// and flash").
 const STM32F103_FLASH_BUDGET: u64 = 56 * 1024;
 const STM32F103_RAM_BUDGET: u64 = 8 * 1024;
-/// The QEMU board has 8 KB of RAM in all; statics must leave room for the
-/// stack (interrupt frames of four priority levels plus the async tasks).
-const QEMU_RAM_SIZE: u64 = 8 * 1024;
-const QEMU_STACK_RESERVE: u64 = 2 * 1024;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -330,7 +326,7 @@ fn qemu(args: &[String]) -> Result {
     let elf = Board::Qemu.build()?;
     std::env::set_var("FIRMWARE_QEMU_ELF", &elf);
     eprintln!(
-        "xtask: the firmware in qemu-system-arm -machine stm32vldiscovery for {seconds} s of \
+        "xtask: the firmware in qemu-system-arm -machine netduino2 for {seconds} s of \
          firmware time, against the simulated machine (Low 2, a +10 % travel-speed change at \
          {} s), with a virtual touchscreen on USART1",
         seconds / 2
@@ -811,7 +807,8 @@ fn size() -> Result {
             }
             // The 128 KB parts' 120 KB (their last 8 KB hold the settings).
             Board::Stm32f103DriveLink => (120 * 1024, STM32F103_RAM_BUDGET),
-            Board::Qemu => (120 * 1024, QEMU_RAM_SIZE - QEMU_STACK_RESERVE),
+            // The QEMU board has the real board's RAM (memory-qemu.x).
+            Board::Qemu => (120 * 1024, STM32F103_RAM_BUDGET),
         };
         println!(
             "| {} | {flash} B | {flash_budget} B | {ram} B | {ram_budget} B |",

@@ -1,12 +1,20 @@
-//! The QEMU board: `qemu-system-arm -machine stm32vldiscovery` (QEMU 7.2).
+//! The QEMU board: `qemu-system-arm -machine netduino2` (QEMU 7.2).
 //!
-//! QEMU emulates the Cortex-M3 core, SysTick, the NVIC and USART1–3, but not
-//! RCC, GPIO, timers, the flash controller or the watchdog (writes ignored,
-//! reads zero; HSE and PLL never become ready). So this board:
+//! The machine is QEMU's STM32F205 model, chosen for its memory: 128 KB of
+//! SRAM, of which this board takes the real board's 20 KB at 0x2000_0000
+//! (`memory-qemu.x`, the STM32F103RB's layout), so that the statics and the
+//! stack are laid out, and measured, as on the real board. QEMU emulates
+//! the Cortex-M3 core, SysTick, the NVIC and the USARTs (the same USART
+//! model as its STM32F100's), but not RCC, GPIO, timers, the flash
+//! controller or the watchdog of an F103: the F1 addresses of those read
+//! zero and ignore writes. So this board:
 //!
-//! - runs from the HSI (the HAL believes 8 MHz; QEMU's SysTick counts at a
-//!   fixed 24 MHz, which is what the monotonic is started with);
-//! - talks to the touchscreen over the real emulated USART1;
+//! - runs from the HSI as far as the HAL knows (8 MHz); QEMU clocks the
+//!   core and SysTick at the machine's fixed 120 MHz, which is what the
+//!   monotonic is started with;
+//! - talks to the touchscreen over the emulated USART1, at the F205's
+//!   address ([`usart1`]), and to the drum driver over USART2 (the F1's
+//!   address on both);
 //! - replaces the registers the real board reads and writes — TIM1's compare
 //!   value, the driver enable pin, TIM3's encoder counter, TIM2's Hall
 //!   captures and counter — by atomics and a simulated machine
@@ -28,11 +36,11 @@ use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering::Relaxed};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use machine_sim::{Event, Fault, Inputs, Machine};
 use stm32f1xx_hal::{
-    pac::{self, USART1, USART2},
-    prelude::*,
-    rcc,
-    serial::{self, Rx, Tx},
+    pac::{self, USART2},
+    serial::{self, Tx},
 };
+#[cfg(feature = "drive-link")]
+use stm32f1xx_hal::{prelude::*, rcc};
 
 use defmt_semihosting as _;
 
@@ -41,8 +49,10 @@ use super::{
     SETTINGS_FLASH_BYTES, SETTINGS_PAGE_BYTES,
 };
 
+mod usart1;
+
 /// Transmit half of the touchscreen UART.
-pub type HmiTx = Tx<USART1>;
+pub type HmiTx = usart1::Tx;
 
 /// Most screen bytes one lock-step period carries (a real line carries
 /// ≈ 115 per 10 ms; the tests send at most this many).
@@ -55,7 +65,7 @@ type GateQueue = heapless::spsc::Queue<u8, { GATE_BYTES + 1 }>;
 /// [`Sensors::sample`]) and are read here first, through the same USART1
 /// interrupt task; otherwise from the emulated USART1.
 pub struct HmiRx {
-    uart: Rx<USART1>,
+    uart: usart1::Rx,
     gate: heapless::spsc::Consumer<'static, u8>,
 }
 
@@ -75,8 +85,9 @@ impl HmiRx {
     }
 }
 
-/// QEMU's `stm32vldiscovery` clocks SysTick at a fixed 24 MHz.
-pub const SYSCLK_HZ: u32 = 24_000_000;
+/// QEMU's `netduino2` clocks the core, and SysTick's processor clock, at a
+/// fixed 120 MHz (its SYSCLK; RCC is not modelled).
+pub const SYSCLK_HZ: u32 = 120_000_000;
 
 /// Stand-in for TIM1's CCR1 register.
 static DRUM_CCR: AtomicU16 = AtomicU16::new(0);
@@ -330,19 +341,7 @@ const WORK_VALUE: u32 = WORK_GROUND - 1;
 /// Brings up the emulated peripherals. Called once from `init`.
 #[inline(never)]
 pub fn init(dp: pac::Peripherals) -> Board {
-    let mut flash = dp.FLASH.constrain();
-    let mut rcc = dp.RCC.freeze(rcc::Config::hsi(), &mut flash.acr);
-    let mut gpioa = dp.GPIOA.split(&mut rcc);
-    let tx_pin = gpioa.pa9.into_alternate_push_pull(&mut gpioa.crh);
-    let rx_pin = gpioa.pa10;
-    let hmi = dp.USART1.serial(
-        (tx_pin, rx_pin),
-        serial::Config::default()
-            .baudrate(115_200.bps())
-            .parity_none(),
-        &mut rcc,
-    );
-    let (hmi_tx, mut uart_rx) = hmi.split();
+    let (hmi_tx, mut uart_rx) = usart1::split(dp.USART1);
     uart_rx.listen();
     // Note: `init` runs once, so the singleton is still free.
     let Some(gate_queue) = cortex_m::singleton!(: GateQueue = GateQueue::new()) else {
@@ -354,7 +353,16 @@ pub fn init(dp: pac::Peripherals) -> Board {
         gate: gate_out,
     };
     // The drum driver's line: USART2 on PA2/PA3 (8N1; QEMU ignores the
-    // rate, the model in `DriveLine` uses the profile's).
+    // rate, the model in `DriveLine` uses the profile's), through the HAL
+    // (the F1's USART2 address is the F205's too; its RCC, AFIO and GPIO
+    // writes land on unmapped addresses, which this machine ignores, and
+    // HSI is the one clock that needs no ready flag).
+    #[cfg(feature = "drive-link")]
+    let mut rcc = dp
+        .RCC
+        .freeze(rcc::Config::hsi(), &mut dp.FLASH.constrain().acr);
+    #[cfg(feature = "drive-link")]
+    let mut gpioa = dp.GPIOA.split(&mut rcc);
     #[cfg(feature = "drive-link")]
     let tx2 = gpioa.pa2.into_alternate_push_pull(&mut gpioa.crl);
     #[cfg(feature = "drive-link")]

@@ -823,8 +823,9 @@ impl Firmware {
 /// The QEMU board reports how deep its stack went (it paints the stack at
 /// reset) after `init` and when a run ends by itself; a run whose stack
 /// reached the statics fails here, whatever else it showed (every
-/// [`Firmware::wait_exit`]; tests that stop QEMU themselves call it). The QEMU board's 8 KB of RAM leave
-/// the least stack of any board, so this is the tight case.
+/// [`Firmware::wait_exit`]; tests that stop QEMU themselves call it). The
+/// QEMU board has the real board's RAM and statics layout, so its figures
+/// are the real board's (`tests/tests/qemu_board.rs`).
 pub fn check_stack(logs: &[String]) -> io::Result<()> {
     for line in logs.iter().filter(|l| l.contains(" stack: ")) {
         let used = number_after(line, "stack: ");

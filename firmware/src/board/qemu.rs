@@ -108,8 +108,7 @@ static WORK_SWITCH_CLOSED: AtomicBool = AtomicBool::new(false);
 static STOP_OPENED_US: AtomicU32 = AtomicU32::new(0);
 static STOP_SAFE_US: AtomicU32 = AtomicU32::new(0);
 
-// The drum driver's line (feature `drive-link`: the QEMU board's 8 KB of
-// RAM hold it only in the images that need it, docs/drive-link.md).
+// The drum driver's line (feature `drive-link`, docs/drive-link.md).
 
 /// Longest frame the virtual driver's gate record carries (a Modbus RTU
 /// reply of this link is at most 9 bytes; a corrupted one the same).
@@ -281,7 +280,7 @@ const GATE_PATH_MAX: usize = 32;
 /// (the figures of the control, without the seedlings' fall) and
 /// `slip_noise=0` the random variation of the track and belt slip around
 /// their means (which no sensor of the machine sees). `drive_tau=MS`,
-/// `drive_dead=MS` (0–15) and `drive_nmax=N` (r/min × 100) give the drum
+/// `drive_dead=MS` (0–63) and `drive_nmax=N` (r/min × 100) give the drum
 /// another drive than the default 25 ms / 5 ms / 44.70 r/min (the drive
 /// identification's test); `load=P` sets the seedlings' load droop to P ‰
 /// (`load=0`: an empty belt).
@@ -453,7 +452,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         .gear
         .and_then(|g| kinematics::consts::Gear::ALL.get(usize::from(g).wrapping_sub(1)))
         .copied();
-    // The model lives in a static (528 B): moving it through `init`'s
+    // The model lives in a static (592 B): moving it through `init`'s
     // return value would need its size again on the stack.
     let machine = match config.build() {
         Ok(m) => cortex_m::singleton!(: Machine = m),

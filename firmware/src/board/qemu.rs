@@ -49,6 +49,7 @@ use super::{
     SETTINGS_FLASH_BYTES, SETTINGS_PAGE_BYTES,
 };
 
+mod stack_guard;
 mod usart1;
 
 /// Transmit half of the touchscreen UART.
@@ -283,7 +284,8 @@ const GATE_PATH_MAX: usize = 32;
 /// `drive_dead=MS` (0–63) and `drive_nmax=N` (r/min × 100) give the drum
 /// another drive than the default 25 ms / 5 ms / 44.70 r/min (the drive
 /// identification's test); `load=P` sets the seedlings' load droop to P ‰
-/// (`load=0`: an empty belt).
+/// (`load=0`: an empty belt). `stack_overflow=T` runs the control task's
+/// stack off the bottom of RAM at T ms (the stack guard's test).
 #[derive(Default, Clone, Copy)]
 struct Scenario {
     gear: Option<u8>,
@@ -328,6 +330,9 @@ struct Scenario {
     no_scatter: bool,
     /// No slip variation (`slip_noise=0`).
     no_slip_noise: bool,
+    /// Run the stack off the bottom of RAM at this time
+    /// (`stack_overflow=T`, the test of [`stack_guard`]).
+    stack_overflow: Option<u32>,
 }
 
 /// [`Scenario::work`]: the contact closes (unit down).
@@ -340,6 +345,7 @@ const WORK_VALUE: u32 = WORK_GROUND - 1;
 /// Brings up the emulated peripherals. Called once from `init`.
 #[inline(never)]
 pub fn init(dp: pac::Peripherals) -> Board {
+    stack_guard::enable();
     let (hmi_tx, mut uart_rx) = usart1::split(dp.USART1);
     uart_rx.listen();
     // Note: `init` runs once, so the singleton is still free.
@@ -820,6 +826,10 @@ impl Sensors {
                 );
             }
         }
+        if due(s.stack_overflow, from, to) {
+            defmt::warn!("sim: stack overflow injected");
+            exhaust_stack(0);
+        }
         if due(s.stall, from, to) {
             self.machine.inject_fault(Fault::DrumStall);
             defmt::warn!("sim: drum stall injected");
@@ -949,6 +959,22 @@ impl Sensors {
             self.machine.hall_edges(),
         )
     }
+}
+
+/// Recurses until the stack runs off the bottom of RAM (`stack_overflow=T`).
+/// Each level writes a frame and reads it back only after the call below
+/// it returns, which it never does: nothing but the guard stops it.
+#[inline(never)]
+fn exhaust_stack(depth: u32) -> u32 {
+    if depth == u32::MAX {
+        return depth;
+    }
+    let mut frame = [depth; 16];
+    core::hint::black_box(&mut frame);
+    let below = exhaust_stack(depth.wrapping_add(1));
+    frame
+        .iter()
+        .fold(below, |sum, &word| sum.wrapping_add(word))
 }
 
 /// Hall capture: edges come from [`Sensors::sample`] on this board.
@@ -1168,6 +1194,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"load" => s.load_permille = parse_u32(value),
             b"scatter" => s.no_scatter = value == b"0",
             b"slip_noise" => s.no_slip_noise = value == b"0",
+            b"stack_overflow" => s.stack_overflow = parse_u32(value),
             b"work_down" | b"work_up" | b"work_down_mm" | b"work_up_mm" => {
                 let flags = if key.starts_with(b"work_down") {
                     WORK_CLOSED

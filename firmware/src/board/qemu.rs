@@ -963,7 +963,7 @@ impl Sensors {
 
 /// Recurses until the stack runs off the bottom of RAM (`stack_overflow=T`).
 /// Each level writes a frame and reads it back only after the call below
-/// it returns, which it never does: nothing but the guard stops it.
+/// it returns, which it never does: only a fault stops it.
 #[inline(never)]
 fn exhaust_stack(depth: u32) -> u32 {
     if depth == u32::MAX {

@@ -1,6 +1,6 @@
 //! Instruction counts of the control code on the Cortex-M3 ISA.
 //!
-//! Run by `cargo xtask bench` in `qemu-system-arm -machine stm32vldiscovery
+//! Run by `cargo xtask bench` in `qemu-system-arm -machine netduino2
 //! -icount shift=0`: every guest instruction then advances virtual time by
 //! exactly 1 ns, and SysTick (on the core's clock, the machine's fixed
 //! 120 MHz) counts virtual time, so one SysTick tick is 8⅓ instructions

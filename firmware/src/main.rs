@@ -2,7 +2,7 @@
 //! travel speed.
 //!
 //! An RTIC 2 application. The hardware lives behind [`board`]: the real
-//! STM32F103RB (default) or the QEMU `stm32vldiscovery` board with a simulated
+//! STM32F103RB (default) or the QEMU board (`netduino2`) with a simulated
 //! machine (`--no-default-features --features board-qemu`). The operating
 //! logic is the host-tested `supervisor` crate; this file wires it to
 //! interrupts, timers and the screen.
@@ -58,13 +58,11 @@ const STATUS_PERIOD_MS: u32 = 200;
 const STATUS_LOG_EVERY: u32 = 5;
 /// The HMI task ticks the screen link at least this often.
 const HMI_TICK_MS: u32 = 20;
-/// Bytes queued between the USART interrupt and the HMI task (the QEMU
-/// board's lock-step delivers at most 32 per control period, and its 8 KB of
-/// RAM need every byte for the stack).
-const RX_QUEUE: usize = if cfg!(feature = "board-qemu") { 32 } else { 64 };
+/// Bytes queued between the USART interrupt and the HMI task.
+const RX_QUEUE: usize = 64;
 /// Hall edges queued between the capture interrupt and the control task
 /// (the QEMU board's edges come with the sensor sample, not this queue).
-const EDGE_QUEUE: usize = if cfg!(feature = "board-qemu") { 2 } else { 16 };
+const EDGE_QUEUE: usize = 16;
 
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [CAN_RX1, CAN_SCE, ADC1_2])]
 mod app {
@@ -137,7 +135,7 @@ mod app {
 
     // The large objects live in `static`s owned by `init` and are shared by
     // reference: returning them by value from `init` would need their size
-    // twice over on the QEMU board's 8 KB of RAM.
+    // twice over on the stack.
     #[shared]
     struct Shared {
         /// The operating logic (profile A or B): control (2), hmi (1), status (1).
@@ -230,8 +228,7 @@ mod app {
                 Actuators::Steppers(board::Steppers::new(drum, board.feed_step))
             }
         };
-        // The deepest part of the run on the 8 KB QEMU board: checked by the
-        // QEMU tests.
+        // The boot is the deepest part of a run: checked by the QEMU tests.
         #[cfg(feature = "board-qemu")]
         board::log_stack();
         // Spawning at init cannot fail: each task is spawned once.
@@ -277,15 +274,14 @@ mod app {
     }
 
     // Init helpers, each in its own stack frame: inlined into `init`, their
-    // temporaries would all be live at once (3.4 KB of stack on a board with
-    // 8 KB of RAM).
+    // temporaries would all be live at once (3.4 KB of stack).
 
     /// Settings: the newest valid record, or the defaults, said out loud;
     /// then the machine built from them. Two frames of their own: the
     /// loaded record (≈ 0.3 KB) never sits in `init`'s frame, under which
     /// RTIC runs the first tasks (it enables the interrupts inside it; the
-    /// first control step builds the fuzzy controller on top: the QEMU
-    /// board's deepest moment), and the load's deep decode path carries
+    /// first control step builds the fuzzy controller on top: the deepest
+    /// moment of a boot), and the load's deep decode path carries
     /// one record, not two.
     #[inline(never)]
     fn load_settings(
@@ -388,7 +384,7 @@ mod app {
     /// loads, so this is a last line of defence); the defaults are valid by
     /// construction, a failure with them is a build-time bug, caught on the
     /// first boot of any board. In its own stack frame: the defaults'
-    /// temporaries must not add to `build_machine`'s on the QEMU board.
+    /// temporaries must not add to `build_machine`'s.
     #[inline(never)]
     #[allow(clippy::field_reassign_with_default)] // see `defaults` below
     fn build_defaults(
@@ -430,7 +426,7 @@ mod app {
     }
 
     /// Profile A, in its own stack frame (the two profiles' temporaries
-    /// must not add up on the QEMU board's 8 KB).
+    /// must not add up).
     #[cfg(feature = "profile-a")]
     #[inline(never)]
     fn build_drum_belt(
@@ -794,7 +790,7 @@ mod app {
             #[cfg(feature = "profile-a")]
             let work_down = work.is_down();
             // In a block: the step's values are not kept across the await
-            // below (the task's future is a static on the QEMU board's 8 KB).
+            // below (the task's future is a static).
             {
                 #[cfg(feature = "profile-a")]
                 let drive = &mut cx.shared.drive;
@@ -1396,8 +1392,7 @@ mod app {
 
     /// The save itself, in its own stack frame: inlined into the priority-1
     /// tasks' dispatcher, its record buffers (≈ 0.7 KB) sat under every
-    /// priority-1 task and under the control task preempting them, on the
-    /// QEMU board's 8 KB.
+    /// priority-1 task and under the control task preempting them.
     #[inline(never)]
     fn save_settings(store: &mut Option<Store>, machine: &Machine) -> &'static str {
         match store.as_mut().map(|s| s.save(machine.settings())) {

@@ -367,8 +367,7 @@ pub struct Supervisor {
     estimator: MtEstimator,
     /// The drum controller, or, while the drive is identified, the
     /// identification in its place (they are never needed together; sharing
-    /// the space keeps the supervisor small enough for the QEMU board's
-    /// 8 KB of RAM).
+    /// the space keeps the supervisor small).
     drum: Drum,
     /// The last identification's outcome (its model until saved).
     identified: IdentifyState,
@@ -819,8 +818,7 @@ impl Supervisor {
     ///
     /// The controller itself is built at the first control step (or Start),
     /// not here: building the fuzzy tuner takes 1.3 KB of stack, which at
-    /// boot would sit on top of the supervisor's own 1.5 KB being built —
-    /// more than the QEMU board's 4.7 KB of stack holds with the rest of
+    /// boot would sit on top of the supervisor's own 1.5 KB being built, in
     /// `init`. The scheduled configuration is valid for every valid drive
     /// model (its gains are scaled by `s ∈ (0, 1]`, test
     /// `scheduled_configs_build_for_extreme_models`).
@@ -1041,9 +1039,9 @@ impl Supervisor {
                 // Rebuilt by the next control step, not here: a Stop comes
                 // through the screen task, and building the
                 // fuzzy controller (≈ 1.4 KB of stack) on top of its frame
-                // reached 4.7 KB on the QEMU board's 4 KB stack (static
-                // analysis of the image: handle_event → command → stop →
-                // restore_controller → Config::build).
+                // reached 4.7 KB of stack (static analysis of the image:
+                // handle_event → command → stop → restore_controller →
+                // Config::build).
                 self.drum = Drum::Unbuilt;
             }
         }
@@ -1062,7 +1060,7 @@ impl Supervisor {
                 Drum::Control(c) => c.start(),
                 // Built (and started, since running) by the next control
                 // step's `ensure_controller`, not here on the screen task's
-                // stack (the QEMU board's 4 KB, see `stop`).
+                // stack (see `stop`).
                 Drum::Unbuilt => {}
             }
             self.run = RunState::Running;
@@ -2133,9 +2131,8 @@ impl Supervisor {
     /// The controller is not built here but by the next control step
     /// ([`Supervisor::ensure_controller`], in the control task): built here,
     /// in the screen task (the operator's *Save* on page 9), its frames
-    /// (≈ 2.6 KB: the command, the build, the fuzzy tuner) overflowed the
-    /// QEMU board's stack when the control task preempted it
-    /// (tests/tests/identify.rs). Every model [`DriveModel`] accepts builds
+    /// (≈ 2.6 KB: the command, the build, the fuzzy tuner) would sit under
+    /// the control task preempting it. Every model [`DriveModel`] accepts builds
     /// (`scheduled_configs_build_for_extreme_models`).
     #[inline(never)]
     fn use_drive(&mut self, model: DriveModel) {

@@ -380,7 +380,7 @@ impl DriveLinkSettings {
 
     /// Reads [`Self::to_bytes`] and validates the result with
     /// [`Self::build`]. Out of line: its temporaries stay out of the store's
-    /// decode frame, on the QEMU board's boot path.
+    /// decode frame, on the boot path.
     #[inline(never)]
     pub fn from_bytes(b: &[u8; DRIVE_LINK_BYTES]) -> Result<Self, DriveLinkError> {
         let [f, c, k, slave, b0, b1, b2, b3, sf0, sf1, k0, k1, k2, k3, fr0, fr1, m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, has, c0, c1] =
@@ -466,7 +466,7 @@ pub const READBACK_MAX_AGE_US: u32 = 100_000;
 
 /// The supervisor's side of the link: the newest sample, the encoder
 /// equivalent of the read-back, the cross-check. Kept small: it lives in
-/// the supervisor, which the QEMU board's 8 KB of RAM hold.
+/// the supervisor.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Feedback {
     /// The newest sample from the link task.

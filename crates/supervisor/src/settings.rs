@@ -381,8 +381,8 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
 }
 
 /// [`decode`] into `out`, the calibration tables in place: no second
-/// `Settings` on the stack (the store decodes in `init`, on the QEMU board's
-/// 4 KB stack). On an error `out` holds valid values but not the record's:
+/// `Settings` on the stack (the store decodes in `init`). On an error `out`
+/// holds valid values but not the record's:
 /// decode into a scratch value.
 pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError> {
     // Every field is written below: this pattern stops compiling when a

@@ -418,8 +418,7 @@ impl<F: NorFlash> SettingsStore<F> {
         // Statuses first, then the newest valid slot once more: each decode
         // goes into the one `settings` value (in place, table by table), so
         // no second decoded record is ever on the stack (this runs in
-        // `init`, on the QEMU board's ≈ 4 KB stack). Nothing writes the
-        // flash in between.
+        // `init`). Nothing writes the flash in between.
         let mut settings = Settings::default();
         let slots = [
             self.scan_into(0, &mut settings).status(),
@@ -472,7 +471,7 @@ impl<F: NorFlash> SettingsStore<F> {
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
         // The decision reads the slots through one scratch decode; the
         // records are compared as bytes (the encoding is canonical), so that
-        // no two decoded records add up in one frame (the QEMU board's 8 KB).
+        // no two decoded records add up in one frame.
         let (target, sequence) = match self.plan_save(settings)? {
             Ok(unchanged) => return Ok(unchanged),
             Err(plan) => plan,
@@ -660,7 +659,7 @@ impl<F: NorFlash> SettingsStore<F> {
     /// hands each to `visit` with its offset, until `visit` says stop
     /// (`false`): one loop for the CRC, the blank check and the byte
     /// comparisons. Out of line, so that its chunk buffer does not add to
-    /// `scan`'s frame (it runs in `init`, on the QEMU board's 4.2 KB stack).
+    /// `scan`'s frame (it runs in `init`).
     #[inline(never)]
     fn walk(
         &mut self,

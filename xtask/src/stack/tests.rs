@@ -70,13 +70,18 @@ fn chip() -> Chip {
     Chip {
         ram: 0x2000_0000..0x2000_2000,
         nvic_prio_bits: 4,
+        overflow_on_purpose: &[],
     }
 }
 
 fn run(name: &str) -> Result<Report, String> {
+    run_on(name, &chip())
+}
+
+fn run_on(name: &str, chip: &Chip) -> Result<Report, String> {
     let objdump = crate::llvm_tool("llvm-objdump").unwrap();
     let elf = build(name);
-    let report = analyse(&elf, &objdump, &chip());
+    let report = analyse(&elf, &objdump, chip);
     if let Some(dir) = elf.parent() {
         let _ = std::fs::remove_dir_all(dir);
     }
@@ -129,6 +134,18 @@ fn frames_calls_priorities_and_preemption() {
 fn recursion_is_an_error_naming_the_function() {
     let e = run("recursion").unwrap_err();
     assert!(e.contains("recursion: countdown → countdown"), "{e}");
+}
+
+#[test]
+fn a_function_that_overflows_on_purpose_counts_its_frame_not_its_recursion() {
+    let chip = Chip {
+        overflow_on_purpose: &["countdown"],
+        ..chip()
+    };
+    let r = run_on("recursion", &chip).unwrap();
+    let reset = entry(&r, "Reset");
+    let names: Vec<&str> = reset.path.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names.last(), Some(&"countdown"), "{}", r.table());
 }
 
 #[test]

@@ -198,7 +198,7 @@ enum Link {
 ///
 /// Fixed size (≤ 728 bytes, asserted by a test: see the `*_QUEUE` and
 /// [`TX_CAPACITY`] consts), no heap.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Hmi {
     decoder: Decoder,
     link: Link,

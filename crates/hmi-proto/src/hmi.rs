@@ -98,6 +98,12 @@ pub const LINK_TIMEOUT_MS: u32 = 2_500;
 /// so the next byte is read as a header whatever came before it.
 pub const RX_GAP_MS: u32 = 10;
 
+/// A `sendme` queued before a `page` instruction is answered, with the
+/// page shown before it, within this long of the `page` instruction (the
+/// screen answers at once; the transmit queue ahead of it takes at most
+/// 28 ms): an answer later than that answers a `sendme` after it.
+pub const PAGE_ANSWER_MS: u32 = GET_TIMEOUT_MS;
+
 /// A motor-starting button's release counts only this long after its press
 /// (docs/hmi.md §3): a press held longer, or whose release was lost, is no
 /// tap (a tap takes 0.1–0.5 s).
@@ -173,6 +179,10 @@ pub struct HmiStats {
     /// (another touch frame between them, a lost or hit press, or held
     /// longer than [`START_TAP_MS`]): ignored.
     pub unpaired_starts: u32,
+    /// `0x66` answers to a `sendme` queued before a later `page`
+    /// instruction (they name the page shown before it): not taken as the
+    /// page shown.
+    pub stale_page_answers: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -196,7 +206,7 @@ enum Link {
 
 /// The screen link: feed it received bytes and the time; drain events and bytes.
 ///
-/// Fixed size (≤ 728 bytes, asserted by a test: see the `*_QUEUE` and
+/// Fixed size (≤ 736 bytes, asserted by a test: see the `*_QUEUE` and
 /// [`TX_CAPACITY`] consts), no heap.
 #[derive(Debug, Clone)]
 pub struct Hmi {
@@ -232,6 +242,15 @@ pub struct Hmi {
     /// The last touch frame was the press of a motor-starting button on
     /// the page shown: its page, id and the time.
     start_press: Option<(u8, u8, u32)>,
+    /// `sendme` queued since the last `page` instruction, not answered yet.
+    probes: u8,
+    /// Answers still to come to `sendme` queued before the last `page`
+    /// instruction: the screen answers them with the page it showed
+    /// before, so they do not say which page is shown now.
+    stale_answers: u8,
+    /// When the last `page` instruction was queued: answers not come
+    /// [`PAGE_ANSWER_MS`] later were lost.
+    stale_since_ms: u32,
 }
 
 impl Hmi {
@@ -260,6 +279,9 @@ impl Hmi {
             stop_held: false,
             page_known: false,
             start_press: None,
+            probes: 0,
+            stale_answers: 0,
+            stale_since_ms: 0,
         }
     }
 
@@ -353,7 +375,7 @@ impl Hmi {
                     heard_ms,
                     probe_ms: now_ms,
                 };
-                let _ = self.send(&Instruction::SendMe);
+                self.ask_page();
             }
         }
         if let Link::Connecting { last_try_ms } = self.link {
@@ -368,7 +390,7 @@ impl Hmi {
                 // Drop stale handshake bytes not yet sent.
                 self.tx.clear();
                 let _ = self.send(&Instruction::Flush);
-                let _ = self.send(&Instruction::SendMe);
+                self.ask_page();
             }
         }
         if let Some(p) = self.pending {
@@ -423,6 +445,13 @@ impl Hmi {
         let sent = self.send(&Instruction::Page(page.id()));
         self.page_known = sent.is_ok();
         sent?;
+        // The `sendme` queued before it are answered with the page before.
+        if self.now_ms.wrapping_sub(self.stale_since_ms) >= PAGE_ANSWER_MS {
+            self.stale_answers = 0;
+        }
+        self.stale_answers = self.stale_answers.saturating_add(self.probes);
+        self.stale_since_ms = self.now_ms;
+        self.probes = 0;
         // `page_instructions`, component by component (no list on the
         // stack).
         for comp in Component::on_page(page) {
@@ -517,6 +546,30 @@ impl Hmi {
         Ok(())
     }
 
+    /// A `0x66` answer came: counts it against the `sendme` queued;
+    /// `true` when it answers one queued before the last `page`
+    /// instruction (stale).
+    fn answered(&mut self) -> bool {
+        if self.stale_answers > 0 && self.now_ms.wrapping_sub(self.stale_since_ms) < PAGE_ANSWER_MS
+        {
+            self.stale_answers = self.stale_answers.saturating_sub(1);
+            true
+        } else {
+            // Those not come by now were lost.
+            self.stale_answers = 0;
+            self.probes = self.probes.saturating_sub(1);
+            false
+        }
+    }
+
+    /// Queues `sendme` (the screen answers `0x66 page`), counted so that
+    /// an answer crossing a later `page` instruction is known as such.
+    fn ask_page(&mut self) {
+        if self.send(&Instruction::SendMe).is_ok() {
+            self.probes = self.probes.saturating_add(1);
+        }
+    }
+
     fn event(&mut self, e: Event) {
         // Room is kept so that a burst of screen errors (a screen file with
         // a wrong name answers `0x1A` to every status write) never costs an
@@ -548,6 +601,8 @@ impl Hmi {
         self.stop_held = false;
         self.start_press = None;
         self.page_known = false;
+        self.probes = 0;
+        self.stale_answers = 0;
         self.stats.link_losses = self.stats.link_losses.wrapping_add(1);
         self.event(Event::Disconnected);
     }
@@ -577,9 +632,15 @@ impl Hmi {
             };
         }
         match frame {
-            Frame::CurrentPage(p) => match self.link {
-                Link::Connecting { .. } => self.connect(),
-                Link::Connected { .. } => match Page::from_id(p) {
+            Frame::CurrentPage(p) => match (self.link, self.answered()) {
+                (Link::Connecting { .. }, _) => self.connect(),
+                // An answer to a `sendme` queued before the last `page`
+                // instruction names the page shown before it: not the
+                // page now (a restart's page 0 still counts, below).
+                (Link::Connected { .. }, true) if p != Page::Boot.id() => {
+                    self.stats.stale_page_answers = self.stats.stale_page_answers.wrapping_add(1);
+                }
+                (Link::Connected { .. }, _) => match Page::from_id(p) {
                     // The screen shows page 0 `boot` only at power-on, before
                     // the handshake: a reply naming it now is a late answer
                     // to a handshake `sendme` (the screen booted and sent
@@ -602,7 +663,13 @@ impl Hmi {
             // 00 FF FF FF` without its header is `00 00 00 FF FF FF`), and
             // dropping the link for it threw the operator off the run page.
             Frame::Startup => self.restart_seen = true,
-            Frame::Ready => self.connect(),
+            Frame::Ready => {
+                // The screen (re)started: it lost the `sendme` it had not
+                // answered (an answer after this names page 0, below).
+                self.probes = 0;
+                self.stale_answers = 0;
+                self.connect();
+            }
             Frame::Touch {
                 page,
                 component,
@@ -674,7 +741,7 @@ impl Hmi {
             // Another page than the one shown (in flight across a page
             // change, or a hit page byte), or the page is not known: ask
             // the screen, so that a page believed wrongly is put right.
-            let _ = self.send(&Instruction::SendMe);
+            self.ask_page();
             if self.page_known || starts_motor {
                 self.stats.foreign_page_touches = self.stats.foreign_page_touches.wrapping_add(1);
                 return;

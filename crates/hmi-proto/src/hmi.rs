@@ -95,7 +95,9 @@ pub const HEARTBEAT_MS: u32 = 1_000;
 pub const LINK_TIMEOUT_MS: u32 = 2_500;
 /// A partial frame is forgotten when the line has been quiet for this long
 /// (a screen sends each frame in one go: 9 bytes take 0.8 ms at 115200 baud),
-/// so the next byte is read as a header whatever came before it.
+/// so the next byte is read as a header whatever came before it. Measured
+/// between the bytes' arrival times ([`Hmi::push_at`]) and up to each
+/// [`Hmi::tick`].
 pub const RX_GAP_MS: u32 = 10;
 
 /// A `sendme` queued before a `page` instruction is answered, with the
@@ -183,6 +185,9 @@ pub struct HmiStats {
     /// instruction (they name the page shown before it): not taken as the
     /// page shown.
     pub stale_page_answers: u32,
+    /// Number or string frames read as the touch frame they end with (a
+    /// stray byte before the touch took it as its payload).
+    pub touches_in_replies: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -223,9 +228,7 @@ pub struct Hmi {
     events: heapless::Deque<Event, EVENT_QUEUE>,
     tx: heapless::Deque<u8, TX_CAPACITY>,
     stats: HmiStats,
-    /// Bytes arrived since the last [`tick`](Self::tick).
-    rx_since_tick: bool,
-    /// The last tick that followed received bytes.
+    /// When the last byte arrived.
     last_rx_ms: u32,
     /// A startup frame came since the screen was last set up: a `0x66`
     /// answer naming page 0 then means the screen restarted (its `0x88`
@@ -273,7 +276,6 @@ impl Hmi {
             events: heapless::Deque::new(),
             tx: heapless::Deque::new(),
             stats: HmiStats::default(),
-            rx_since_tick: false,
             last_rx_ms: 0,
             restart_seen: false,
             stop_held: false,
@@ -332,9 +334,31 @@ impl Hmi {
         self.tx.len()
     }
 
-    /// Feeds one received byte.
+    /// Feeds one received byte that arrived at `at_ms` (the receive
+    /// interrupt's time, however late the link gets it): a partial frame
+    /// followed by [`RX_GAP_MS`] of quiet line is forgotten before the
+    /// byte, which then starts a frame (docs/hmi.md §3, "Line errors").
+    pub fn push_at(&mut self, byte: u8, at_ms: u32) {
+        if !self.decoder.is_idle() && quiet_since(self.last_rx_ms, at_ms) >= RX_GAP_MS {
+            self.forget_partial_frame();
+        }
+        self.last_rx_ms = at_ms;
+        self.decode(byte);
+    }
+
+    /// Feeds one received byte that arrived at the last [`tick`](Self::tick)'s
+    /// time ([`push_at`](Self::push_at) with that time).
     pub fn push(&mut self, byte: u8) {
-        self.rx_since_tick = true;
+        self.push_at(byte, self.now_ms);
+    }
+
+    fn forget_partial_frame(&mut self) {
+        // The rest of that frame is not coming: the next byte is a header.
+        self.decoder.reset();
+        self.stats.gap_resyncs = self.stats.gap_resyncs.wrapping_add(1);
+    }
+
+    fn decode(&mut self, byte: u8) {
         let mut next = self.decoder.push(byte);
         while let Some(result) = next {
             match result {
@@ -347,7 +371,8 @@ impl Hmi {
         }
     }
 
-    /// Feeds received bytes.
+    /// Feeds received bytes that arrived at the last
+    /// [`tick`](Self::tick)'s time.
     pub fn push_slice(&mut self, bytes: &[u8]) {
         for &b in bytes {
             self.push(b);
@@ -359,18 +384,18 @@ impl Hmi {
     /// timed from the last `tick`.
     pub fn tick(&mut self, now_ms: u32) {
         self.now_ms = now_ms;
-        if core::mem::take(&mut self.rx_since_tick) {
-            self.last_rx_ms = now_ms;
-        } else if !self.decoder.is_idle() && now_ms.wrapping_sub(self.last_rx_ms) >= RX_GAP_MS {
-            // The rest of that frame is not coming: the next byte is a header.
-            self.decoder.reset();
-            self.stats.gap_resyncs = self.stats.gap_resyncs.wrapping_add(1);
+        if !self.decoder.is_idle() && quiet_since(self.last_rx_ms, now_ms) >= RX_GAP_MS {
+            self.forget_partial_frame();
         }
         if let Link::Connected { heard_ms, probe_ms } = self.link {
             let quiet = now_ms.wrapping_sub(heard_ms);
             if quiet >= LINK_TIMEOUT_MS {
                 self.lose_link();
-            } else if quiet >= HEARTBEAT_MS && now_ms.wrapping_sub(probe_ms) >= HEARTBEAT_MS {
+            } else if quiet >= HEARTBEAT_MS
+                && now_ms.wrapping_sub(probe_ms) >= HEARTBEAT_MS
+                // Not while a frame is coming in: the screen is there.
+                && self.decoder.is_idle()
+            {
                 self.link = Link::Connected {
                     heard_ms,
                     probe_ms: now_ms,
@@ -675,21 +700,49 @@ impl Hmi {
                 component,
                 event,
             } => self.on_touch(page, component, event),
-            Frame::Number(v) => match self.pending.take() {
-                Some(p) => {
+            // A stray byte before a touch frame makes a reply of it: `71`
+            // a number whose four bytes are the touch's, `70` a string
+            // ending in them (docs/hmi.md §3, "Line errors").
+            Frame::Number(v) => match (self.pending, touch_in(&v.to_le_bytes())) {
+                // No reply awaited: the touch.
+                (None, Some((page, id, event))) => self.stray_touch(page, id, event),
+                // A reply awaited: the touch only if it is the Stop of the
+                // page shown (no input of a page with a Stop takes such a
+                // value); the reply still counts when it comes.
+                (Some(_), Some((page, id, event)))
+                    if self.page_known
+                        && page == self.page.id()
+                        && Component::lookup(page, id)
+                            .is_some_and(|c| matches!(c.role, Role::Action(Action::Stop))) =>
+                {
+                    self.stray_touch(page, id, event);
+                }
+                (Some(p), _) => {
+                    self.pending = None;
                     self.on_value(p.field, v);
                     self.drain_touches();
                 }
+                (None, None) => {
+                    self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
+                }
+            },
+            // The MCU never asks for a string.
+            Frame::Text(t) => match t.as_bytes().last_chunk::<4>().and_then(touch_in) {
+                Some((page, id, event)) => self.stray_touch(page, id, event),
                 None => {
                     self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
                 }
             },
-            Frame::Text(_) => {
-                self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
-            }
             Frame::Error(code) => self.event(Event::ScreenError(code)),
             _ => {}
         }
+    }
+
+    /// A touch frame read from the end of a reply frame (a stray header
+    /// byte before it).
+    fn stray_touch(&mut self, page: u8, id: u8, event: TouchEvent) {
+        self.stats.touches_in_replies = self.stats.touches_in_replies.wrapping_add(1);
+        self.on_touch(page, id, event);
     }
 
     /// One touch frame (docs/hmi.md §3). Frames carry no CRC: a motor
@@ -921,4 +974,25 @@ impl Hmi {
             }
         }
     }
+}
+
+/// Milliseconds from `from` to `to` (wrapping clock); 0 when `to` is
+/// before `from` (a byte stamped before the last tick).
+fn quiet_since(from: u32, to: u32) -> u32 {
+    let d = to.wrapping_sub(from);
+    if d > u32::MAX / 2 {
+        0
+    } else {
+        d
+    }
+}
+
+/// The page, component and event of the touch frame whose bytes before the
+/// terminator are `b` (`65 page id event`).
+fn touch_in(b: &[u8; 4]) -> Option<(u8, u8, TouchEvent)> {
+    let [header, page, id, event] = *b;
+    (header == crate::frame::HEADER_TOUCH)
+        .then_some(())
+        .and(TouchEvent::from_byte(event))
+        .map(|event| (page, id, event))
 }

@@ -96,16 +96,11 @@ fn scan(bytes: &[u8]) -> Scan {
     };
     let body = match kind_of(header) {
         None => return Scan::Broken(DecodeError::UnknownHeader(header), None),
-        // A coordinate frame's last payload byte is its event, `00` or
-        // `01`: any other byte there ends it at once, so that a stray
-        // `0x67` or `0x68` does not take a touch frame after it as its
-        // payload (`65 p id ev FF` puts `FF` there).
-        Some(Kind::Fixed(n))
-            if matches!(header, HEADER_XY_AWAKE | HEADER_XY_ASLEEP)
-                && bytes
-                    .get(usize::from(n))
-                    .is_some_and(|&e| TouchEvent::from_byte(e).is_none()) =>
-        {
+        // A coordinate frame (`0x67`/`0x68`, the only one with 5 payload
+        // bytes) ends in its event, `00` or `01`: any other byte there ends
+        // it at once, so that a stray `0x67` or `0x68` does not take a touch
+        // frame after it as its payload (`65 p id ev FF` puts `FF` there).
+        Some(Kind::Fixed(5)) if bytes.get(5).is_some_and(|&e| e > 1) => {
             return Scan::Broken(DecodeError::Malformed { header }, None);
         }
         Some(Kind::Fixed(n)) => usize::from(n).saturating_add(1),

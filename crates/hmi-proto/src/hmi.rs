@@ -96,15 +96,8 @@ pub const LINK_TIMEOUT_MS: u32 = 2_500;
 /// A partial frame is forgotten when the line has been quiet for this long
 /// (a screen sends each frame in one go: 9 bytes take 0.8 ms at 115200 baud),
 /// so the next byte is read as a header whatever came before it. Measured
-/// between the bytes' arrival times ([`Hmi::push_at`]) and up to each
-/// [`Hmi::tick`].
+/// between the bytes' arrival times ([`Hmi::push_at`]).
 pub const RX_GAP_MS: u32 = 10;
-
-/// A `sendme` queued before a `page` instruction is answered, with the
-/// page shown before it, within this long of the `page` instruction (the
-/// screen answers at once; the transmit queue ahead of it takes at most
-/// 28 ms): an answer later than that answers a `sendme` after it.
-pub const PAGE_ANSWER_MS: u32 = GET_TIMEOUT_MS;
 
 /// A motor-starting button's release counts only this long after its press
 /// (docs/hmi.md §3): a press held longer, or whose release was lost, is no
@@ -251,9 +244,6 @@ pub struct Hmi {
     /// instruction: the screen answers them with the page it showed
     /// before, so they do not say which page is shown now.
     stale_answers: u8,
-    /// When the last `page` instruction was queued: answers not come
-    /// [`PAGE_ANSWER_MS`] later were lost.
-    stale_since_ms: u32,
 }
 
 impl Hmi {
@@ -283,7 +273,6 @@ impl Hmi {
             start_press: None,
             probes: 0,
             stale_answers: 0,
-            stale_since_ms: 0,
         }
     }
 
@@ -339,8 +328,11 @@ impl Hmi {
     /// followed by [`RX_GAP_MS`] of quiet line is forgotten before the
     /// byte, which then starts a frame (docs/hmi.md §3, "Line errors").
     pub fn push_at(&mut self, byte: u8, at_ms: u32) {
-        if !self.decoder.is_idle() && quiet_since(self.last_rx_ms, at_ms) >= RX_GAP_MS {
-            self.forget_partial_frame();
+        if !self.decoder.is_idle() && quiet_since(self.last_rx_ms, at_ms) >= RX_GAP_MS.cast_signed()
+        {
+            // The rest of that frame is not coming: this byte is a header.
+            self.decoder.reset();
+            self.stats.gap_resyncs = self.stats.gap_resyncs.wrapping_add(1);
         }
         self.last_rx_ms = at_ms;
         self.decode(byte);
@@ -350,12 +342,6 @@ impl Hmi {
     /// time ([`push_at`](Self::push_at) with that time).
     pub fn push(&mut self, byte: u8) {
         self.push_at(byte, self.now_ms);
-    }
-
-    fn forget_partial_frame(&mut self) {
-        // The rest of that frame is not coming: the next byte is a header.
-        self.decoder.reset();
-        self.stats.gap_resyncs = self.stats.gap_resyncs.wrapping_add(1);
     }
 
     fn decode(&mut self, byte: u8) {
@@ -384,18 +370,11 @@ impl Hmi {
     /// timed from the last `tick`.
     pub fn tick(&mut self, now_ms: u32) {
         self.now_ms = now_ms;
-        if !self.decoder.is_idle() && quiet_since(self.last_rx_ms, now_ms) >= RX_GAP_MS {
-            self.forget_partial_frame();
-        }
         if let Link::Connected { heard_ms, probe_ms } = self.link {
             let quiet = now_ms.wrapping_sub(heard_ms);
             if quiet >= LINK_TIMEOUT_MS {
                 self.lose_link();
-            } else if quiet >= HEARTBEAT_MS
-                && now_ms.wrapping_sub(probe_ms) >= HEARTBEAT_MS
-                // Not while a frame is coming in: the screen is there.
-                && self.decoder.is_idle()
-            {
+            } else if quiet >= HEARTBEAT_MS && now_ms.wrapping_sub(probe_ms) >= HEARTBEAT_MS {
                 self.link = Link::Connected {
                     heard_ms,
                     probe_ms: now_ms,
@@ -471,11 +450,7 @@ impl Hmi {
         self.page_known = sent.is_ok();
         sent?;
         // The `sendme` queued before it are answered with the page before.
-        if self.now_ms.wrapping_sub(self.stale_since_ms) >= PAGE_ANSWER_MS {
-            self.stale_answers = 0;
-        }
-        self.stale_answers = self.stale_answers.saturating_add(self.probes);
-        self.stale_since_ms = self.now_ms;
+        self.stale_answers = self.stale_answers.wrapping_add(self.probes);
         self.probes = 0;
         // `page_instructions`, component by component (no list on the
         // stack).
@@ -575,13 +550,10 @@ impl Hmi {
     /// `true` when it answers one queued before the last `page`
     /// instruction (stale).
     fn answered(&mut self) -> bool {
-        if self.stale_answers > 0 && self.now_ms.wrapping_sub(self.stale_since_ms) < PAGE_ANSWER_MS
-        {
-            self.stale_answers = self.stale_answers.saturating_sub(1);
+        if self.stale_answers > 0 {
+            self.stale_answers = self.stale_answers.wrapping_sub(1);
             true
         } else {
-            // Those not come by now were lost.
-            self.stale_answers = 0;
             self.probes = self.probes.saturating_sub(1);
             false
         }
@@ -591,7 +563,7 @@ impl Hmi {
     /// an answer crossing a later `page` instruction is known as such.
     fn ask_page(&mut self) {
         if self.send(&Instruction::SendMe).is_ok() {
-            self.probes = self.probes.saturating_add(1);
+            self.probes = self.probes.wrapping_add(1);
         }
     }
 
@@ -642,6 +614,11 @@ impl Hmi {
         self.restart_seen = false;
         self.stop_held = false;
         self.start_press = None;
+        // The handshake's `sendme` not answered by now were lost (the screen
+        // was off or restarting); a late answer naming page 0 is ignored
+        // below.
+        self.probes = 0;
+        self.stale_answers = 0;
         let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
         let _ = self.send(&Instruction::Dims(self.settings.brightness.raw()));
         let _ = self.show_page(self.home_page());
@@ -656,16 +633,35 @@ impl Hmi {
                 probe_ms,
             };
         }
+        // A stray byte before a touch frame makes a reply of it: `71` a
+        // number whose four bytes are the touch's, `70` a string ending in
+        // them (docs/hmi.md §3, "Line errors"). The touch is read back
+        // out: from a number when no reply is awaited, or when it is the
+        // Stop of the page shown (no input of a page with a Stop takes
+        // such a value; the reply still counts when it comes); from any
+        // string (the MCU never asks for one). One call of `on_touch`
+        // for every way in (one copy in flash).
+        let touch = match &frame {
+            Frame::Touch {
+                page,
+                component,
+                event,
+            } => Some((*page, *component, *event)),
+            Frame::Number(v) if self.pending.is_none() => touch_in(&v.to_le_bytes()),
+            Frame::Text(t) => t.as_bytes().last_chunk::<4>().and_then(touch_in),
+            _ => None,
+        };
+        if let Some((page, id, event)) = touch {
+            if !matches!(frame, Frame::Touch { .. }) {
+                self.stats.touches_in_replies = self.stats.touches_in_replies.wrapping_add(1);
+            }
+            self.on_touch(page, id, event);
+            return;
+        }
         match frame {
             Frame::CurrentPage(p) => match (self.link, self.answered()) {
                 (Link::Connecting { .. }, _) => self.connect(),
-                // An answer to a `sendme` queued before the last `page`
-                // instruction names the page shown before it: not the
-                // page now (a restart's page 0 still counts, below).
-                (Link::Connected { .. }, true) if p != Page::Boot.id() => {
-                    self.stats.stale_page_answers = self.stats.stale_page_answers.wrapping_add(1);
-                }
-                (Link::Connected { .. }, _) => match Page::from_id(p) {
+                (Link::Connected { .. }, stale) => match Page::from_id(p) {
                     // The screen shows page 0 `boot` only at power-on, before
                     // the handshake: a reply naming it now is a late answer
                     // to a handshake `sendme` (the screen booted and sent
@@ -675,6 +671,13 @@ impl Hmi {
                     // was lost.
                     Some(Page::Boot) if self.restart_seen => self.connect(),
                     Some(Page::Boot) | None => {}
+                    // An answer to a `sendme` queued before the last `page`
+                    // instruction names the page shown before it: not the
+                    // page now.
+                    Some(_) if stale => {
+                        self.stats.stale_page_answers =
+                            self.stats.stale_page_answers.wrapping_add(1);
+                    }
                     Some(page) => {
                         self.page = page;
                         self.page_known = true;
@@ -688,61 +691,22 @@ impl Hmi {
             // 00 FF FF FF` without its header is `00 00 00 FF FF FF`), and
             // dropping the link for it threw the operator off the run page.
             Frame::Startup => self.restart_seen = true,
-            Frame::Ready => {
-                // The screen (re)started: it lost the `sendme` it had not
-                // answered (an answer after this names page 0, below).
-                self.probes = 0;
-                self.stale_answers = 0;
-                self.connect();
-            }
-            Frame::Touch {
-                page,
-                component,
-                event,
-            } => self.on_touch(page, component, event),
-            // A stray byte before a touch frame makes a reply of it: `71`
-            // a number whose four bytes are the touch's, `70` a string
-            // ending in them (docs/hmi.md §3, "Line errors").
-            Frame::Number(v) => match (self.pending, touch_in(&v.to_le_bytes())) {
-                // No reply awaited: the touch.
-                (None, Some((page, id, event))) => self.stray_touch(page, id, event),
-                // A reply awaited: the touch only if it is the Stop of the
-                // page shown (no input of a page with a Stop takes such a
-                // value); the reply still counts when it comes.
-                (Some(_), Some((page, id, event)))
-                    if self.page_known
-                        && page == self.page.id()
-                        && Component::lookup(page, id)
-                            .is_some_and(|c| matches!(c.role, Role::Action(Action::Stop))) =>
-                {
-                    self.stray_touch(page, id, event);
-                }
-                (Some(p), _) => {
-                    self.pending = None;
+            Frame::Ready => self.connect(),
+            Frame::Number(v) => match self.pending.take() {
+                Some(p) => {
                     self.on_value(p.field, v);
                     self.drain_touches();
                 }
-                (None, None) => {
-                    self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
-                }
-            },
-            // The MCU never asks for a string.
-            Frame::Text(t) => match t.as_bytes().last_chunk::<4>().and_then(touch_in) {
-                Some((page, id, event)) => self.stray_touch(page, id, event),
                 None => {
                     self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
                 }
             },
+            Frame::Text(_) => {
+                self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
+            }
             Frame::Error(code) => self.event(Event::ScreenError(code)),
             _ => {}
         }
-    }
-
-    /// A touch frame read from the end of a reply frame (a stray header
-    /// byte before it).
-    fn stray_touch(&mut self, page: u8, id: u8, event: TouchEvent) {
-        self.stats.touches_in_replies = self.stats.touches_in_replies.wrapping_add(1);
-        self.on_touch(page, id, event);
     }
 
     /// One touch frame (docs/hmi.md §3). Frames carry no CRC: a motor
@@ -976,15 +940,10 @@ impl Hmi {
     }
 }
 
-/// Milliseconds from `from` to `to` (wrapping clock); 0 when `to` is
-/// before `from` (a byte stamped before the last tick).
-fn quiet_since(from: u32, to: u32) -> u32 {
-    let d = to.wrapping_sub(from);
-    if d > u32::MAX / 2 {
-        0
-    } else {
-        d
-    }
+/// Milliseconds from `from` to `to` (wrapping clock); negative when `to`
+/// is before `from` (a byte stamped before the last tick).
+fn quiet_since(from: u32, to: u32) -> i32 {
+    to.wrapping_sub(from).cast_signed()
 }
 
 /// The page, component and event of the touch frame whose bytes before the

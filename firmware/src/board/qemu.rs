@@ -41,9 +41,6 @@ use super::{
     SETTINGS_FLASH_BYTES, SETTINGS_PAGE_BYTES,
 };
 
-/// Transmit half of the touchscreen UART.
-pub type HmiTx = Tx<USART1>;
-
 /// Most screen bytes one lock-step period carries (a real line carries
 /// ≈ 115 per 10 ms; the tests send at most this many).
 const GATE_BYTES: usize = 32;
@@ -202,7 +199,7 @@ impl DriveLine {
 /// Everything the application owns after [`init`].
 pub struct Board {
     /// Touchscreen transmitter.
-    pub hmi_tx: HmiTx,
+    pub hmi_tx: super::HmiTx,
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
     /// The drum driver's RS-485 line (USART2), in a static (the QEMU
@@ -342,7 +339,8 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
-    let (hmi_tx, mut uart_rx) = hmi.split();
+    let (tx, mut uart_rx) = hmi.split();
+    let hmi_tx = super::HmiTx::new(tx);
     uart_rx.listen();
     // Note: `init` runs once, so the singleton is still free.
     let Some(gate_queue) = cortex_m::singleton!(: GateQueue = GateQueue::new()) else {

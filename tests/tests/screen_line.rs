@@ -285,29 +285,52 @@ fn every_stray_byte_before_a_touch_with_the_independent_screen() {
     assert!(lost.is_empty(), "{lost:?}");
 }
 
-/// The quiet-line rule with the independent screen: two stray bytes (`67
-/// 00`, the start of a coordinate frame, which would take the touch as its
-/// payload), then the Stop's press 11 ms later: the Stop, even with the hmi
-/// task 15 ms late (the bytes' arrival times count). 9 ms later the bytes
-/// are one stream and the press is lost (its release still stops).
+/// The quiet-line rule with the independent screen: while an *Apply*'s
+/// `get` is awaited (a number or string frame is then read as one; the
+/// screen takes 15 ms an instruction here, so the reply comes late), a
+/// stray `70` (a string's header, which would take the touch as its text),
+/// then the Stop's press 11 ms later: the Stop, even with the hmi task
+/// 15 ms late (the bytes' arrival times count). 9 ms later the bytes are
+/// one stream and the press is lost (its release still stops).
 #[test]
 fn the_quiet_line_rule_at_11_ms_with_the_independent_screen() {
     for (gap_ms, taken) in [(RX_GAP_MS + 1, true), (RX_GAP_MS - 1, false)] {
         for latency_us in [50, 15_000] {
-            let mut rig = Rig::connected(Settings::default());
+            let slow = nextion_model::Config {
+                instruction_us: 15_000,
+                ..nextion_model::Config::default()
+            };
+            let mut rig = Rig::connected_to(
+                nextion_model::Screen::with_config(slow),
+                Settings::default(),
+            );
             let t = rig.now_us();
             tap(&mut rig, t, "badapt", 80_000);
-            rig.run_for(300_000);
+            rig.run_for(1_000_000);
             rig.task_latency_us = latency_us;
             let t = rig.now_us();
-            rig.at(t, Act::Noise(vec![0x67, 0x00]));
-            let press = t + 2 * 87 + u64::from(gap_ms) * 1000;
+            // Apply: `get nspacing.val` goes out, answered 15 ms or more later.
+            tap(&mut rig, t, "bapply", 80_000);
+            let stray = t + 80_000 + 1_000;
+            rig.at(stray, Act::Noise(vec![0x70]));
+            let press = stray + 87 + u64::from(gap_ms) * 1000;
             rig.at(press, Act::Press("bstop"));
-            let got = rig.run_until_event(press + 50_000, is_stop);
+            let seen = rig.events.len();
+            rig.run_until(press + 50_000);
+            let new = &rig.events[seen..];
+            let got = new.iter().find(|(_, e)| is_stop(e)).map(|(at, _)| *at);
+            let reply = new
+                .iter()
+                .find(|(_, e)| matches!(e, Event::Command(Command::SetSpacing(_))))
+                .map(|(at, _)| *at);
+            assert!(
+                reply.is_some_and(|r| r > press + 1_000),
+                "the reply came before the press: {new:?}"
+            );
             assert_eq!(
                 got.is_some(),
                 taken,
-                "{gap_ms} ms of quiet, task {latency_us} µs late"
+                "{gap_ms} ms of quiet, task {latency_us} µs late: {new:?}"
             );
             if let Some(at) = got {
                 eprintln!(

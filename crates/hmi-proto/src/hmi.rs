@@ -178,9 +178,6 @@ pub struct HmiStats {
     /// instruction (they name the page shown before it): not taken as the
     /// page shown.
     pub stale_page_answers: u32,
-    /// Number or string frames read as the touch frame they end with (a
-    /// stray byte before the touch took it as its payload).
-    pub touches_in_replies: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -335,6 +332,11 @@ impl Hmi {
             self.stats.gap_resyncs = self.stats.gap_resyncs.wrapping_add(1);
         }
         self.last_rx_ms = at_ms;
+        // A number reply is expected only while a `get` is awaited; a
+        // string or touch coordinates never (the MCU asks for neither): a
+        // stray `70`, `71`, `67` or `68` then never takes the touch frame
+        // after it (docs/hmi.md §3, "Line errors").
+        self.decoder.expect_replies(self.pending.is_some());
         self.decode(byte);
     }
 
@@ -633,32 +635,12 @@ impl Hmi {
                 probe_ms,
             };
         }
-        // A stray byte before a touch frame makes a reply of it: `71` a
-        // number whose four bytes are the touch's, `70` a string ending in
-        // them (docs/hmi.md §3, "Line errors"). The touch is read back
-        // out: from a number when no reply is awaited, or when it is the
-        // Stop of the page shown (no input of a page with a Stop takes
-        // such a value; the reply still counts when it comes); from any
-        // string (the MCU never asks for one). One call of `on_touch`
-        // for every way in (one copy in flash).
-        let touch = match &frame {
+        match frame {
             Frame::Touch {
                 page,
                 component,
                 event,
-            } => Some((*page, *component, *event)),
-            Frame::Number(v) if self.pending.is_none() => touch_in(&v.to_le_bytes()),
-            Frame::Text(t) => t.as_bytes().last_chunk::<4>().and_then(touch_in),
-            _ => None,
-        };
-        if let Some((page, id, event)) = touch {
-            if !matches!(frame, Frame::Touch { .. }) {
-                self.stats.touches_in_replies = self.stats.touches_in_replies.wrapping_add(1);
-            }
-            self.on_touch(page, id, event);
-            return;
-        }
-        match frame {
+            } => self.on_touch(page, component, event),
             Frame::CurrentPage(p) => match (self.link, self.answered()) {
                 (Link::Connecting { .. }, _) => self.connect(),
                 (Link::Connected { .. }, stale) => match Page::from_id(p) {
@@ -944,14 +926,4 @@ impl Hmi {
 /// is before `from` (a byte stamped before the last tick).
 fn quiet_since(from: u32, to: u32) -> i32 {
     to.wrapping_sub(from).cast_signed()
-}
-
-/// The page, component and event of the touch frame whose bytes before the
-/// terminator are `b` (`65 page id event`).
-fn touch_in(b: &[u8; 4]) -> Option<(u8, u8, TouchEvent)> {
-    let [header, page, id, event] = *b;
-    (header == crate::frame::HEADER_TOUCH)
-        .then_some(())
-        .and(TouchEvent::from_byte(event))
-        .map(|event| (page, id, event))
 }

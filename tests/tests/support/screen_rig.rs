@@ -81,11 +81,16 @@ impl Rig {
     /// A screen switched on at time 0 and the firmware's link, run until the
     /// link reports the screen set up.
     pub fn connected(settings: Settings) -> Self {
+        Self::connected_to(Screen::new(), settings)
+    }
+
+    /// [`connected`](Self::connected) to `screen` (switched on at time 0).
+    pub fn connected_to(screen: Screen, settings: Settings) -> Self {
         let ring: &'static mut heapless::spsc::Queue<u8, TX_RING> =
             Box::leak(Box::new(heapless::spsc::Queue::new()));
         let (ring, ring_out) = ring.split();
         let mut rig = Rig {
-            screen: Screen::new(),
+            screen,
             hmi: Hmi::new(settings, "rig"),
             now_us: 0,
             from_screen: VecDeque::new(),

@@ -445,11 +445,7 @@ fn a_stop_press_on_a_flooded_line_during_a_page_change_stops_the_drum() {
     let mut twin = running_drum();
     twin.tap("bback").unwrap();
     twin.run_ms(300).unwrap();
-    assert_eq!(
-        twin.pin('B', 12),
-        Level::High,
-        "the drum runs on page 1"
-    );
+    assert_eq!(twin.pin('B', 12), Level::High, "the drum runs on page 1");
     let dropped_before = twin.static_u32("HMI_RX_DROPPED").unwrap_or(0);
     let flood = [0x1Au8, 0xFF, 0xFF, 0xFF].repeat(40);
     // `bset` (page 1, id 4) released: the MCU shows page 6.
@@ -467,7 +463,9 @@ fn a_stop_press_on_a_flooded_line_during_a_page_change_stops_the_drum() {
         .unwrap();
     let after_ms = (twin.now().saturating_sub(press_end)) as f64 * 1000.0 / TICKS_PER_S as f64;
     let dropped = twin.static_u32("HMI_RX_DROPPED").unwrap_or(0) - dropped_before;
-    eprintln!("drum disabled {after_ms:.1} ms after the Stop's press; {dropped} received bytes dropped");
+    eprintln!(
+        "drum disabled {after_ms:.1} ms after the Stop's press; {dropped} received bytes dropped"
+    );
     assert!(stopped, "the drum ran on ({dropped} bytes dropped)");
     assert!(after_ms <= 25.0, "{after_ms:.1} ms");
     assert_eq!(dropped, 0);

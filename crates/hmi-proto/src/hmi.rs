@@ -16,7 +16,14 @@
 //!   the page's `tmsg` box and the old value written back (nothing changes);
 //! * while a `get` reply is awaited, further touch events are queued (up to
 //!   [`TOUCH_QUEUE`]), never lost; *Stop* bypasses the queue;
-//! * the MCU drives navigation (`page N`) and writes settings and live status.
+//! * the MCU drives navigation (`page N`) and writes settings and live status;
+//!   the `sendme` it queues are counted, and an answer owed by one queued
+//!   before the last `page` instruction (it names the page before) is not
+//!   taken as the page shown;
+//! * received bytes come with their arrival time ([`Hmi::push_at`]): a
+//!   partial frame followed by [`RX_GAP_MS`] of quiet line is forgotten; and
+//!   while no `get` is awaited, a reply header (`70`, `71`, `67`, `68`) is
+//!   read as a stray byte, so it never takes the touch frame after it.
 //!
 //! Boot handshake: until the screen answers, [`Hmi::tick`] sends a lone
 //! terminator (to end any partial instruction) and `sendme` every
@@ -201,7 +208,7 @@ enum Link {
 
 /// The screen link: feed it received bytes and the time; drain events and bytes.
 ///
-/// Fixed size (≤ 736 bytes, asserted by a test: see the `*_QUEUE` and
+/// Fixed size (≤ 728 bytes, asserted by a test: see the `*_QUEUE` and
 /// [`TX_CAPACITY`] consts), no heap.
 #[derive(Debug, Clone)]
 pub struct Hmi {

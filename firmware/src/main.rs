@@ -66,10 +66,10 @@ const RX_QUEUE: usize = if cfg!(feature = "board-qemu") { 32 } else { 64 };
 /// The ring of bytes from the HMI task to the USART interrupt's transmitter
 /// (it holds one less): all the screen link can have queued
 /// (`TX_CAPACITY`), so one move of the HMI task empties the link's queue.
-/// The QEMU board's USART sends each byte at once: there a smaller ring is
-/// emptied as the task fills it.
+/// The QEMU board's USART sends each byte at once, so a ring of 3 is
+/// emptied as the task fills it (its 8 KB of RAM need every byte).
 const TX_RING: usize = if cfg!(feature = "board-qemu") {
-    64
+    4
 } else {
     hmi_proto::hmi::TX_CAPACITY + 1
 };

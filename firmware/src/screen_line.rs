@@ -3,8 +3,10 @@
 //!
 //! - Received bytes go to the hmi task with their arrival time, so that the
 //!   quiet-line rule (`hmi_proto::hmi::RX_GAP_MS`) is measured on the line,
-//!   not when the task gets to them: one `u32` each in the channel, the
-//!   byte and the low 24 bits of the millisecond clock.
+//!   not when the task gets to them: one `u16` each in the channel, the
+//!   byte and the low 8 bits of the millisecond clock (a byte waits there
+//!   far less than 256 ms: the hmi task runs at least every 20 ms, and its
+//!   longest wait behind a task of its priority is a settings save, 50 ms).
 //! - The task never waits on the transmitter: it moves the screen link's
 //!   queued bytes into a ring that the USART1 interrupt empties, one byte
 //!   per TXE (`board::HmiTx`).
@@ -12,26 +14,23 @@
 use heapless::spsc::Producer;
 use hmi_proto::hmi::Hmi;
 
-/// Bits of the arrival time kept (4.6 hours: a byte never waits in the
-/// channel that long).
-const STAMP_MASK: u32 = (1 << 24) - 1;
-
 /// One received byte and its arrival time, as the USART1 interrupt hands
 /// it to the hmi task.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct LineItem(u32);
+pub struct LineItem(u16);
 
 impl LineItem {
     /// `byte`, received at `at_ms` (the monotonic's milliseconds).
     pub const fn new(byte: u8, at_ms: u32) -> Self {
-        Self(((at_ms & STAMP_MASK) << 8) | byte as u32)
+        Self(u16::from_le_bytes([byte, at_ms as u8]))
     }
 
     /// The byte and its arrival time, taken at `now_ms` (not before it
-    /// arrived, and less than 4.6 hours after).
+    /// arrived, and less than 256 ms after).
     pub fn received(self, now_ms: u32) -> (u8, u32) {
-        let age = now_ms.wrapping_sub(self.0 >> 8) & STAMP_MASK;
-        ((self.0 & 0xFF) as u8, now_ms.wrapping_sub(age))
+        let [byte, stamp] = self.0.to_le_bytes();
+        let age = (now_ms as u8).wrapping_sub(stamp);
+        (byte, now_ms.wrapping_sub(u32::from(age)))
     }
 }
 

@@ -41,6 +41,9 @@ use super::{
     SETTINGS_FLASH_BYTES, SETTINGS_PAGE_BYTES,
 };
 
+/// USART1's transmit half, driven by [`super::HmiTx`].
+pub type ScreenUsartTx = Tx<USART1>;
+
 /// Most screen bytes one lock-step period carries (a real line carries
 /// ≈ 115 per 10 ms; the tests send at most this many).
 const GATE_BYTES: usize = 32;

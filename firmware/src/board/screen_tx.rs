@@ -10,18 +10,19 @@
 //! (TXE is always set): there the first interrupt sends the whole ring.
 
 use heapless::spsc::Consumer;
-use stm32f1xx_hal::{
-    pac::{self, USART1},
-    serial::Tx,
-};
+use stm32f1xx_hal::pac;
 
-/// The touchscreen's transmitter.
+use super::ScreenUsartTx;
+
+/// The touchscreen's transmitter (on each board its USART1 transmit half,
+/// [`ScreenUsartTx`], with the HAL's `write_u8`, `is_tx_empty`, `listen`
+/// and `unlisten`).
 pub struct HmiTx {
-    tx: Tx<USART1>,
+    tx: ScreenUsartTx,
 }
 
 impl HmiTx {
-    pub(super) fn new(tx: Tx<USART1>) -> Self {
+    pub(super) fn new(tx: ScreenUsartTx) -> Self {
         Self { tx }
     }
 

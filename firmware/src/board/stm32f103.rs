@@ -46,6 +46,8 @@ use super::{
 /// Frequency of the Hall capture timer: one tick is 1 µs.
 const HALL_TIMER_HZ: u32 = 1_000_000;
 
+/// USART1's transmit half, driven by [`super::HmiTx`].
+pub type ScreenUsartTx = Tx<USART1>;
 /// Receive half of the touchscreen UART.
 pub type HmiRx = Rx<USART1>;
 

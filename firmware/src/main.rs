@@ -1024,7 +1024,7 @@ mod app {
     ///   link (handshake retries, heartbeats, `get` timeouts).
     /// - Budget: 1 ms (the bytes received, a tick, the events, a page's
     ///   instructions encoded and moved to the transmit ring: `cargo xtask
-    ///   bench`'s `hmi_wake`, 26 400 instructions with a second page change);
+    ///   bench`'s `hmi_wake`, 26 312 instructions with a second page change);
     ///   it never waits on the line: [`usart1`] sends the bytes.
     #[task(priority = 1, local = [bytes_out, tx_in, saves_in, boot_notice], shared = [machine, hmi, stop])]
     async fn hmi(mut cx: hmi::Context) {

@@ -38,7 +38,7 @@ pub struct LinkConfig {
     pub reply_timeout_us: u32,
     /// Extra attempts of a failed request before the link is lost.
     pub retries: u8,
-    /// Every n-th poll reads the fault register instead of the speed.
+    /// Every n-th poll reads the fault register, whatever else is due.
     pub fault_poll_every: u8,
     /// The 3.5-character silence (µs).
     pub silent_interval_us: u32,
@@ -205,6 +205,8 @@ pub struct Link {
     /// The last poll wrote the speed command.
     commanded: bool,
     polls: u8,
+    /// Polls since the speed command was last written.
+    since_command: u8,
     lost: bool,
     answering: bool,
     counters: Counters,
@@ -236,6 +238,7 @@ impl Link {
             mode_due: profile.velocity_mode.is_some(),
             commanded: false,
             polls: 0,
+            since_command: 0,
             lost: false,
             answering: false,
             counters: Counters::default(),
@@ -268,7 +271,8 @@ impl Link {
     }
 
     /// Sets the speed command (drum milli-r/min); written when it changes
-    /// and refreshed on every fault poll. `None` stops commanding.
+    /// and written again every [`LinkConfig::fault_poll_every`] polls.
+    /// `None` stops commanding.
     pub fn set_speed_command(&mut self, drum_milli_rpm: Option<i32>) {
         self.command = drum_milli_rpm.and_then(|s| self.profile.command_counts(s));
     }
@@ -315,20 +319,17 @@ impl Link {
                 return (Job::Mode, Request::Write { address, value });
             }
         }
-        self.polls = self.polls.wrapping_add(1);
-        let fault_turn = self.config.fault_poll_every != 0
-            && self.polls.is_multiple_of(self.config.fault_poll_every);
-        // A changed command is written, but never twice in a row: the
-        // speed read that follows keeps the read-back fresh while the
-        // command changes every control period.
-        if let (Some(value), Some((address, _))) = (self.command, self.profile.speed_command) {
-            if (self.command_sent != Some(value) && !self.commanded) || fault_turn {
-                self.commanded = true;
-                return (Job::Command, Request::Write { address, value });
-            }
-        }
-        self.commanded = false;
-        if fault_turn {
+        let every = self.config.fault_poll_every;
+        // Counts 1, 2, …, every, 1, …
+        self.polls = if self.polls >= every {
+            1
+        } else {
+            self.polls.saturating_add(1)
+        };
+        self.since_command = self.since_command.saturating_add(1);
+        // The fault word has its own turn, every `every`-th poll, whatever
+        // else is due: a fault must be seen while the speed is commanded.
+        if every != 0 && self.polls == every {
             return (
                 Job::Faults,
                 Request::Read {
@@ -337,6 +338,19 @@ impl Link {
                 },
             );
         }
+        // A changed command is written, but never twice in a row: the
+        // speed read that follows keeps the read-back fresh while the
+        // command changes every control period. An unchanged one is
+        // written again once every `every` polls (a driver that lost it).
+        if let (Some(value), Some((address, _))) = (self.command, self.profile.speed_command) {
+            let due = self.command_sent != Some(value) || self.since_command >= every.max(1);
+            if due && !self.commanded {
+                self.commanded = true;
+                self.since_command = 0;
+                return (Job::Command, Request::Write { address, value });
+            }
+        }
+        self.commanded = false;
         (
             Job::Speed,
             Request::Read {

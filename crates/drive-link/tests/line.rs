@@ -565,3 +565,56 @@ fn a_retried_enable_is_not_sent_after_a_disable() {
         assert_eq!(b.link.counters().losses, 0);
     }
 }
+
+/// The fault word is read at a guaranteed rate whatever else is polled.
+/// Before, with a speed command set, every 4th poll wrote the command
+/// instead of reading the fault register: 0 fault reads while commanding,
+/// and a driver fault went unseen until the drum stopped. A constant
+/// command and one changed every 10 ms (the control period), at both
+/// bauds: the fault word is read on at least one poll in 4, and a fault
+/// set at any moment is reported within 4 polls and the fault read's own
+/// reply.
+#[test]
+fn a_fault_is_read_while_a_speed_command_runs() {
+    for baud in [9600, 115_200] {
+        for changing in [false, true] {
+            let mut b = Bench::new(baud);
+            b.link.control(ControlAction::Enable);
+            b.link.set_speed_command(Some(20_000));
+            b.run_for(200_000);
+            let reads_before = b.link.counters().fault_reads;
+            let requests_before = b.requests.len();
+            for k in 0..30 {
+                if changing {
+                    b.link.set_speed_command(Some(20_000 + 100 * (k % 2)));
+                }
+                b.run_for(10_000);
+            }
+            let polls = b.requests.len() - requests_before;
+            let reads = b.link.counters().fault_reads - reads_before;
+            assert!(
+                reads as usize * 4 >= polls - 4,
+                "{baud} baud, changing {changing}: {reads} fault reads in {polls} polls"
+            );
+            // A fault set now is reported within 4 polls + one.
+            b.driver.fault_bits = 0x0800;
+            let set = b.now;
+            for k in 0..60 {
+                if changing {
+                    b.link.set_speed_command(Some(20_000 + 100 * (k % 2)));
+                }
+                b.run_for(10_000);
+            }
+            let seen = b
+                .events
+                .iter()
+                .find(|(_, e)| *e == Event::Faults(0x0800))
+                .map(|(t, _)| t - set);
+            let bound = 5.0 * poll_cycle_us(baud, b.driver.turnaround_us);
+            assert!(
+                seen.is_some_and(|s| s as f64 <= bound),
+                "{baud} baud, changing {changing}: fault seen after {seen:?} µs, bound {bound:.0}"
+            );
+        }
+    }
+}

@@ -26,7 +26,9 @@
 //! driver samples after it has the request), so its age at use includes the
 //! reply's own time on the line.
 
-use crate::profile::{ControlWord, DriverProfile};
+use heapless::Deque;
+
+use crate::profile::DriverProfile;
 use crate::rtu::{self, Reply, ReplyError, Request};
 use crate::timing;
 
@@ -76,6 +78,10 @@ impl LinkConfig {
         })
     }
 }
+
+/// Control words queued at most (a clear between two enable states, and
+/// one more).
+pub const CONTROL_QUEUE: usize = 4;
 
 /// What happened on the link that the supervisor must act on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -198,7 +204,9 @@ pub struct Link {
     state: State,
     /// The request being retried, with its failures so far.
     retry: Option<(Job, Request, u8)>,
-    control: Option<u16>,
+    /// Control words to write, oldest first (the head is the one on the
+    /// line while a control write is outstanding).
+    control: Deque<u16, CONTROL_QUEUE>,
     command: Option<u16>,
     command_sent: Option<u16>,
     mode_due: bool,
@@ -232,7 +240,7 @@ impl Link {
             config,
             state: State::Idle { at: 0 },
             retry: None,
-            control: None,
+            control: Deque::new(),
             command: None,
             command_sent: None,
             mode_due: profile.velocity_mode.is_some(),
@@ -252,22 +260,45 @@ impl Link {
     }
 
     /// Queues a control-word write (ignored when the profile has none; the
-    /// enable pin still acts). The latest request wins.
+    /// enable pin still acts). Control words are written in the order
+    /// asked: a clear-alarm is never overtaken by the enable state that
+    /// follows it. A new enable state replaces one still queued behind
+    /// the last clear (only the newest state matters), and a value equal
+    /// to the newest queued is not queued twice.
     pub fn control(&mut self, action: ControlAction) {
-        if let Some(ControlWord {
-            enable,
-            disable,
-            clear_alarm,
-            ..
-        }) = self.profile.control
-        {
-            let value = match action {
-                ControlAction::Enable => enable,
-                ControlAction::Disable => disable,
-                ControlAction::ClearAlarm => clear_alarm,
-            };
-            self.control = Some(value);
+        let Some(cw) = self.profile.control else {
+            return;
+        };
+        let value = match action {
+            ControlAction::Enable => cw.enable,
+            ControlAction::Disable => cw.disable,
+            ControlAction::ClearAlarm => cw.clear_alarm,
+        };
+        let is_state = |v: u16| v != cw.clear_alarm;
+        if self.control.back() == Some(&value) {
+            return;
         }
+        if is_state(value) {
+            if let Some(last) = self.control.back_mut().filter(|v| is_state(**v)) {
+                // Replaced even on the line: its reply pops it only if it
+                // is still the value written, so the new one goes next.
+                *last = value;
+                return;
+            }
+        }
+        if self.control.is_full() {
+            // Four changes within one transaction: keep the head (it may
+            // be on the line) and the clears, in order; the new state
+            // supersedes the queued ones.
+            let mut kept: Deque<u16, CONTROL_QUEUE> = Deque::new();
+            for (i, &v) in self.control.iter().enumerate() {
+                if (i == 0 || !is_state(v)) && kept.back() != Some(&v) {
+                    let _ = kept.push_back(v);
+                }
+            }
+            self.control = kept;
+        }
+        let _ = self.control.push_back(value);
     }
 
     /// Sets the speed command (drum milli-r/min); written when it changes
@@ -293,7 +324,7 @@ impl Link {
                 Job::Control,
                 Request::Write {
                     address,
-                    value: self.control.unwrap_or(value),
+                    value: self.control.front().copied().unwrap_or(value),
                 },
             ),
             Some((job, request, _)) => (job, request),
@@ -305,7 +336,7 @@ impl Link {
     }
 
     fn choose(&mut self) -> (Job, Request) {
-        if let (Some(value), Some(cw)) = (self.control, self.profile.control) {
+        if let (Some(&value), Some(cw)) = (self.control.front(), self.profile.control) {
             return (
                 Job::Control,
                 Request::Write {
@@ -508,8 +539,8 @@ impl Link {
             // or a command queued while it was on its way is still due.
             (Job::Control, _) => {
                 if let Request::Write { value, .. } = request {
-                    if self.control == Some(value) {
-                        self.control = None;
+                    if self.control.front() == Some(&value) {
+                        self.control.pop_front();
                     }
                 }
             }
@@ -622,5 +653,73 @@ impl Link {
     #[must_use]
     pub fn profile(&self) -> &DriverProfile {
         &self.profile
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+    use crate::profile::ZLAC8015D;
+    use std::vec::Vec;
+
+    /// Runs the link against an echoing driver until it has nothing but
+    /// polls left; the control words written, in order.
+    fn written(link: &mut Link, t: &mut u64) -> Vec<u16> {
+        let mut out = Vec::new();
+        for _ in 0..20 {
+            *t += 10_000;
+            let mut buf = [0u8; rtu::MAX_FRAME];
+            let n = link.next_frame(*t, &mut buf).unwrap();
+            link.sent(*t);
+            let frame = &buf[..n];
+            let reply: Vec<u8> = if frame[1] == 0x06 {
+                if frame[2..4] == [0x20, 0x0E] {
+                    out.push(u16::from_be_bytes([frame[4], frame[5]]));
+                }
+                frame.to_vec()
+            } else {
+                let mut r = std::vec![1, 3, 2, 0, 0];
+                r.extend_from_slice(&rtu::crc16(&r).to_le_bytes());
+                r
+            };
+            *t += 5_000;
+            link.received(*t, &reply);
+        }
+        out
+    }
+
+    #[test]
+    fn control_words_keep_their_order_and_the_newest_state() {
+        let mut link = Link::new(ZLAC8015D, LinkConfig::for_baud(115_200).unwrap());
+        let mut t = 0;
+        written(&mut link, &mut t);
+        // Enable, clear, disable, enable, clear, disable, clear: the
+        // states between two clears collapse to the newest.
+        for a in [
+            ControlAction::Enable,
+            ControlAction::ClearAlarm,
+            ControlAction::Disable,
+            ControlAction::Enable,
+            ControlAction::ClearAlarm,
+            ControlAction::ClearAlarm,
+            ControlAction::Disable,
+        ] {
+            link.control(a);
+        }
+        // Five entries after collapsing (E C E C D) in a queue of four:
+        // the head kept, the superseded state dropped, the two clears
+        // then next to each other written once, the newest state last.
+        assert_eq!(written(&mut link, &mut t), [0x08, 0x06, 0x07]);
+        // Within the queue's room nothing is dropped.
+        for a in [
+            ControlAction::ClearAlarm,
+            ControlAction::Enable,
+            ControlAction::ClearAlarm,
+            ControlAction::Disable,
+        ] {
+            link.control(a);
+        }
+        assert_eq!(written(&mut link, &mut t), [0x06, 0x08, 0x06, 0x07]);
     }
 }

@@ -54,6 +54,8 @@ pub struct VirtualZlac {
     pub inject: Injection,
     /// Requests it answered.
     pub answered: u32,
+    /// Every register write it took (function 06), in order.
+    pub writes: Vec<(u16, u16)>,
     /// Requests it received with a bad CRC (ignored, as the spec says).
     pub bad_requests: u32,
     /// The driver's turnaround, µs.
@@ -76,6 +78,7 @@ impl Default for VirtualZlac {
             fault_bits: 0,
             inject: Injection::default(),
             answered: 0,
+            writes: Vec::new(),
             bad_requests: 0,
             turnaround_us: 2_000,
             own_motor: false,
@@ -169,6 +172,7 @@ impl VirtualZlac {
                         ))
                     }
                 }
+                self.writes.push((reg, arg));
                 body.to_vec()
             }
             _ => std::vec![self.slave, f | 0x80, 0x01],

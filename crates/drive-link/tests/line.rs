@@ -618,3 +618,38 @@ fn a_fault_is_read_while_a_speed_command_runs() {
         }
     }
 }
+
+/// A clear after an acknowledged fault must reach the driver, whatever
+/// follows it. The firmware queues ClearAlarm when the operator
+/// acknowledges, and the next control period (10 ms later) queues the
+/// enable state again (Enable or Disable). Before, the control word kept
+/// only the latest request: a ClearAlarm not yet on the line was replaced
+/// by the Enable, and the driver's alarm stayed latched. 50 phases over
+/// one transaction and a control period, at both bauds: 50 of 50 clears
+/// written, in order, before the Enable.
+#[test]
+fn a_clear_followed_by_an_enable_reaches_the_driver_every_time() {
+    for baud in [9600, 115_200] {
+        let span = poll_cycle_us(baud, 2000) as u64 + 10_000;
+        let mut reached = 0;
+        for k in 0..50u64 {
+            let mut b = Bench::new(baud);
+            b.run_for(200_000);
+            b.driver.fault_bits = 0x0004;
+            b.run_for(200_000);
+            assert!(b.link.fault_word() == 0x0004, "{baud}: fault not read");
+            b.run_for(k * span / 50);
+            b.link.control(ControlAction::ClearAlarm);
+            b.run_for(10_000);
+            b.link.control(ControlAction::Enable);
+            b.run_for(300_000);
+            let clear = b.driver.writes.iter().position(|&w| w == (0x200E, 0x06));
+            let enable = b.driver.writes.iter().rposition(|&w| w == (0x200E, 0x08));
+            if matches!((clear, enable), (Some(c), Some(e)) if c < e) && b.driver.fault_bits == 0 {
+                reached += 1;
+            }
+            assert!(b.driver.enabled, "{baud}: phase {k}: the Enable was lost");
+        }
+        assert_eq!(reached, 50, "{baud} baud: clears that reached the driver");
+    }
+}

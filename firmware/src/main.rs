@@ -605,6 +605,9 @@ mod app {
                 if let Some(n) = line.receive(now, &mut buf) {
                     event = link.received(now, buf.get(..n).unwrap_or(&[]));
                 }
+                if line.receiving(now) {
+                    link.line_busy(now);
+                }
                 event = event.or(link.tick(now));
                 if let Some(n) = link.next_frame(now, &mut buf) {
                     line.send(buf.get(..n).unwrap_or(&[]), now);

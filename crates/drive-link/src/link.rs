@@ -26,17 +26,101 @@
 //! driver samples after it has the request), so its age at use includes the
 //! reply's own time on the line.
 
+use core::fmt;
+
 use heapless::Deque;
 
 use crate::profile::DriverProfile;
 use crate::rtu::{self, Reply, ReplyError, Request};
 use crate::timing;
 
+/// The link's timing settings, as the operator enters them (page 10 of
+/// the screen, docs/drive-link.md), validated into a [`LinkConfig`] by
+/// [`LinkConfig::for_profile`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LinkTiming {
+    /// The driver's answer time allowed: from the request's last bit to
+    /// the reply's first, ms ([`REPLY_TIMEOUT_MS`]). The reply's own time
+    /// on the line and the silence that ends it are added.
+    pub reply_timeout_ms: u16,
+    /// The quiet line a failed request waits for before it is sent again,
+    /// ms ([`RETRY_GAP_MS`]): a late reply, or the rest of a noise burst,
+    /// passes first instead of colliding with the retry.
+    pub retry_gap_ms: u16,
+    /// The driver's own communication-loss time, ms, written to its
+    /// offline-time register at start-up (profiles that name one): the
+    /// driver stops its motor when no request has come for this long.
+    /// At least [`LinkConfig::longest_request_interval_us`] (a link
+    /// within its retry budget never trips it), at most 32 767.
+    pub offline_time_ms: u16,
+}
+
+/// The range of [`LinkTiming::reply_timeout_ms`].
+pub const REPLY_TIMEOUT_MS: core::ops::RangeInclusive<u16> = 5..=1000;
+/// The range of [`LinkTiming::retry_gap_ms`].
+pub const RETRY_GAP_MS: core::ops::RangeInclusive<u16> = 2..=1000;
+/// The largest [`LinkTiming::offline_time_ms`] (the register is signed).
+pub const OFFLINE_TIME_MAX_MS: u16 = 32_767;
+
+impl LinkTiming {
+    /// The defaults: a driver may take 60 ms to answer (slow drivers
+    /// answer in up to 50 ms), a retry waits for 20 ms of quiet line, and
+    /// the driver stops its motor after 500 ms without a request.
+    pub const DEFAULT: Self = Self {
+        reply_timeout_ms: 60,
+        retry_gap_ms: 20,
+        offline_time_ms: 500,
+    };
+}
+
+impl Default for LinkTiming {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Why link timing settings were refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TimingError {
+    /// The baud rate is 0.
+    Baud,
+    /// The reply timeout is outside [`REPLY_TIMEOUT_MS`].
+    ReplyTimeout(u16),
+    /// The retry gap is outside [`RETRY_GAP_MS`].
+    RetryGap(u16),
+    /// The offline time is shorter than the link's longest interval
+    /// between two requests (the driver would stop its motor while the
+    /// link retries), or beyond [`OFFLINE_TIME_MAX_MS`].
+    OfflineTime {
+        /// The value set, ms.
+        set: u16,
+        /// The least it may be with this timing, ms.
+        least: u32,
+    },
+}
+
+impl fmt::Display for TimingError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Baud => f.write_str("baud rate 0"),
+            Self::ReplyTimeout(ms) => write!(f, "reply timeout {ms} ms outside 5..1000 ms"),
+            Self::RetryGap(ms) => write!(f, "retry gap {ms} ms outside 2..1000 ms"),
+            Self::OfflineTime { set, least } => write!(
+                f,
+                "offline time {set} ms outside {least}..32767 ms (the link may be silent {least} ms while it retries)"
+            ),
+        }
+    }
+}
+
 /// Timing of the link.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LinkConfig {
-    /// A reply must end within this time of the request's end (µs).
+    /// A reply must be complete (its closing silence included) within
+    /// this time of the request's end (µs).
     pub reply_timeout_us: u32,
     /// Extra attempts of a failed request before the link is lost.
     pub retries: u8,
@@ -44,38 +128,82 @@ pub struct LinkConfig {
     pub fault_poll_every: u8,
     /// The 3.5-character silence (µs).
     pub silent_interval_us: u32,
+    /// Quiet line before a failed request is sent again (µs, at least the
+    /// 3.5-character silence).
+    pub retry_gap_us: u32,
+    /// Written to the profile's offline-time register at start-up, ms.
+    pub offline_time_ms: u16,
+    /// A request's time on the line (8 characters), µs.
+    request_us: u32,
 }
 
-/// The driver's own turnaround allowed on top of the reply's time on the
-/// line: Modbus drivers answer within a few ms; 20 ms covers the slow ones.
-pub const DRIVER_TURNAROUND_US: u32 = 20_000;
-
 impl LinkConfig {
-    /// The timing for a profile's baud rate: the reply timeout is
-    /// [`DRIVER_TURNAROUND_US`] plus the longest reply's time on the line
-    /// (9 characters) plus the 3.5-character silence after it, without
-    /// which the reply's end is not seen (§2.5.1.1); two retries; faults
-    /// every 4th poll.
+    /// The timing for a baud rate with `timing`: the reply timeout is the
+    /// answer time plus the longest reply's time on the line (9
+    /// characters) plus the 3.5-character silence after it, without which
+    /// the reply's end is not seen (§2.5.1.1); two retries; faults every
+    /// 4th poll.
     ///
     /// ```
-    /// use drive_link::{link::LinkConfig, profile::ZLAC8015D};
-    /// let c = LinkConfig::for_baud(9600).unwrap();
-    /// // 20 ms + 9 × 1145.8 µs = 10 313 µs on the line + 4011 µs of silence.
-    /// assert_eq!(c.reply_timeout_us, 34_324);
-    /// assert_eq!(LinkConfig::for_baud(ZLAC8015D.baud).unwrap().reply_timeout_us, 22_610);
+    /// use drive_link::link::{LinkConfig, LinkTiming, TimingError};
+    /// let c = LinkConfig::new(9600, LinkTiming::DEFAULT).unwrap();
+    /// // 60 ms + 9 × 1145.8 µs = 10 313 µs on the line + 4011 µs of silence.
+    /// assert_eq!(c.reply_timeout_us, 74_324);
+    /// let slow = LinkTiming { reply_timeout_ms: 1001, ..LinkTiming::DEFAULT };
+    /// assert_eq!(LinkConfig::new(9600, slow), Err(TimingError::ReplyTimeout(1001)));
     /// ```
-    #[must_use]
-    pub fn for_baud(baud: u32) -> Option<Self> {
-        let reply = timing::frame_time_us(baud, 9)?;
-        let silent = timing::silent_interval_us(baud)?;
-        Some(Self {
-            reply_timeout_us: reply
-                .checked_add(silent)?
-                .checked_add(DRIVER_TURNAROUND_US)?,
+    pub fn new(baud: u32, timing: LinkTiming) -> Result<Self, TimingError> {
+        let LinkTiming {
+            reply_timeout_ms,
+            retry_gap_ms,
+            offline_time_ms,
+        } = timing;
+        if !REPLY_TIMEOUT_MS.contains(&reply_timeout_ms) {
+            return Err(TimingError::ReplyTimeout(reply_timeout_ms));
+        }
+        if !RETRY_GAP_MS.contains(&retry_gap_ms) {
+            return Err(TimingError::RetryGap(retry_gap_ms));
+        }
+        let reply = timing::frame_time_us(baud, 9).ok_or(TimingError::Baud)?;
+        let request_us = timing::frame_time_us(baud, 8).ok_or(TimingError::Baud)?;
+        let silent = timing::silent_interval_us(baud).ok_or(TimingError::Baud)?;
+        let answer = u32::from(reply_timeout_ms).saturating_mul(1000);
+        Ok(Self {
+            reply_timeout_us: reply.saturating_add(silent).saturating_add(answer),
             retries: 2,
             fault_poll_every: 4,
             silent_interval_us: silent,
+            retry_gap_us: u32::from(retry_gap_ms).saturating_mul(1000).max(silent),
+            offline_time_ms,
+            request_us,
         })
+    }
+
+    /// The default timing ([`LinkTiming::DEFAULT`]) at a baud rate;
+    /// `None` for a baud rate of 0.
+    #[must_use]
+    pub fn for_baud(baud: u32) -> Option<Self> {
+        Self::new(baud, LinkTiming::DEFAULT).ok()
+    }
+
+    /// The longest time between the ends of two requests while the driver
+    /// answers nothing (µs): a request timed out, the wait for its late
+    /// reply (one more reply timeout), the quiet gap, the next request.
+    #[must_use]
+    pub fn longest_request_interval_us(&self) -> u32 {
+        self.reply_timeout_us
+            .saturating_mul(2)
+            .saturating_add(self.retry_gap_us)
+            .saturating_add(self.request_us)
+    }
+
+    /// One failed attempt, from the request's first bit until the retry
+    /// may go out (µs): the request, its reply timeout, the quiet gap.
+    #[must_use]
+    pub fn failed_attempt_us(&self) -> u32 {
+        self.request_us
+            .saturating_add(self.reply_timeout_us)
+            .saturating_add(self.retry_gap_us)
     }
 }
 
@@ -148,6 +276,8 @@ pub struct Counters {
     /// Fault words read (a new reading re-raises a fault the operator
     /// acknowledged while it was still there).
     pub fault_reads: u32,
+    /// Attempts sent again after a failed one.
+    pub retries: u32,
 }
 
 /// A speed read back from the driver.
@@ -226,6 +356,13 @@ pub struct Link {
     timed_out: bool,
     /// When the current request's first attempt ended (µs).
     first_sent_at: u64,
+    /// When its last attempt ended (µs).
+    last_sent_at: u64,
+    /// The current attempt met a corrupt frame (noise, or its reply hit).
+    corrupt: bool,
+    /// The function and register of the request whose retries ran out,
+    /// until it is answered.
+    lost_on: Option<(u8, u16)>,
     /// The current attempt got a reply from the slave that does not fit
     /// it (not a late reply to it: that would fit).
     unfit: bool,
@@ -255,6 +392,9 @@ impl Link {
             loss: None,
             timed_out: false,
             first_sent_at: 0,
+            last_sent_at: 0,
+            corrupt: false,
+            lost_on: None,
             unfit: false,
         }
     }
@@ -316,6 +456,9 @@ impl Link {
         };
         if now_us < at {
             return None;
+        }
+        if self.retry.is_some() {
+            self.counters.retries = self.counters.retries.wrapping_add(1);
         }
         let (job, request) = match self.retry {
             // A control write is retried with the newest value queued (an
@@ -397,7 +540,9 @@ impl Link {
             if self.retry.is_none() {
                 self.first_sent_at = now_us;
             }
+            self.last_sent_at = now_us;
             self.unfit = false;
+            self.corrupt = false;
             let deadline = now_us.saturating_add(u64::from(self.config.reply_timeout_us));
             self.state = State::Awaiting {
                 job,
@@ -408,33 +553,73 @@ impl Link {
         }
     }
 
+    /// Bytes are arriving on the line (a frame not yet ended by its
+    /// silence): no request goes out until the line has been quiet for
+    /// the 3.5-character silence, or for the retry gap before a retry.
+    /// The board layer calls it on every tick while it holds received
+    /// bytes not yet handed over.
+    pub fn line_busy(&mut self, now_us: u64) {
+        self.quiet_from(now_us);
+    }
+
+    /// The line was busy until `t`: the next request waits for the quiet
+    /// it needs after it.
+    fn quiet_from(&mut self, t: u64) {
+        let need = if self.retry.is_some() {
+            self.config.retry_gap_us
+        } else {
+            self.config.silent_interval_us
+        };
+        if let State::Idle { at } = &mut self.state {
+            *at = (*at).max(t.saturating_add(u64::from(need)));
+        }
+    }
+
     /// A frame came in (ended by the silent interval).
+    ///
+    /// A frame that fails its CRC or its length (noise, a reply hit on the
+    /// line) ends nothing: the valid reply may still follow, so the wait
+    /// goes on until the reply timeout, and only then is the request sent
+    /// again, on a quiet line (wait and flush). While a failed request
+    /// waits for its retry, a valid reply to it is still its answer.
     pub fn received(&mut self, now_us: u64, frame: &[u8]) -> Option<Event> {
-        let State::Awaiting {
-            job,
-            request,
-            sent_at,
-            ..
-        } = self.state
-        else {
-            // Nothing outstanding: a reply after its timeout.
-            self.counters.late_replies = self.counters.late_replies.wrapping_add(1);
-            return None;
+        let (job, request, sent_at, late) = match (self.state, self.retry) {
+            (
+                State::Awaiting {
+                    job,
+                    request,
+                    sent_at,
+                    ..
+                },
+                _,
+            ) => (job, request, sent_at, false),
+            (State::Idle { .. }, Some((job, request, _))) => {
+                // The frame ended 3.5 characters ago.
+                self.quiet_from(now_us.saturating_sub(u64::from(self.config.silent_interval_us)));
+                (job, request, self.last_sent_at, true)
+            }
+            _ => {
+                // Nothing outstanding: a reply after its timeout.
+                self.counters.late_replies = self.counters.late_replies.wrapping_add(1);
+                return None;
+            }
         };
         match rtu::parse_reply(self.profile.slave, request, frame) {
-            Ok(reply) => self.answered(now_us, job, request, sent_at, reply),
-            // Under 4 bytes is no RTU frame (address, function, CRC): noise
-            // (e.g. the bus heard while DE drops), not the reply; the reply
-            // may still follow, so the wait goes on.
-            Err(ReplyError::Length(n)) if n < 4 => {
-                self.counters.crc_errors = self.counters.crc_errors.wrapping_add(1);
-                None
+            Ok(reply) => {
+                // A reply after the attempt failed answers an earlier
+                // attempt: the driver sampled after the first one's end.
+                self.timed_out |= late;
+                self.answered(now_us, job, request, sent_at, reply)
             }
+            // Noise or a reply hit on the line: the wait goes on (a
+            // fragment under 4 bytes is no RTU frame at all: the bus heard
+            // while DE drops).
             Err(ReplyError::Crc | ReplyError::Length(_)) => {
                 self.counters.crc_errors = self.counters.crc_errors.wrapping_add(1);
-                self.failed(now_us, LossCause::Corrupt)
+                self.corrupt |= !late;
+                None
             }
-            Err(ReplyError::Exception(code)) => {
+            Err(ReplyError::Exception(code)) if !late => {
                 self.counters.exceptions = self.counters.exceptions.wrapping_add(1);
                 let (function, register) = request.function_and_register();
                 self.failed(
@@ -450,7 +635,7 @@ impl Link {
                 // A late reply to an earlier request: keep waiting. From
                 // this slave it may also be its answer, unfit (the cause
                 // if this attempt fails).
-                self.unfit |= e == ReplyError::Mismatch;
+                self.unfit |= e == ReplyError::Mismatch && !late;
                 self.counters.late_replies = self.counters.late_replies.wrapping_add(1);
                 None
             }
@@ -460,15 +645,21 @@ impl Link {
     /// Timer: ends an unanswered request at its deadline.
     pub fn tick(&mut self, now_us: u64) -> Option<Event> {
         match self.state {
-            State::Awaiting { deadline, .. } if now_us >= deadline => {
-                self.counters.timeouts = self.counters.timeouts.wrapping_add(1);
-                self.timed_out = true;
-                let cause = match (self.unfit, self.state) {
-                    (true, State::Awaiting { request, .. }) => {
-                        let (function, register) = request.function_and_register();
+            State::Awaiting {
+                deadline, request, ..
+            } if now_us >= deadline => {
+                let (function, register) = request.function_and_register();
+                let cause = if self.corrupt {
+                    // Its reply came, hit on the line: none is due any more.
+                    LossCause::Corrupt
+                } else {
+                    self.counters.timeouts = self.counters.timeouts.wrapping_add(1);
+                    self.timed_out = true;
+                    if self.unfit {
                         LossCause::Unfit { function, register }
+                    } else {
+                        LossCause::NoReply
                     }
-                    _ => LossCause::NoReply,
                 };
                 self.failed(now_us, cause)
             }
@@ -486,15 +677,16 @@ impl Link {
     /// last attempt's end. When an attempt of it timed out, a reply to it
     /// may still be on its way, and a reply to function 03 does not name
     /// its register: the next request (another register) waits until that
-    /// reply is over due, one more reply timeout (the libmodbus recovery:
-    /// wait a response timeout and flush), and what comes meanwhile is
-    /// counted late. Retries of the same request go out at once: a late
-    /// reply to an earlier attempt answers them with the same register.
-    fn request_done(&mut self, now_us: u64, sent_at: u64) {
+    /// reply is over due (the libmodbus recovery: wait a response timeout
+    /// and flush), and what comes meanwhile is counted late. Answered,
+    /// one reply more may come until the last attempt's own deadline;
+    /// given up, until one reply timeout after it.
+    fn request_done(&mut self, now_us: u64, sent_at: u64, answered: bool) {
         self.line_free(now_us);
         if core::mem::take(&mut self.timed_out) {
+            let timeouts = if answered { 1 } else { 2 };
             let drained = sent_at
-                .saturating_add(2 * u64::from(self.config.reply_timeout_us))
+                .saturating_add(u64::from(self.config.reply_timeout_us).saturating_mul(timeouts))
                 .saturating_add(u64::from(self.config.silent_interval_us));
             if let State::Idle { at } = &mut self.state {
                 *at = (*at).max(drained);
@@ -517,7 +709,7 @@ impl Link {
         } else {
             sent_at
         };
-        self.request_done(now_us, sent_at);
+        self.request_done(now_us, sent_at, true);
         self.retry = None;
         self.counters.replies = self.counters.replies.wrapping_add(1);
         let mut event = None;
@@ -552,6 +744,16 @@ impl Link {
             }
             _ => {}
         }
+        // After a loss the driver answers again when the request that was
+        // lost is answered: a driver that answers some registers and
+        // refuses one of its profile's is not answering.
+        if self
+            .lost_on
+            .is_some_and(|k| k != request.function_and_register())
+        {
+            return event;
+        }
+        self.lost_on = None;
         let was_answering = self.answering;
         self.answering = true;
         if self.lost && !was_answering {
@@ -575,12 +777,15 @@ impl Link {
         self.line_free(now_us);
         let failures = self.retry.map_or(1, |(_, _, n)| n.saturating_add(1));
         if failures <= self.config.retries {
+            // Again once the line has been quiet for the retry gap.
             self.retry = Some((job, request, failures));
+            self.quiet_from(now_us);
             return None;
         }
-        self.request_done(now_us, sent_at);
+        self.request_done(now_us, sent_at, false);
         self.retry = None;
         self.answering = false;
+        self.lost_on = Some(request.function_and_register());
         self.speed = None;
         self.command_sent = None;
         if self.lost {
@@ -657,7 +862,11 @@ impl Link {
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
 mod tests {
     use super::*;
     use crate::profile::ZLAC8015D;

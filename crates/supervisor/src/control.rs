@@ -1887,21 +1887,27 @@ impl Supervisor {
 
     /// The drive model the controller is scheduled from: the drive's own,
     /// with the driver read-back as the feedback, or the bus command, its
-    /// dead time lengthened by one link transaction each ([`crate::drive_link::DriveLinkSettings::readback_delay_us`]),
+    /// dead time lengthened by one link transaction for the read-back
+    /// ([`crate::drive_link::DriveLinkSettings::readback_delay_us`]) and by
+    /// the command's mean wait ([`crate::drive_link::DriveLinkSettings::command_delay_us`]),
     /// so that the gains shrink in the SIMC ratio (docs/drive-link.md).
     fn control_model(&self) -> DriveModel {
         use crate::drive_link::{CommandPath, FeedbackSource};
         let m = self.settings.drive;
         let link = &self.link_in_force;
-        // One transaction's delay for the read-back as the feedback, one
-        // more for the bus command (written every other transaction).
-        let transactions = u32::from(link.feedback == FeedbackSource::Driver)
-            .saturating_add(u32::from(link.command == CommandPath::Modbus));
-        if transactions == 0 {
+        // One transaction's delay for the read-back as the feedback, and
+        // the bus command's own ([`DriveLinkSettings::command_delay_us`]).
+        let mut extra_us = 0u32;
+        if link.feedback == FeedbackSource::Driver {
+            extra_us = link.readback_delay_us();
+        }
+        if link.command == CommandPath::Modbus {
+            extra_us = extra_us.saturating_add(link.command_delay_us());
+        }
+        if extra_us == 0 {
             return m;
         }
-        let extra = u16::try_from(link.readback_delay_us().saturating_mul(transactions) / 100)
-            .unwrap_or(u16::MAX);
+        let extra = u16::try_from(extra_us / 100).unwrap_or(u16::MAX);
         let dead = m
             .dead_time_x10_ms()
             .saturating_add(extra)
@@ -1926,10 +1932,10 @@ impl Supervisor {
         } else {
             0
         };
-        // The bus command reaches the driver one transaction later (on
-        // average; written every other transaction).
+        // The bus command reaches the driver later by its mean wait for a
+        // write ([`DriveLinkSettings::command_delay_us`]).
         let command = if link.command == CommandPath::Modbus {
-            periods(link.readback_delay_us())
+            periods(link.command_delay_us())
         } else {
             0
         };

@@ -312,6 +312,17 @@ impl DriveLinkSettings {
             .saturating_add(gap.saturating_mul(2))
     }
 
+    /// The bus speed command's mean delay the controller allows for, µs:
+    /// the master writes a changed command at most every other poll and
+    /// gives every 4th poll to the fault word, so a command is written 3
+    /// times in 8 transactions, 2, 3 and 3 apart; a change waits on
+    /// average (4 + 9 + 9) / (2 × 8) = 11/8 of a transaction
+    /// ([`Self::readback_delay_us`]) for its write.
+    #[must_use]
+    pub fn command_delay_us(&self) -> u32 {
+        self.readback_delay_us().saturating_mul(11) / 8
+    }
+
     /// Whether the control loop runs through the link: the read-back as
     /// the feedback or the bus speed command. The drum controller is then
     /// the conventional PID (the fuzzy tuner's base gains, scaled by the

@@ -207,6 +207,12 @@ impl DriveLine {
         Some(n)
     }
 
+    /// Whether bytes have arrived that no frame has been handed over with
+    /// yet (a frame on the line, not yet ended by its silence).
+    pub fn receiving(&mut self, _now_us: u64) -> bool {
+        self.rx_len > 0
+    }
+
     /// USART2's interrupt.
     pub fn on_interrupt(&mut self, now_us: u64) {
         let r = Self::regs();

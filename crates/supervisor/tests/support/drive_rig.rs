@@ -212,6 +212,15 @@ impl Rig {
                 self.replies.push_back((due, reply));
             }
         }
+        // A reply on the line (from its first byte until its closing
+        // silence has passed): the board layer tells the master.
+        if let Some((due, frame)) = self.replies.front() {
+            let on_line = frame_time_us(self.baud, frame.len() as u32).unwrap();
+            let silence = drive_link::timing::silent_interval_us(self.baud).unwrap();
+            if t + u64::from(on_line) + u64::from(silence) >= *due {
+                self.link.line_busy(t);
+            }
+        }
         let e = self.link.tick(t);
         self.on_event(e, t);
         if self.request.is_none() && self.replies.is_empty() {

@@ -76,7 +76,7 @@ mod app {
     #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     use ::drive_link::link::ControlAction;
     #[cfg(feature = "drive-link")]
-    use ::drive_link::link::{Event as LinkEvent, Link, LinkConfig, LossCause};
+    use ::drive_link::link::{Event as LinkEvent, Link, LossCause, SetupFault};
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
@@ -465,9 +465,9 @@ mod app {
         machine: &Machine,
     ) -> &'static mut DriveState {
         #[allow(unreachable_patterns)]
-        let profile: Option<::drive_link::profile::DriverProfile> = match machine {
+        let link = match machine {
             #[cfg(feature = "profile-a")]
-            Machine::DrumBelt(sup) => sup.settings().drive_link.build().ok().flatten(),
+            Machine::DrumBelt(sup) => sup.settings().drive_link.config().ok().flatten(),
             _ => None,
         };
         // The empty state first, then the link built in its place (built
@@ -476,12 +476,14 @@ mod app {
             link: None,
             enabled: None,
         });
-        if let Some((p, config)) = profile.and_then(|p| Some((p, LinkConfig::for_baud(p.baud)?))) {
+        if let Some((p, config)) = link {
             defmt::info!(
-                "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us",
+                "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us, retry gap {=u32} us, driver offline time {=u16} ms",
                 p.slave,
                 p.baud,
-                config.reply_timeout_us
+                config.reply_timeout_us,
+                config.retry_gap_us,
+                config.offline_time_ms
             );
             state.link = Some(Link::new(p, config));
         }
@@ -663,6 +665,15 @@ mod app {
             Some(LossCause::Corrupt) => defmt::warn!(
                 "drive link: lost: corrupt replies after the retries (noise, termination, baud)"
             ),
+            Some(LossCause::Setup(SetupFault::MaxSpeed { driver, needed })) => defmt::warn!(
+                "drive link: refused: the driver's maximum speed register holds {=u16}; the drum's top speed needs {=u32} through the gearbox: raise it (ZLAC8015D 0x2008, at most 1000 r/min) or use a smaller ratio",
+                driver,
+                needed
+            ),
+            Some(LossCause::Setup(SetupFault::Resolution(value))) => defmt::warn!(
+                "drive link: refused: the driver's speed resolution register holds {=u16}; set 1 to 10 (ZLAC8015D 0x2022: 1 = 1 r/min, 10 = 0.1 r/min)",
+                value
+            ),
             _ => defmt::warn!(
                 "drive link: lost: no reply after the retries (wiring, power, slave id, baud)"
             ),
@@ -681,6 +692,10 @@ mod app {
                 age_us: u32::try_from(now_us.saturating_sub(s.sampled_at_us)).unwrap_or(u32::MAX),
             }),
             lost: link.is_lost(),
+            setup: match link.loss_cause() {
+                Some(LossCause::Setup(f)) => Some(f),
+                _ => None,
+            },
             refused: matches!(
                 link.loss_cause(),
                 Some(LossCause::Refused { .. } | LossCause::Unfit { .. })

@@ -43,8 +43,8 @@ fn settings(feedback: FeedbackSource, command: CommandPath, baud: u32) -> Settin
         ..Settings::default()
     };
     s.drive_link.generic.baud = baud;
-    // The virtual driver's motor is geared 59:1 (qemu_tests::drive).
-    s.drive_link.generic.micro_rpm_per_count = 1695;
+    // The virtual driver's motor is geared 20:1 (qemu_tests::drive).
+    s.drive_link.generic.micro_rpm_per_count = 5000;
     s
 }
 

@@ -30,7 +30,7 @@ use core::fmt;
 
 use heapless::Deque;
 
-use crate::profile::DriverProfile;
+use crate::profile::{DriverProfile, MAX_RESOLUTION};
 use crate::rtu::{self, Reply, ReplyError, Request};
 use crate::timing;
 
@@ -55,6 +55,20 @@ pub struct LinkTiming {
     /// within its retry budget never trips it), at most 32 767.
     pub offline_time_ms: u16,
 }
+
+/// The fault word is read on every 6th poll, whatever else is due (the
+/// speed read, the speed command): a fault set at any moment is read
+/// within 6 polls and the reply. Every 6th and not every 4th: at 9600
+/// baud, with the driver's read-back as the only feedback and its speed
+/// command over the bus, the read-back and the command share the line with
+/// the fault reads, and every 4th poll made the drum's control loop trip
+/// its instability supervisor in 10 of 90 rows of the full noise model
+/// (every 6th: 0 of 180; docs/drive-link.md).
+pub const FAULT_POLL_EVERY: u8 = 6;
+
+/// The drum's top speed a driver must reach by default: paper A's
+/// 44.7 r/min (eq. 7's cap, `kinematics::consts::N_MAX`), milli-r/min.
+pub const TOP_DRUM_MILLI_RPM: u32 = 44_700;
 
 /// The range of [`LinkTiming::reply_timeout_ms`].
 pub const REPLY_TIMEOUT_MS: core::ops::RangeInclusive<u16> = 5..=1000;
@@ -133,6 +147,10 @@ pub struct LinkConfig {
     pub retry_gap_us: u32,
     /// Written to the profile's offline-time register at start-up, ms.
     pub offline_time_ms: u16,
+    /// The drum's top speed the driver must be able to reach, milli-r/min
+    /// (checked against its maximum-speed register). Default
+    /// [`TOP_DRUM_MILLI_RPM`].
+    pub top_drum_milli_rpm: u32,
     /// A request's time on the line (8 characters), µs.
     request_us: u32,
 }
@@ -141,8 +159,8 @@ impl LinkConfig {
     /// The timing for a baud rate with `timing`: the reply timeout is the
     /// answer time plus the longest reply's time on the line (9
     /// characters) plus the 3.5-character silence after it, without which
-    /// the reply's end is not seen (§2.5.1.1); two retries; faults every
-    /// 4th poll.
+    /// the reply's end is not seen (§2.5.1.1); two retries; the fault
+    /// word every [`FAULT_POLL_EVERY`]th poll.
     ///
     /// ```
     /// use drive_link::link::{LinkConfig, LinkTiming, TimingError};
@@ -171,12 +189,44 @@ impl LinkConfig {
         Ok(Self {
             reply_timeout_us: reply.saturating_add(silent).saturating_add(answer),
             retries: 2,
-            fault_poll_every: 4,
+            fault_poll_every: FAULT_POLL_EVERY,
             silent_interval_us: silent,
             retry_gap_us: u32::from(retry_gap_ms).saturating_mul(1000).max(silent),
             offline_time_ms,
+            top_drum_milli_rpm: TOP_DRUM_MILLI_RPM,
             request_us,
         })
+    }
+
+    /// [`LinkConfig::new`] at the profile's baud rate, with the offline
+    /// time checked too when the profile writes it to the driver: at least
+    /// [`LinkConfig::longest_request_interval_us`], so that the driver
+    /// never stops its motor while the link is within its retry budget.
+    ///
+    /// ```
+    /// use drive_link::link::{LinkConfig, LinkTiming, TimingError};
+    /// use drive_link::profile::ZLAC8015D;
+    /// let short = LinkTiming { offline_time_ms: 100, ..LinkTiming::DEFAULT };
+    /// // 115 200 baud: 2 × 62.6 ms (reply timeout) + 20 ms + 0.8 ms.
+    /// assert_eq!(
+    ///     LinkConfig::for_profile(&ZLAC8015D, short),
+    ///     Err(TimingError::OfflineTime { set: 100, least: 146 })
+    /// );
+    /// ```
+    pub fn for_profile(profile: &DriverProfile, timing: LinkTiming) -> Result<Self, TimingError> {
+        let c = Self::new(profile.baud, timing)?;
+        if profile.offline_register.is_some() {
+            let least = c.longest_request_interval_us().div_ceil(1000);
+            if u32::from(timing.offline_time_ms) < least
+                || timing.offline_time_ms > OFFLINE_TIME_MAX_MS
+            {
+                return Err(TimingError::OfflineTime {
+                    set: timing.offline_time_ms,
+                    least,
+                });
+            }
+        }
+        Ok(c)
     }
 
     /// The default timing ([`LinkTiming::DEFAULT`]) at a baud rate;
@@ -255,6 +305,30 @@ pub enum LossCause {
         /// The request's register.
         register: u16,
     },
+    /// The driver answers, but its set-up refuses it: the link writes no
+    /// speed command and the supervisor stops the drum until the driver's
+    /// register is corrected (read again every poll cycle).
+    Setup(SetupFault),
+}
+
+/// Why the driver's set-up, read at start-up, refuses it
+/// ([`LossCause::Setup`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SetupFault {
+    /// The speed-resolution register holds a value the link cannot use: 0,
+    /// above [`MAX_RESOLUTION`], or one at which the drum's top speed
+    /// needs more command counts than the register holds.
+    Resolution(u16),
+    /// The driver's maximum speed (its register, in command counts at a
+    /// resolution of 1: r/min of the ZLAC8015D's motor) is below what the
+    /// drum's top speed needs through the gearbox.
+    MaxSpeed {
+        /// The driver's maximum speed, command counts.
+        driver: u16,
+        /// What the drum's top speed needs, command counts (rounded up).
+        needed: u32,
+    },
 }
 
 /// Counters since start (wrapping at u32::MAX, never panicking).
@@ -308,6 +382,9 @@ enum Job {
     Faults,
     Control,
     Mode,
+    Offline,
+    Resolution,
+    MaxSpeed,
     Command,
 }
 
@@ -337,14 +414,28 @@ pub struct Link {
     /// Control words to write, oldest first (the head is the one on the
     /// line while a control write is outstanding).
     control: Deque<u16, CONTROL_QUEUE>,
-    command: Option<u16>,
+    /// The speed command, drum milli-r/min.
+    command: Option<i32>,
     command_sent: Option<u16>,
+    /// Start-up steps still to do (again after a loss): the mode and
+    /// offline-time writes, the resolution and maximum-speed reads.
     mode_due: bool,
+    offline_due: bool,
+    resolution_due: bool,
+    max_speed_due: bool,
+    /// The driver's speed resolution (1 without a resolution register;
+    /// none until read).
+    resolution: Option<u16>,
+    /// Why the driver's set-up refuses it, while it does.
+    setup_fault: Option<SetupFault>,
     /// The last poll wrote the speed command.
     commanded: bool,
     polls: u8,
     /// Polls since the speed command was last written.
     since_command: u8,
+    /// Until when (µs) reads must be of the register of a read that timed
+    /// out and was then answered, with its job and request.
+    drain: Option<(u64, Job, Request)>,
     lost: bool,
     answering: bool,
     counters: Counters,
@@ -381,9 +472,19 @@ impl Link {
             command: None,
             command_sent: None,
             mode_due: profile.velocity_mode.is_some(),
+            offline_due: profile.offline_register.is_some(),
+            resolution_due: profile.resolution_register.is_some(),
+            max_speed_due: profile.max_speed_register.is_some(),
+            resolution: if profile.resolution_register.is_some() {
+                None
+            } else {
+                Some(1)
+            },
+            setup_fault: None,
             commanded: false,
             polls: 0,
             since_command: 0,
+            drain: None,
             lost: false,
             answering: false,
             counters: Counters::default(),
@@ -445,7 +546,7 @@ impl Link {
     /// and written again every [`LinkConfig::fault_poll_every`] polls.
     /// `None` stops commanding.
     pub fn set_speed_command(&mut self, drum_milli_rpm: Option<i32>) {
-        self.command = drum_milli_rpm.and_then(|s| self.profile.command_counts(s));
+        self.command = drum_milli_rpm.filter(|_| self.profile.speed_command.is_some());
     }
 
     /// The next frame to send, if the line is free; encodes it into `buf`
@@ -471,14 +572,40 @@ impl Link {
                 },
             ),
             Some((job, request, _)) => (job, request),
-            None => self.choose(),
+            None => self.choose_draining(now_us),
         };
         let n = rtu::encode(self.profile.slave, request, buf).ok()?;
         self.state = State::Sending { job, request };
         Some(n)
     }
 
+    /// [`Link::choose`], but while a timed-out read's reply may still
+    /// come, a read of another register becomes a read of that one (a
+    /// fault turn or a set-up read so displaced comes after the drain).
+    fn choose_draining(&mut self, now_us: u64) -> (Job, Request) {
+        if self.drain.is_some_and(|(until, ..)| now_us >= until) {
+            self.drain = None;
+        }
+        let (job, request) = self.choose();
+        match self.drain {
+            Some((_, drained_job, drained))
+                if matches!(request, Request::Read { .. }) && request != drained =>
+            {
+                if job == Job::Faults {
+                    // The fault turn is next again.
+                    self.polls = self.config.fault_poll_every.saturating_sub(1);
+                }
+                (drained_job, drained)
+            }
+            _ => (job, request),
+        }
+    }
+
     fn choose(&mut self) -> (Job, Request) {
+        // The driver's set-up first: it takes an enable only in a mode.
+        if let Some(step) = self.setup_step() {
+            return step;
+        }
         if let (Some(&value), Some(cw)) = (self.control.front(), self.profile.control) {
             return (
                 Job::Control,
@@ -487,11 +614,6 @@ impl Link {
                     value,
                 },
             );
-        }
-        if self.mode_due {
-            if let Some((address, value)) = self.profile.velocity_mode {
-                return (Job::Mode, Request::Write { address, value });
-            }
         }
         let every = self.config.fault_poll_every;
         // Counts 1, 2, …, every, 1, …
@@ -504,6 +626,12 @@ impl Link {
         // The fault word has its own turn, every `every`-th poll, whatever
         // else is due: a fault must be seen while the speed is commanded.
         if every != 0 && self.polls == every {
+            // The set-up is read again every cycle while it refuses the
+            // driver (the operator may correct its registers).
+            if self.setup_fault.is_some() {
+                self.resolution_due = self.profile.resolution_register.is_some();
+                self.max_speed_due = self.profile.max_speed_register.is_some();
+            }
             return (
                 Job::Faults,
                 Request::Read {
@@ -516,7 +644,13 @@ impl Link {
         // speed read that follows keeps the read-back fresh while the
         // command changes every control period. An unchanged one is
         // written again once every `every` polls (a driver that lost it).
-        if let (Some(value), Some((address, _))) = (self.command, self.profile.speed_command) {
+        let counts = match (self.command, self.resolution, self.setup_fault) {
+            (Some(milli), Some(resolution), None) => {
+                self.profile.command_counts_at(milli, resolution)
+            }
+            _ => None,
+        };
+        if let (Some(value), Some((address, _))) = (counts, self.profile.speed_command) {
             let due = self.command_sent != Some(value) || self.since_command >= every.max(1);
             if due && !self.commanded {
                 self.commanded = true;
@@ -532,6 +666,84 @@ impl Link {
                 count: 1,
             },
         )
+    }
+
+    /// The next start-up step, if one is due.
+    fn setup_step(&self) -> Option<(Job, Request)> {
+        let p = &self.profile;
+        if let (true, Some((address, value))) = (self.mode_due, p.velocity_mode) {
+            return Some((Job::Mode, Request::Write { address, value }));
+        }
+        if let (true, Some(address)) = (self.offline_due, p.offline_register) {
+            let value = self.config.offline_time_ms;
+            return Some((Job::Offline, Request::Write { address, value }));
+        }
+        let read = |job, address| Some((job, Request::Read { address, count: 1 }));
+        if let (true, Some(address)) = (self.resolution_due, p.resolution_register) {
+            return read(Job::Resolution, address);
+        }
+        if let (true, Some(address)) = (self.max_speed_due, p.max_speed_register) {
+            return read(Job::MaxSpeed, address);
+        }
+        None
+    }
+
+    /// A set-up register read back: the resolution must be one the link
+    /// can use, and the maximum speed must let the drum reach its top
+    /// speed. Returns the event when the refusal starts or ends.
+    fn check_setup(&mut self, job: Job, value: u16) -> Option<Event> {
+        let top = self.config.top_drum_milli_rpm;
+        let needed = self.profile.command_counts_needed(top).unwrap_or(0);
+        let fault = match job {
+            Job::Resolution => {
+                self.resolution_due = false;
+                let fits = u64::from(needed).saturating_mul(u64::from(value))
+                    <= i16::MAX.unsigned_abs().into();
+                if (1..=MAX_RESOLUTION).contains(&value) && fits {
+                    self.resolution = Some(value);
+                    None
+                } else {
+                    self.resolution = None;
+                    Some(SetupFault::Resolution(value))
+                }
+            }
+            Job::MaxSpeed => {
+                self.max_speed_due = false;
+                (needed > u32::from(value)).then_some(SetupFault::MaxSpeed {
+                    driver: value,
+                    needed,
+                })
+            }
+            _ => return None,
+        };
+        // The other check's refusal stands until it is read again.
+        let other = self.setup_fault.filter(|f| {
+            !matches!(
+                (f, job),
+                (SetupFault::Resolution(_), Job::Resolution)
+                    | (SetupFault::MaxSpeed { .. }, Job::MaxSpeed)
+            )
+        });
+        let fault = fault.or(other);
+        let was = self.setup_fault;
+        self.setup_fault = fault;
+        match (was, fault) {
+            (_, Some(f)) if was != fault => {
+                self.command_sent = None;
+                self.answering = false;
+                self.loss = Some(LossCause::Setup(f));
+                if !self.lost {
+                    self.lost = true;
+                    self.counters.losses = self.counters.losses.wrapping_add(1);
+                }
+                Some(Event::Lost)
+            }
+            (Some(_), None) => {
+                self.answering = true;
+                Some(Event::Restored)
+            }
+            _ => None,
+        }
     }
 
     /// The request's last bit has left (TC).
@@ -605,12 +817,7 @@ impl Link {
             }
         };
         match rtu::parse_reply(self.profile.slave, request, frame) {
-            Ok(reply) => {
-                // A reply after the attempt failed answers an earlier
-                // attempt: the driver sampled after the first one's end.
-                self.timed_out |= late;
-                self.answered(now_us, job, request, sent_at, reply)
-            }
+            Ok(reply) => self.answered(now_us, job, request, sent_at, reply, late),
             // Noise or a reply hit on the line: the wait goes on (a
             // fragment under 4 bytes is no RTU frame at all: the bus heard
             // while DE drops).
@@ -676,20 +883,31 @@ impl Link {
     /// The request is done (answered or given up) after `sent_at`, its
     /// last attempt's end. When an attempt of it timed out, a reply to it
     /// may still be on its way, and a reply to function 03 does not name
-    /// its register: the next request (another register) waits until that
-    /// reply is over due (the libmodbus recovery: wait a response timeout
-    /// and flush), and what comes meanwhile is counted late. Answered,
-    /// one reply more may come until the last attempt's own deadline;
-    /// given up, until one reply timeout after it.
-    fn request_done(&mut self, now_us: u64, sent_at: u64, answered: bool) {
+    /// its register (a write's echo does): until that reply is over due,
+    /// one more reply timeout after the last attempt's deadline, what is
+    /// read must be the same register, so that a late reply answers a
+    /// request for its own register (the libmodbus recovery waits a
+    /// response timeout and flushes; reading the same register meanwhile
+    /// keeps the read-back flowing). Given up, nothing goes out until then.
+    fn request_done(
+        &mut self,
+        now_us: u64,
+        job: Job,
+        request: Request,
+        sent_at: u64,
+        answered: bool,
+    ) {
         self.line_free(now_us);
         if core::mem::take(&mut self.timed_out) {
-            let timeouts = if answered { 1 } else { 2 };
-            let drained = sent_at
-                .saturating_add(u64::from(self.config.reply_timeout_us).saturating_mul(timeouts))
+            let until = sent_at
+                .saturating_add(u64::from(self.config.reply_timeout_us).saturating_mul(2))
                 .saturating_add(u64::from(self.config.silent_interval_us));
-            if let State::Idle { at } = &mut self.state {
-                *at = (*at).max(drained);
+            if !answered {
+                if let State::Idle { at } = &mut self.state {
+                    *at = (*at).max(until);
+                }
+            } else if let Request::Read { .. } = request {
+                self.drain = Some((until, job, request));
             }
         }
     }
@@ -701,15 +919,13 @@ impl Link {
         request: Request,
         sent_at: u64,
         reply: Reply,
+        late: bool,
     ) -> Option<Event> {
-        // After a timeout the reply may be a late one to an earlier
-        // attempt: the driver sampled after the first attempt's end.
-        let sampled_at = if self.timed_out {
-            self.first_sent_at
-        } else {
-            sent_at
-        };
-        self.request_done(now_us, sent_at, true);
+        // A reply taken after its attempt failed answers an earlier
+        // attempt: the driver sampled after the first one's end. One
+        // within an attempt's own reply timeout is that attempt's.
+        let sampled_at = if late { self.first_sent_at } else { sent_at };
+        self.request_done(now_us, job, request, sent_at, true);
         self.retry = None;
         self.counters.replies = self.counters.replies.wrapping_add(1);
         let mut event = None;
@@ -737,6 +953,13 @@ impl Link {
                 }
             }
             (Job::Mode, _) => self.mode_due = false,
+            (Job::Offline, _) => self.offline_due = false,
+            (Job::Resolution | Job::MaxSpeed, Reply::Registers { first, .. }) => {
+                event = self.check_setup(job, first);
+                if self.setup_fault.is_some() || event.is_some() {
+                    return event;
+                }
+            }
             (Job::Command, Reply::Written) => {
                 if let Request::Write { value, .. } = request {
                     self.command_sent = Some(value);
@@ -756,12 +979,29 @@ impl Link {
         self.lost_on = None;
         let was_answering = self.answering;
         self.answering = true;
+        if self.setup_fault.is_some() {
+            self.answering = false;
+            return event;
+        }
         if self.lost && !was_answering {
-            // The driver may have been power-cycled: select its mode again.
-            self.mode_due = self.profile.velocity_mode.is_some();
+            // The driver may have been power-cycled: its set-up again.
+            self.setup_again();
             return Some(Event::Restored);
         }
         event
+    }
+
+    /// Every start-up step due again (after a loss: the driver may have
+    /// been power-cycled).
+    fn setup_again(&mut self) {
+        let p = &self.profile;
+        self.mode_due = p.velocity_mode.is_some();
+        self.offline_due = p.offline_register.is_some();
+        self.resolution_due = p.resolution_register.is_some();
+        self.max_speed_due = p.max_speed_register.is_some();
+        if p.resolution_register.is_some() {
+            self.resolution = None;
+        }
     }
 
     fn failed(&mut self, now_us: u64, cause: LossCause) -> Option<Event> {
@@ -782,7 +1022,7 @@ impl Link {
             self.quiet_from(now_us);
             return None;
         }
-        self.request_done(now_us, sent_at, false);
+        self.request_done(now_us, job, request, sent_at, false);
         self.retry = None;
         self.answering = false;
         self.lost_on = Some(request.function_and_register());

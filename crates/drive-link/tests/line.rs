@@ -15,7 +15,10 @@
     clippy::cast_possible_wrap
 )]
 
-use drive_link::link::{ControlAction, Event, Link, LinkConfig, LinkTiming, LossCause};
+use drive_link::link::SetupFault;
+use drive_link::link::{
+    ControlAction, Event, Link, LinkConfig, LinkTiming, LossCause, FAULT_POLL_EVERY,
+};
 use drive_link::profile::{DriverFault, DriverProfile, ZLAC8015D};
 use drive_link::rtu::MAX_FRAME;
 use drive_link::timing::{frame_time_us, silent_interval_us};
@@ -200,7 +203,7 @@ fn polls_at_the_rate_the_line_allows_and_reads_the_speed() {
         b.driver.actual_decirpm = 203; // 20.3 r/min
         b.run_for(2_000_000);
         // The first request selects velocity mode; then speed and fault
-        // polls (every 4th is the fault register).
+        // polls (every 6th is the fault register).
         let n = b.requests.len() as f64;
         let expected = 2.0e6 / poll_cycle_us(baud, b.driver.turnaround_us);
         // Within 5 % (the 50 µs simulation step rounds each event).
@@ -238,7 +241,7 @@ fn enable_and_speed_command_drive_the_motor() {
     b.link.set_speed_command(Some(20_000));
     b.run_for(1_000_000);
     assert!(b.driver.enabled && b.driver.velocity_mode);
-    assert_eq!(b.driver.command_rpm, 20);
+    assert_eq!(b.driver.command_raw, 20);
     // τ = 100 ms: after ~1 s the motor is at the command, and the read-back shows it.
     assert_eq!(b.samples.last().unwrap().2, 20_000);
     b.link.control(ControlAction::Disable);
@@ -328,13 +331,14 @@ fn a_driver_whose_replies_do_not_fit_is_named_as_the_cause() {
         b.driver.inject.wide_registers = true;
         b.run_for(600_000);
         assert!(matches!(b.events.first(), Some((_, Event::Lost))));
-        // The first request is the velocity-mode write (fits: echoed), then
-        // the speed read of the ZLAC8015D's 0x20AB (Modbus function 03).
+        // The first requests are the velocity-mode and offline-time writes
+        // (fit: echoed), then the read of the speed resolution, the
+        // ZLAC8015D's 0x2022 (Modbus function 03).
         assert_eq!(
             b.link.loss_cause(),
             Some(LossCause::Unfit {
                 function: 0x03,
-                register: ZLAC8015D.speed_feedback
+                register: ZLAC8015D.resolution_register.unwrap()
             }),
             "{baud} baud"
         );
@@ -422,9 +426,10 @@ fn driver_faults_are_read_and_named() {
         .find(|(_, e)| matches!(e, Event::Faults(_)))
         .unwrap();
     assert_eq!(e, Event::Faults(0x0404));
-    // Within 4 polls + one (every 4th poll reads the faults).
+    // Within 6 polls + one (every 6th poll reads the faults).
+    let polls = f64::from(FAULT_POLL_EVERY) + 1.0;
     assert!(
-        (t - set) as f64 <= 5.0 * poll_cycle_us(115_200, 2000),
+        (t - set) as f64 <= polls * poll_cycle_us(115_200, 2000),
         "{} µs",
         t - set
     );
@@ -522,6 +527,12 @@ fn a_noise_fragment_before_the_reply_does_not_end_the_wait() {
         fault_register: 0x20A5,
         fault_masks: [0; 6],
         speed_command: None,
+        command_scale: 100_000,
+        control: None,
+        velocity_mode: None,
+        offline_register: None,
+        resolution_register: None,
+        max_speed_register: None,
     }
     .build()
     .unwrap();
@@ -531,7 +542,7 @@ fn a_noise_fragment_before_the_reply_does_not_end_the_wait() {
         let mut buf = [0u8; MAX_FRAME];
         let n = link.next_frame(t, &mut buf).unwrap();
         assert_eq!(n, 8);
-        // Speed reads, every 4th the fault register (word 0).
+        // Speed reads, every 6th the fault register (word 0).
         let value: u8 = if buf[3] == 0xA5 { 0 } else { 0xFA };
         t += 760;
         link.sent(t);
@@ -596,7 +607,7 @@ fn a_speed_command_changed_during_its_write_is_written_next() {
         // The write in flight, a speed read, the new command: 3 cycles
         // (and one for the 50 µs steps).
         b.run_for(4 * cycle);
-        assert_eq!(b.driver.command_rpm, 10, "changed {at} µs after the first");
+        assert_eq!(b.driver.command_raw, 10, "changed {at} µs after the first");
     }
 }
 
@@ -628,8 +639,8 @@ fn a_retried_enable_is_not_sent_after_a_disable() {
 /// instead of reading the fault register: 0 fault reads while commanding,
 /// and a driver fault went unseen until the drum stopped. A constant
 /// command and one changed every 10 ms (the control period), at both
-/// bauds: the fault word is read on at least one poll in 4, and a fault
-/// set at any moment is reported within 4 polls and the fault read's own
+/// bauds: the fault word is read on at least one poll in 6, and a fault
+/// set at any moment is reported within 6 polls and the fault read's own
 /// reply.
 #[test]
 fn a_fault_is_read_while_a_speed_command_runs() {
@@ -649,11 +660,12 @@ fn a_fault_is_read_while_a_speed_command_runs() {
             }
             let polls = b.requests.len() - requests_before;
             let reads = b.link.counters().fault_reads - reads_before;
+            let every = usize::from(FAULT_POLL_EVERY);
             assert!(
-                reads as usize * 4 >= polls - 4,
+                reads as usize * every >= polls - every,
                 "{baud} baud, changing {changing}: {reads} fault reads in {polls} polls"
             );
-            // A fault set now is reported within 4 polls + one.
+            // A fault set now is reported within 6 polls + one.
             b.driver.fault_bits = 0x0800;
             let set = b.now;
             for k in 0..60 {
@@ -667,7 +679,8 @@ fn a_fault_is_read_while_a_speed_command_runs() {
                 .iter()
                 .find(|(_, e)| *e == Event::Faults(0x0800))
                 .map(|(t, _)| t - set);
-            let bound = 5.0 * poll_cycle_us(baud, b.driver.turnaround_us);
+            let bound =
+                (f64::from(FAULT_POLL_EVERY) + 1.0) * poll_cycle_us(baud, b.driver.turnaround_us);
             assert!(
                 seen.is_some_and(|s| s as f64 <= bound),
                 "{baud} baud, changing {changing}: fault seen after {seen:?} µs, bound {bound:.0}"
@@ -732,7 +745,7 @@ fn a_driver_answering_in_up_to_50_ms_works_with_the_defaults() {
             );
             assert!(c.replies > 10, "{baud}, {answer_ms} ms: {c:?}");
             assert_eq!(b.samples.last().map(|s| s.2), Some(20_300));
-            assert_eq!(b.driver.command_rpm, 20);
+            assert_eq!(b.driver.command_raw, 20);
         }
     }
 }
@@ -781,4 +794,127 @@ fn two_percent_noise_bursts_never_lose_the_link() {
         assert_eq!(c.losses, 0, "{baud}: {c:?}");
         assert!(c.crc_errors > 0, "{baud}: no noise met: {c:?}");
     }
+}
+
+/// The driver's given-speed resolution (0x2022) is read at start-up and
+/// honoured: with 10 (0.1 r/min) a 20.0 r/min command is written as 200,
+/// and the driver runs at 20 r/min, not 2. Before, 0x2022 was never read:
+/// a driver set to 10 ran at a tenth of the command. The read-back (0x20AB,
+/// always 0.1 r/min) is unaffected.
+#[test]
+fn the_speed_resolution_is_read_and_commands_follow_it() {
+    for baud in [9600, 115_200] {
+        for (resolution, raw) in [(1u16, 20i16), (10, 200), (4, 80)] {
+            let mut b = Bench::new(baud);
+            b.driver.own_motor = true;
+            b.driver.resolution = resolution;
+            b.link.control(ControlAction::Enable);
+            b.link.set_speed_command(Some(20_000));
+            b.run_for(1_500_000);
+            assert_eq!(b.driver.command_raw, raw, "{baud}, resolution {resolution}");
+            assert!((b.driver.target_rpm() - 20.0).abs() < 1e-9);
+            assert_eq!(b.samples.last().unwrap().2, 20_000, "{baud}, {resolution}");
+            assert!(!b.link.is_lost());
+        }
+    }
+}
+
+/// A resolution register the link cannot use (0, written by a harness or
+/// a tool): the link refuses the driver with the reason, writes no speed
+/// command, and takes it again once the register is corrected.
+#[test]
+fn an_unusable_resolution_is_refused_with_its_reason() {
+    let mut b = Bench::new(115_200);
+    b.driver.resolution = 0;
+    b.link.control(ControlAction::Enable);
+    b.link.set_speed_command(Some(20_000));
+    b.run_for(300_000);
+    assert_eq!(
+        b.link.loss_cause(),
+        Some(LossCause::Setup(SetupFault::Resolution(0)))
+    );
+    assert!(!b.driver.writes.iter().any(|w| w.0 == 0x2088));
+    b.driver.resolution = 10;
+    b.run_for(300_000);
+    assert!(b.events.iter().any(|(_, e)| *e == Event::Restored));
+    assert!(b.link.acknowledge());
+    assert_eq!(b.driver.command_raw, 200);
+}
+
+/// The driver's maximum motor speed (0x2008, ≤ 1000 r/min) is read and
+/// the drum's top speed (44.7 r/min) must fit under it through the
+/// gearbox: behind 59:1 the drum needs 2638 motor r/min, and the link
+/// refuses the driver by name instead of letting it limit the motor
+/// silently (it ran at 0.64 of the command before). Behind 20:1 (894 r/min)
+/// it works, and is refused when the driver comes back from a power cut
+/// with 0x2008 set to 800 (the set-up is read again after every loss).
+#[test]
+fn a_gearbox_beyond_the_drivers_maximum_speed_is_refused() {
+    let geared = |ratio: i32| DriverProfile {
+        micro_rpm_per_count: 100_000 / ratio,
+        speed_command: Some((0x2088, 1_000_000 / ratio)),
+        ..ZLAC8015D
+    };
+    let mut b = Bench::new(115_200);
+    b.link = Link::new(geared(59), LinkConfig::for_baud(115_200).unwrap());
+    b.link.set_speed_command(Some(20_000));
+    b.run_for(300_000);
+    // 44.7 r/min × 59 = 2637.3 → 2638 counts of 1 r/min (16 949 µr/min each).
+    assert_eq!(
+        b.link.loss_cause(),
+        Some(LossCause::Setup(SetupFault::MaxSpeed {
+            driver: 1000,
+            needed: 2638
+        }))
+    );
+    assert!(!b.driver.writes.iter().any(|w| w.0 == 0x2088));
+    let mut b = Bench::new(115_200);
+    b.link = Link::new(geared(20), LinkConfig::for_baud(115_200).unwrap());
+    b.link.set_speed_command(Some(20_000));
+    b.run_for(300_000);
+    assert_eq!(b.link.loss_cause(), None);
+    assert_eq!(b.driver.command_raw, 400);
+    b.driver.inject.silent = true;
+    b.run_for(500_000);
+    b.driver.max_rpm = 800;
+    b.driver.inject.silent = false;
+    b.run_for(500_000);
+    assert_eq!(
+        b.link.loss_cause(),
+        Some(LossCause::Setup(SetupFault::MaxSpeed {
+            driver: 800,
+            needed: 894
+        }))
+    );
+}
+
+/// The driver's offline time (0x2000) is written from the link's setting
+/// at start-up and again after a loss: a driver left silent that long
+/// stops its motor on its own.
+#[test]
+fn the_offline_time_is_written_from_the_setting() {
+    let mut b = Bench::new(9600);
+    let timing = LinkTiming {
+        offline_time_ms: 700,
+        ..LinkTiming::DEFAULT
+    };
+    b.link = Link::new(ZLAC8015D, LinkConfig::new(9600, timing).unwrap());
+    b.run_for(300_000);
+    assert_eq!(b.driver.offline_ms, 700);
+    // Power-cycled (back to its default) while the link is cut: written
+    // again when it answers.
+    b.driver.inject.silent = true;
+    b.run_for(1_000_000);
+    b.driver.offline_ms = 1000;
+    b.driver.inject.silent = false;
+    b.run_for(500_000);
+    assert_eq!(b.driver.offline_ms, 700);
+    assert!(
+        b.driver
+            .writes
+            .iter()
+            .filter(|w| **w == (0x2000, 700))
+            .count()
+            >= 2
+    );
 }

@@ -129,6 +129,12 @@ pub enum Alarm {
     /// (a generic profile's registers, most often). As [`Alarm::LinkLost`]
     /// otherwise.
     LinkRefused,
+    /// The driver answers, but its set-up refuses it: its maximum speed
+    /// is below what the drum's top speed needs through the gearbox, or
+    /// its speed resolution is unusable
+    /// ([`drive_link::link::SetupFault`]). As [`Alarm::LinkLost`]
+    /// otherwise; cleared once the driver's register is corrected.
+    DriverSetup(drive_link::link::SetupFault),
     /// Encoder and driver read-back disagree beyond the cross-check's
     /// margin for its hold time ([`drive_link::cross_check`]): a lost
     /// encoder, or a driver reporting wrong. Latched.
@@ -146,6 +152,7 @@ impl Alarm {
                 | Self::DriverFault(_)
                 | Self::LinkLost
                 | Self::LinkRefused
+                | Self::DriverSetup(_)
                 | Self::SpeedMismatch
         )
     }
@@ -172,6 +179,12 @@ impl Alarm {
             }
             Self::LinkLost => w.write_str("Drum driver link lost"),
             Self::LinkRefused => w.write_str("Driver refuses register: check profile"),
+            Self::DriverSetup(drive_link::link::SetupFault::MaxSpeed { .. }) => {
+                w.write_str("Driver max speed too low for gearbox")
+            }
+            Self::DriverSetup(drive_link::link::SetupFault::Resolution(_)) => {
+                w.write_str("Driver speed resolution unusable")
+            }
             Self::SpeedMismatch => w.write_str("Encoder or driver speed wrong"),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
@@ -1846,6 +1859,7 @@ impl Supervisor {
             age_us: age,
         });
         s.lost = sample.lost;
+        s.setup = sample.setup;
         s.refused = sample.refused;
         s.answering = sample.answering;
         s.fault_word = sample.fault_word;
@@ -1887,27 +1901,21 @@ impl Supervisor {
 
     /// The drive model the controller is scheduled from: the drive's own,
     /// with the driver read-back as the feedback, or the bus command, its
-    /// dead time lengthened by one link transaction for the read-back
-    /// ([`crate::drive_link::DriveLinkSettings::readback_delay_us`]) and by
-    /// the command's mean wait ([`crate::drive_link::DriveLinkSettings::command_delay_us`]),
+    /// dead time lengthened by one link transaction each ([`crate::drive_link::DriveLinkSettings::readback_delay_us`]),
     /// so that the gains shrink in the SIMC ratio (docs/drive-link.md).
     fn control_model(&self) -> DriveModel {
         use crate::drive_link::{CommandPath, FeedbackSource};
         let m = self.settings.drive;
         let link = &self.link_in_force;
-        // One transaction's delay for the read-back as the feedback, and
-        // the bus command's own ([`DriveLinkSettings::command_delay_us`]).
-        let mut extra_us = 0u32;
-        if link.feedback == FeedbackSource::Driver {
-            extra_us = link.readback_delay_us();
-        }
-        if link.command == CommandPath::Modbus {
-            extra_us = extra_us.saturating_add(link.command_delay_us());
-        }
-        if extra_us == 0 {
+        // One transaction's delay for the read-back as the feedback, one
+        // more for the bus command (written about every other transaction).
+        let transactions = u32::from(link.feedback == FeedbackSource::Driver)
+            .saturating_add(u32::from(link.command == CommandPath::Modbus));
+        if transactions == 0 {
             return m;
         }
-        let extra = u16::try_from(extra_us / 100).unwrap_or(u16::MAX);
+        let extra = u16::try_from(link.readback_delay_us().saturating_mul(transactions) / 100)
+            .unwrap_or(u16::MAX);
         let dead = m
             .dead_time_x10_ms()
             .saturating_add(extra)
@@ -1932,10 +1940,10 @@ impl Supervisor {
         } else {
             0
         };
-        // The bus command reaches the driver later by its mean wait for a
-        // write ([`DriveLinkSettings::command_delay_us`]).
+        // The bus command reaches the driver one transaction later (on
+        // average; written about every other transaction).
         let command = if link.command == CommandPath::Modbus {
-            periods(link.command_delay_us())
+            periods(link.readback_delay_us())
         } else {
             0
         };
@@ -1999,10 +2007,10 @@ impl Supervisor {
         }
         let sample = self.link.sample;
         if sample.lost {
-            self.latch(if sample.refused {
-                Alarm::LinkRefused
-            } else {
-                Alarm::LinkLost
+            self.latch(match sample.setup {
+                Some(fault) => Alarm::DriverSetup(fault),
+                None if sample.refused => Alarm::LinkRefused,
+                None => Alarm::LinkLost,
             });
             return;
         }
@@ -2049,7 +2057,7 @@ impl Supervisor {
     /// alarm (a fault still there comes back with the next fault read).
     fn acknowledge_link_alarm(&mut self) -> Option<Effect> {
         match self.alarm {
-            Some(Alarm::LinkLost | Alarm::LinkRefused)
+            Some(Alarm::LinkLost | Alarm::LinkRefused | Alarm::DriverSetup(_))
                 if !self.link.sample.answering || self.link.sample.lost =>
             {
                 Some(Effect::Message("Drum driver still not answering"))
@@ -2480,8 +2488,24 @@ mod tests {
             set(&mut sup, P::Driver, 1),
             Effect::Message("Scale under 1365: reads < 44.7 r/min")
         );
+        // Behind 59:1 (1695) the drum's 44.7 r/min needs 2638 motor r/min,
+        // beyond the ZLAC8015D's 1000 (0x2008): refused by name; behind
+        // 20:1 (5000) it needs 894: taken.
         assert_eq!(set(&mut sup, P::Scale, 1695), Effect::SettingsChanged);
+        assert_eq!(
+            set(&mut sup, P::Driver, 1),
+            Effect::Message("Gearbox needs over 1000 motor r/min")
+        );
+        assert_eq!(set(&mut sup, P::Scale, 5000), Effect::SettingsChanged);
         assert_eq!(set(&mut sup, P::Driver, 1), Effect::SettingsChanged);
+        // A reply timeout beyond 1000 ms is refused; the saved one stays.
+        assert_eq!(
+            set(&mut sup, P::ReplyTimeout, 1001),
+            Effect::Message("Reply timeout: 5-1000 ms")
+        );
+        assert_eq!(sup.settings().drive_link.timing.reply_timeout_ms, 60);
+        assert_eq!(set(&mut sup, P::ReplyTimeout, 80), Effect::SettingsChanged);
+        assert_eq!(sup.settings().drive_link.timing.reply_timeout_ms, 80);
         assert_eq!(set(&mut sup, P::Feedback, 1), Effect::SettingsChanged);
         assert_eq!(sup.settings().drive_link.feedback, FeedbackSource::Driver);
         assert_eq!(sup.screen_settings().link_value, 1);
@@ -2538,7 +2562,7 @@ mod tests {
             kind: DriverKind::Zlac8015d,
             ..DriveLinkSettings::default()
         };
-        settings.drive_link.generic.micro_rpm_per_count = 1695;
+        settings.drive_link.generic.micro_rpm_per_count = 5000;
         assert!(settings.drive_link.build().is_ok());
         let saved = settings.drive_link;
         let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
@@ -2779,7 +2803,7 @@ mod tests {
                 kind: DriverKind::Zlac8015d,
                 ..DriveLinkSettings::default()
             };
-            drive_link.generic.micro_rpm_per_count = 1695;
+            drive_link.generic.micro_rpm_per_count = 5000;
             let settings = Settings {
                 drive_link,
                 ..Settings::default()

@@ -98,7 +98,7 @@ mod app {
         machine::Machine,
         settings::{Profile, Settings},
         stop_input::{StopChange, StopLatch},
-        store::{Loaded, SettingsStore},
+        store::{LoadStatus, SettingsStore},
     };
     #[cfg(feature = "profile-b")]
     use supervisor::{
@@ -293,13 +293,27 @@ mod app {
         slot: &'static mut MaybeUninit<Machine>,
     ) -> (Option<Store>, &'static mut Machine, Option<&'static str>) {
         let mut store = flash.and_then(|flash| SettingsStore::new(flash, 0).ok());
-        let loaded = store.as_mut().map(|s| s.load());
-        let notice = match &loaded {
-            Some(Loaded::Saved { sequence, .. }) => {
+        let mut notice = None;
+        // The record returned straight into the call's argument: no copy
+        // of it in this frame.
+        let (machine, machine_notice) = build_machine(slot, load_record(&mut store, &mut notice));
+        (store, machine, machine_notice.or(notice))
+    }
+
+    /// The saved settings (the defaults without a valid record or a
+    /// store) and the screen's notice, loaded in place into the value
+    /// returned: the machine is built from that one record (a second copy
+    /// of it, 352 B, sat under the supervisor built on the stack, on the
+    /// QEMU board's boot path).
+    #[inline(never)]
+    fn load_record(store: &mut Option<Store>, notice: &mut Option<&'static str>) -> Settings {
+        let mut settings = Settings::default();
+        *notice = match store.as_mut().map(|s| s.load_into(&mut settings)) {
+            Some(LoadStatus::Saved { sequence }) => {
                 defmt::info!("settings: loaded record {=u32}", sequence);
                 None
             }
-            Some(Loaded::Defaults { reason, .. }) => {
+            Some(LoadStatus::Defaults { reason }) => {
                 defmt::warn!("settings: defaults in use ({})", reason);
                 Some(reason.message())
             }
@@ -308,21 +322,7 @@ mod app {
                 Some("No settings store: defaults")
             }
         };
-        let (machine, machine_notice) = build_loaded(slot, loaded);
-        (store, machine, machine_notice.or(notice))
-    }
-
-    /// [`build_machine`] from what the store loaded (the defaults without a
-    /// store), in its own frame (see [`load_settings`]).
-    #[inline(never)]
-    fn build_loaded(
-        slot: &'static mut MaybeUninit<Machine>,
-        loaded: Option<Loaded>,
-    ) -> (&'static mut Machine, Option<&'static str>) {
-        build_machine(
-            slot,
-            loaded.map_or_else(Settings::default, Loaded::into_settings),
-        )
+        settings
     }
 
     /// Whether this image carries the machine of `profile` (the real board
@@ -693,7 +693,7 @@ mod app {
             }),
             lost: link.is_lost(),
             setup: match link.loss_cause() {
-                Some(LossCause::Setup(f)) => Some(f),
+                Some(LossCause::Setup(f)) => Some(f.into()),
                 _ => None,
             },
             refused: matches!(

@@ -199,7 +199,60 @@ fn ensure_tools() -> Result {
         )?;
     }
     ensure_twin_tools()?;
+    ensure_peer_tools()?;
     ensure_linker()
+}
+
+/// The pymodbus release the independent ZLAC8015D peer is written for
+/// (tests/peers/zlac8015d).
+const PYMODBUS: &str = "pymodbus[serial]==3.16.1";
+
+/// Whether python3 has pymodbus 3.16.1 and pyserial (the peer's serial
+/// server).
+fn have_pymodbus() -> bool {
+    Command::new("python3")
+        .args([
+            "-c",
+            "import sys, serial, pymodbus; sys.exit(pymodbus.__version__ != '3.16.1')",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// The drive link's conformance test (crates/supervisor/tests/conformance.rs)
+/// runs the master against an independent Modbus RTU slave on a pty pair:
+/// `socat` (Debian's package) and pymodbus (PyPI), installed here when
+/// missing.
+fn ensure_peer_tools() -> Result {
+    let socat = Command::new("socat")
+        .arg("-V")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok();
+    if !socat {
+        apt_install(&["socat"], "the drive link's conformance test")?;
+    }
+    if have_pymodbus() {
+        return Ok(());
+    }
+    let pip = |extra: &[&str]| {
+        Command::new("python3")
+            .args(["-m", "pip", "install", "--quiet"])
+            .args(extra)
+            .arg(PYMODBUS)
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    // Debian's own python3 refuses pip outside a venv (PEP 668) unless told.
+    if (pip(&[]) || pip(&["--break-system-packages"])) && have_pymodbus() {
+        return Ok(());
+    }
+    Err(format!(
+        "the drive link's conformance test needs `python3 -m pip install '{PYMODBUS}'`"
+    ))
 }
 
 /// Whether a file name is one that bindgen (clang-sys) loads as libclang.

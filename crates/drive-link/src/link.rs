@@ -558,6 +558,13 @@ impl Link {
         if now_us < at {
             return None;
         }
+        // A speed command's retry carries the newest command; with none
+        // any more (stopped) it is not sent again.
+        if let Some((Job::Command, ..)) = self.retry {
+            if self.command_counts().is_none() {
+                self.retry = None;
+            }
+        }
         if self.retry.is_some() {
             self.counters.retries = self.counters.retries.wrapping_add(1);
         }
@@ -569,6 +576,15 @@ impl Link {
                 Request::Write {
                     address,
                     value: self.control.front().copied().unwrap_or(value),
+                },
+            ),
+            // So is the speed command: a retry with the speed of before
+            // would leave the driver behind.
+            Some((Job::Command, Request::Write { address, value }, _)) => (
+                Job::Command,
+                Request::Write {
+                    address,
+                    value: self.command_counts().unwrap_or(value),
                 },
             ),
             Some((job, request, _)) => (job, request),
@@ -644,13 +660,9 @@ impl Link {
         // speed read that follows keeps the read-back fresh while the
         // command changes every control period. An unchanged one is
         // written again once every `every` polls (a driver that lost it).
-        let counts = match (self.command, self.resolution, self.setup_fault) {
-            (Some(milli), Some(resolution), None) => {
-                self.profile.command_counts_at(milli, resolution)
-            }
-            _ => None,
-        };
-        if let (Some(value), Some((address, _))) = (counts, self.profile.speed_command) {
+        if let (Some(value), Some((address, _))) =
+            (self.command_counts(), self.profile.speed_command)
+        {
             let due = self.command_sent != Some(value) || self.since_command >= every.max(1);
             if due && !self.commanded {
                 self.commanded = true;
@@ -666,6 +678,18 @@ impl Link {
                 count: 1,
             },
         )
+    }
+
+    /// The speed command register's value for the command in force (none
+    /// without one, before the resolution is known, or while the set-up
+    /// refuses the driver).
+    fn command_counts(&self) -> Option<u16> {
+        match (self.command, self.resolution, self.setup_fault) {
+            (Some(milli), Some(resolution), None) => {
+                self.profile.command_counts_at(milli, resolution)
+            }
+            _ => None,
+        }
     }
 
     /// The next start-up step, if one is due.

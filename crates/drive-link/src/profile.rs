@@ -223,24 +223,42 @@ impl DriverProfile {
     #[must_use]
     pub fn command_counts_needed(&self, drum_milli_rpm: u32) -> Option<u32> {
         let (_, scale) = self.speed_command?;
-        let need = u64::from(drum_milli_rpm)
-            .saturating_mul(1000)
-            .div_ceil(u64::from(scale.unsigned_abs()).max(1));
-        Some(u32::try_from(need).unwrap_or(u32::MAX))
+        // In u32 (no 64-bit division on the boot path): a drum top speed
+        // beyond 4294 r/min saturates, and needs the most anyway.
+        Some(
+            drum_milli_rpm
+                .saturating_mul(1000)
+                .div_ceil(scale.unsigned_abs().max(1)),
+        )
     }
 
     /// The named faults in a fault word, then the unnamed bits as one
     /// [`DriverFault::Other`].
     pub fn faults(&self, word: u16) -> impl Iterator<Item = DriverFault> + '_ {
-        let named = self.fault_masks.iter().fold(0u16, |acc, m| acc | m);
-        let other = word & !named;
-        NAMED_FAULTS
-            .iter()
-            .zip(self.fault_masks.iter())
-            .filter(move |(_, &mask)| mask != 0 && word & mask != 0)
-            .map(|(&f, _)| f)
-            .chain((other != 0).then_some(DriverFault::Other(other)))
+        faults_in(&self.fault_masks, word)
     }
+}
+
+/// The named faults of a fault word under `masks` ([`NAMED_FAULTS`]'
+/// order), then the unnamed bits as one [`DriverFault::Other`].
+pub fn faults_in(masks: &[u16; 6], word: u16) -> impl Iterator<Item = DriverFault> + '_ {
+    let named = masks.iter().fold(0u16, |acc, m| acc | m);
+    let other = word & !named;
+    NAMED_FAULTS
+        .iter()
+        .zip(masks.iter())
+        .filter(move |(_, &mask)| mask != 0 && word & mask != 0)
+        .map(|(&f, _)| f)
+        .chain((other != 0).then_some(DriverFault::Other(other)))
+}
+
+/// The first fault of a nonzero fault word under `masks` (what an alarm
+/// names).
+#[must_use]
+pub fn first_fault(masks: &[u16; 6], word: u16) -> DriverFault {
+    faults_in(masks, word)
+        .next()
+        .unwrap_or(DriverFault::Other(word))
 }
 
 /// The largest |scale| a generic profile may name: 100 r/min per count

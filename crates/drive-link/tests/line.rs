@@ -51,6 +51,8 @@ struct Bench {
     noise: (u32, u32, u64),
     /// Noise before a reply at random: (per mille, seed).
     noise_random: (u32, u64),
+    /// The last request sent.
+    last_request: Vec<u8>,
 }
 
 const STEP_US: u64 = 50;
@@ -69,6 +71,7 @@ impl Bench {
             requests: Vec::new(),
             noise: (0, 0, 0),
             noise_random: (0, 1),
+            last_request: Vec::new(),
         }
     }
 
@@ -180,6 +183,7 @@ impl Bench {
             let mut buf = [0u8; MAX_FRAME];
             if let Some(n) = self.link.next_frame(now, &mut buf) {
                 self.requests.push(now);
+                self.last_request = buf[..n].to_vec();
                 self.put(now, buf[..n].to_vec(), true);
             }
         }
@@ -917,4 +921,38 @@ fn the_offline_time_is_written_from_the_setting() {
             .count()
             >= 2
     );
+}
+
+/// A speed command write that fails is sent again with the newest command,
+/// not the one it carried: a retry of a stale speed (the command changes
+/// every control period) would leave the driver a transaction behind, and
+/// after a stop the last speed before it. Before, the retry re-sent the
+/// old value (seen against the independent peer: a CRC error on a command
+/// write's echo, then the old command written again).
+#[test]
+fn a_failed_command_write_is_sent_again_with_the_newest_command() {
+    for baud in [9600, 115_200] {
+        let mut b = Bench::new(baud);
+        b.link.control(ControlAction::Enable);
+        b.link.set_speed_command(Some(20_000));
+        b.run_for(300_000);
+        // Wait for a command write on the line, then lose its reply.
+        b.link.set_speed_command(Some(21_000));
+        while b.last_request.get(1..4) != Some(&[0x06, 0x20, 0x88]) {
+            b.run_for(STEP_US);
+        }
+        b.driver.inject.silent = true;
+        b.link.set_speed_command(Some(25_000));
+        b.run_for(frame_time_us(baud, 8).unwrap().into());
+        b.driver.inject.silent = false;
+        let before = b.driver.writes.len();
+        b.run_for(300_000);
+        let commands: Vec<u16> = b.driver.writes[before..]
+            .iter()
+            .filter(|w| w.0 == 0x2088)
+            .map(|w| w.1)
+            .collect();
+        assert_eq!(commands.first(), Some(&25), "{baud}: {commands:?}");
+        assert_eq!(b.link.counters().losses, 0);
+    }
 }

@@ -134,7 +134,7 @@ pub enum Alarm {
     /// its speed resolution is unusable
     /// ([`drive_link::link::SetupFault`]). As [`Alarm::LinkLost`]
     /// otherwise; cleared once the driver's register is corrected.
-    DriverSetup(drive_link::link::SetupFault),
+    DriverSetup(crate::drive_link::SetupRefusal),
     /// Encoder and driver read-back disagree beyond the cross-check's
     /// margin for its hold time ([`drive_link::cross_check`]): a lost
     /// encoder, or a driver reporting wrong. Latched.
@@ -179,10 +179,10 @@ impl Alarm {
             }
             Self::LinkLost => w.write_str("Drum driver link lost"),
             Self::LinkRefused => w.write_str("Driver refuses register: check profile"),
-            Self::DriverSetup(drive_link::link::SetupFault::MaxSpeed { .. }) => {
+            Self::DriverSetup(crate::drive_link::SetupRefusal::MaxSpeed) => {
                 w.write_str("Driver max speed too low for gearbox")
             }
-            Self::DriverSetup(drive_link::link::SetupFault::Resolution(_)) => {
+            Self::DriverSetup(crate::drive_link::SetupRefusal::Resolution) => {
                 w.write_str("Driver speed resolution unusable")
             }
             Self::SpeedMismatch => w.write_str("Encoder or driver speed wrong"),
@@ -394,7 +394,7 @@ pub struct Supervisor {
     /// The link settings in force: those the supervisor was built with.
     /// Page 10 edits `settings.drive_link`, which the board's link task
     /// takes only at the next start (docs/drive-link.md).
-    link_in_force: crate::drive_link::DriveLinkSettings,
+    link_in_force: crate::drive_link::LinkInForce,
     /// Drum encoder counts since boot.
     drum_counts_total: u64,
     last_encoder: Option<u16>,
@@ -871,9 +871,9 @@ impl Supervisor {
         // Without the link in the image: encoder and PWM, the saved link
         // settings kept for the record.
         let link_in_force = if cfg!(feature = "drive-link") {
-            settings.drive_link
+            crate::drive_link::LinkInForce::from(&settings.drive_link)
         } else {
-            crate::drive_link::DriveLinkSettings::default()
+            crate::drive_link::LinkInForce::default()
         };
         let phase = Phase::new(hw.encoder_counts_per_drum_rev, settings.spacing.raw());
         Ok(Self {
@@ -2017,13 +2017,10 @@ impl Supervisor {
         if sample.fault_word != 0
             && !(self.link.acked && self.link.acked_fault_reads == sample.fault_reads)
         {
-            let fault = self
-                .link_in_force
-                .build()
-                .ok()
-                .flatten()
-                .and_then(|p| p.faults(sample.fault_word).next())
-                .unwrap_or(drive_link::profile::DriverFault::Other(sample.fault_word));
+            let fault = drive_link::profile::first_fault(
+                &self.link_in_force.fault_masks(),
+                sample.fault_word,
+            );
             if self.alarm != Some(Alarm::DriverFault(fault)) {
                 self.latch(Alarm::DriverFault(fault));
             }

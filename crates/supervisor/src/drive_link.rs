@@ -220,6 +220,17 @@ impl DriveLinkSettings {
         Ok(self.config()?.map(|(p, _)| p))
     }
 
+    /// The masks of the named driver faults: the ZLAC8015D's, or the
+    /// generic profile's (without building the profile: the control task
+    /// names a fault with them).
+    #[must_use]
+    pub fn fault_masks(&self) -> [u16; 6] {
+        match self.kind {
+            DriverKind::Zlac8015d => ZLAC8015D.fault_masks,
+            DriverKind::None | DriverKind::Generic => self.generic.fault_masks,
+        }
+    }
+
     /// [`Self::build`] with the link's timing: what the link task runs.
     pub fn config(&self) -> Result<Option<(DriverProfile, LinkConfig)>, DriveLinkError> {
         let top = kinematics::consts::N_MAX.to_milli();
@@ -494,10 +505,26 @@ impl DriveLinkSettings {
     }
 
     /// Reads [`Self::to_bytes`] and validates the result with
-    /// [`Self::build`]. Out of line: its temporaries stay out of the store's
-    /// decode frame, on the QEMU board's boot path.
-    #[inline(never)]
+    /// [`Self::build`].
     pub fn from_bytes(b: &[u8; DRIVE_LINK_BYTES]) -> Result<Self, DriveLinkError> {
+        let s = Self::parse(b)?;
+        s.check()?;
+        Ok(s)
+    }
+
+    /// [`Self::build`]'s checks, the profile and timing built and dropped.
+    /// Out of line, apart from [`Self::parse`]: on the QEMU board's boot
+    /// path (the store's decode) the two frames come one after the other,
+    /// not one on top of the other.
+    #[inline(never)]
+    pub fn check(&self) -> Result<(), DriveLinkError> {
+        self.config().map(|_| ())
+    }
+
+    /// Reads [`Self::to_bytes`] without validating more than its bytes
+    /// (the choices' codes, the presence byte): [`Self::check`] the result.
+    #[inline(never)]
+    pub fn parse(b: &[u8; DRIVE_LINK_BYTES]) -> Result<Self, DriveLinkError> {
         let byte = |i: usize| b.get(i).copied().unwrap_or(0);
         let u16_at = |i: usize| u16::from_le_bytes([byte(i), byte(i.saturating_add(1))]);
         let u32_at = |i: usize| {
@@ -562,7 +589,6 @@ impl DriveLinkSettings {
                 offline_time_ms: u16_at(35),
             },
         };
-        s.build()?;
         Ok(s)
     }
 
@@ -571,6 +597,14 @@ impl DriveLinkSettings {
     /// did — its command in the feedback's scale, no control word, mode
     /// write, offline time, resolution or maximum-speed register.
     pub fn from_v5_bytes(b: &[u8; DRIVE_LINK_V5_BYTES]) -> Result<Self, DriveLinkError> {
+        let s = Self::parse_v5(b)?;
+        s.check()?;
+        Ok(s)
+    }
+
+    /// [`Self::from_v5_bytes`] without [`Self::check`].
+    #[inline(never)]
+    pub fn parse_v5(b: &[u8; DRIVE_LINK_V5_BYTES]) -> Result<Self, DriveLinkError> {
         let mut full = [0u8; DRIVE_LINK_BYTES];
         let (old, new) = full.split_at_mut(DRIVE_LINK_V5_BYTES);
         old.copy_from_slice(b);
@@ -589,7 +623,7 @@ impl DriveLinkSettings {
         put(&t.offline_time_ms.to_le_bytes());
         put(scale);
         // The registers stay 0: none.
-        Self::from_bytes(&full)
+        Self::parse(&full)
     }
 }
 
@@ -604,6 +638,86 @@ const CONTROL_DEFAULT: ControlWord = ControlWord {
 
 /// The mode value stored when a generic profile names no mode register.
 const MODE_DEFAULT: u16 = 3;
+
+/// Which of the driver's set-up registers refuses it (the alarm's name;
+/// the numbers are in the link task's log).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SetupRefusal {
+    /// Its maximum speed is below what the drum's top speed needs.
+    MaxSpeed,
+    /// Its speed resolution is unusable.
+    Resolution,
+}
+
+impl From<SetupFault> for SetupRefusal {
+    fn from(f: SetupFault) -> Self {
+        match f {
+            SetupFault::MaxSpeed { .. } => Self::MaxSpeed,
+            SetupFault::Resolution(_) => Self::Resolution,
+        }
+    }
+}
+
+/// What the supervisor keeps of the link settings it was built with (the
+/// link in force until a restart): the paths, and what it derives from
+/// the rest once (the read-back's delays, the fault masks). Small: it
+/// lives in the supervisor, on the QEMU board's 8 KB.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LinkInForce {
+    /// Feedback source.
+    pub feedback: FeedbackSource,
+    /// Command path.
+    pub command: CommandPath,
+    /// The driver.
+    pub kind: DriverKind,
+    /// [`DriveLinkSettings::readback_delay_us`].
+    readback_delay_us: u32,
+    /// [`DriveLinkSettings::readback_max_age_us`].
+    readback_max_age_us: u32,
+    /// [`DriveLinkSettings::fault_masks`].
+    fault_masks: [u16; 6],
+}
+
+impl LinkInForce {
+    /// See [`DriveLinkSettings::readback_delay_us`].
+    #[must_use]
+    pub const fn readback_delay_us(&self) -> u32 {
+        self.readback_delay_us
+    }
+
+    /// See [`DriveLinkSettings::readback_max_age_us`].
+    #[must_use]
+    pub const fn readback_max_age_us(&self) -> u32 {
+        self.readback_max_age_us
+    }
+
+    /// See [`DriveLinkSettings::fault_masks`].
+    #[must_use]
+    pub const fn fault_masks(&self) -> [u16; 6] {
+        self.fault_masks
+    }
+
+    /// See [`DriveLinkSettings::delays_control`].
+    #[must_use]
+    pub fn delays_control(&self) -> bool {
+        self.feedback == FeedbackSource::Driver || self.command == CommandPath::Modbus
+    }
+}
+
+impl From<&DriveLinkSettings> for LinkInForce {
+    fn from(s: &DriveLinkSettings) -> Self {
+        Self {
+            feedback: s.feedback,
+            command: s.command,
+            kind: s.kind,
+            readback_delay_us: s.readback_delay_us(),
+            readback_max_age_us: s.readback_max_age_us(),
+            fault_masks: s.fault_masks(),
+        }
+    }
+}
 
 /// The driver's speed read-back with its age: one more sensor sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -626,7 +740,7 @@ pub struct LinkSample {
     pub lost: bool,
     /// The loss is the driver's set-up ([`drive_link::link::LossCause::Setup`]):
     /// its maximum speed or speed resolution refuses it.
-    pub setup: Option<SetupFault>,
+    pub setup: Option<SetupRefusal>,
     /// The loss came from the driver's profile, not the line: the driver
     /// answers but refuses a register or function its profile names
     /// ([`drive_link::link::LossCause::Refused`]), or its replies do not

@@ -393,6 +393,16 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
 /// 4 KB stack). On an error `out` holds valid values but not the record's:
 /// decode into a scratch value.
 pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError> {
+    decode_into_unchecked_link(bytes, out)?;
+    out.drive_link.check().map_err(SettingsError::DriveLink)
+}
+
+/// [`decode_into`] but the drive link block is parsed, not checked
+/// ([`DriveLinkSettings::check`]): the store checks it once its read
+/// buffer is off the stack (on the QEMU board's boot path the two frames
+/// come one after the other, not one on top of the other). A record is
+/// valid only when both pass.
+pub fn decode_into_unchecked_link(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError> {
     // Every field is written below: this pattern stops compiling when a
     // field is added, until it is decoded here too.
     let Settings {
@@ -433,14 +443,15 @@ pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError
         });
     }
     let (v4, v5) = bytes.split_at(bytes.len().min(SETTINGS_V4_BYTES));
+    // Parsed here, checked by the caller (`decode_into`, the store).
     let drive_link = if v5.is_empty() {
         DriveLinkSettings::default()
     } else if let Ok(block) = <&[u8; DRIVE_LINK_BYTES]>::try_from(v5) {
-        DriveLinkSettings::from_bytes(block).map_err(SettingsError::DriveLink)?
+        DriveLinkSettings::parse(block).map_err(SettingsError::DriveLink)?
     } else if let Ok(block) = <&[u8; DRIVE_LINK_V5_BYTES]>::try_from(v5) {
         // Format 5: migrated (the timing's defaults, a generic profile as
         // it worked then).
-        DriveLinkSettings::from_v5_bytes(block).map_err(SettingsError::DriveLink)?
+        DriveLinkSettings::parse_v5(block).map_err(SettingsError::DriveLink)?
     } else {
         return Err(length);
     };

@@ -90,7 +90,7 @@ use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 
 use crate::crc::Crc32;
 use crate::settings::{
-    decode_into, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION,
+    decode_into_unchecked_link, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION,
     SETTINGS_V1_BYTES, SETTINGS_V2_BYTES, SETTINGS_V3_BYTES, SETTINGS_V4_BYTES, SETTINGS_V5_BYTES,
 };
 
@@ -179,6 +179,22 @@ impl fmt::Display for DefaultsReason {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.message())
     }
+}
+
+/// What [`SettingsStore::load_into`] put into the caller's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LoadStatus {
+    /// The newest valid record, of this sequence number.
+    Saved {
+        /// Its sequence number.
+        sequence: u32,
+    },
+    /// No valid record: [`Settings::default`], and why.
+    Defaults {
+        /// Why (shown on the screen).
+        reason: DefaultsReason,
+    },
 }
 
 /// What [`SettingsStore::load`] found.
@@ -416,15 +432,28 @@ impl<F: NorFlash> SettingsStore<F> {
     /// defaults with the reason. Never writes.
     #[inline(never)]
     pub fn load(&mut self) -> Loaded {
+        let mut settings = Settings::default();
+        match self.load_into(&mut settings) {
+            LoadStatus::Saved { sequence } => Loaded::Saved { settings, sequence },
+            LoadStatus::Defaults { reason } => Loaded::Defaults { settings, reason },
+        }
+    }
+
+    /// [`SettingsStore::load`] into the caller's `settings` (the defaults
+    /// when no record is valid): no second record on the caller's stack
+    /// (the firmware's boot builds the machine from it, on the QEMU
+    /// board's few KB of stack). Out of line: its frame and the defaults'
+    /// temporaries stay off the caller's.
+    #[inline(never)]
+    pub fn load_into(&mut self, settings: &mut Settings) -> LoadStatus {
         // Statuses first, then the newest valid slot once more: each decode
         // goes into the one `settings` value (in place, table by table), so
         // no second decoded record is ever on the stack (this runs in
         // `init`, on the QEMU board's ≈ 4 KB stack). Nothing writes the
         // flash in between.
-        let mut settings = Settings::default();
         let slots = [
-            self.scan_into(0, &mut settings).status(),
-            self.scan_into(1, &mut settings).status(),
+            self.scan_into(0, settings).status(),
+            self.scan_into(1, settings).status(),
         ];
         let newest = slots
             .iter()
@@ -435,8 +464,8 @@ impl<F: NorFlash> SettingsStore<F> {
             })
             .reduce(|a, b| if is_newer(b.1, a.1) { b } else { a });
         if let Some((slot, _)) = newest {
-            if let Slot::Valid(sequence, ()) = self.scan_into(slot, &mut settings) {
-                return Loaded::Saved { settings, sequence };
+            if let Slot::Valid(sequence, ()) = self.scan_into(slot, settings) {
+                return LoadStatus::Saved { sequence };
             }
         }
         let any = |f: fn(&SlotStatus) -> bool| slots.iter().any(f);
@@ -449,10 +478,8 @@ impl<F: NorFlash> SettingsStore<F> {
         } else {
             DefaultsReason::Blank
         };
-        Loaded::Defaults {
-            settings: Settings::default(),
-            reason,
-        }
+        *settings = Settings::default();
+        LoadStatus::Defaults { reason }
     }
 
     /// What each slot holds, slot 0 first (diagnostics and tests).
@@ -715,6 +742,9 @@ impl<F: NorFlash> SettingsStore<F> {
     /// `Valid`).
     fn scan_into(&mut self, slot: SlotIndex, out: &mut Settings) -> Slot<F::Error, ()> {
         match self.try_scan(slot, out) {
+            // The drive link block is checked here, the read buffer off
+            // the stack (`decode_into_unchecked_link`).
+            Ok(Slot::Valid(..)) if out.drive_link.check().is_err() => Slot::Corrupt,
             Ok(s) => s,
             Err(ReadFail::Flash(e)) => Slot::Unreadable(e),
             Err(ReadFail::Bounds) => Slot::Corrupt,
@@ -797,7 +827,7 @@ impl<F: NorFlash> SettingsStore<F> {
         let mut buf = [0u8; SETTINGS_BYTES];
         let payload = buf.get_mut(..len).ok_or(ReadFail::Bounds)?;
         self.read(slot, HEADER_BYTES, payload)?;
-        Ok(match decode_into(payload, out) {
+        Ok(match decode_into_unchecked_link(payload, out) {
             Ok(()) => Slot::Valid(sequence, ()),
             Err(SettingsError::UnsupportedVersion(_)) => Slot::Unsupported(sequence),
             Err(_) => Slot::Corrupt,

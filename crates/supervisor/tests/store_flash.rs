@@ -694,6 +694,32 @@ fn a_record_with_valid_crc_but_invalid_field_is_corrupt() {
     assert_eq!(boot(&f).defaults_reason(), Some(DefaultsReason::Corrupt));
 }
 
+/// A record whose drive link block parses but does not pass its checks
+/// (the store checks it after the decode, `decode_into_unchecked_link`):
+/// a ZLAC8015D behind 59:1 needs 2638 motor r/min, beyond its 1000. It
+/// is corrupt: the older valid record (or the defaults) is used.
+#[test]
+fn a_record_whose_drive_link_fails_its_checks_is_corrupt() {
+    let mut bad = settings_b();
+    bad.drive_link.generic.micro_rpm_per_count = 1695;
+    assert!(bad.drive_link.build().is_err());
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 0, &raw_record(4, &settings_a().encode()));
+    put_raw(&mut f, 1, &raw_record(5, &bad.encode()));
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: settings_a(),
+            sequence: 4
+        }
+    );
+    let mut st = store(f);
+    assert_eq!(
+        st.slots(),
+        [SlotStatus::Valid { sequence: 4 }, SlotStatus::Corrupt]
+    );
+}
+
 #[test]
 fn a_record_written_before_profile_b_still_loads() {
     // Format 1: the first 209 bytes of today's payload, version byte 1

@@ -277,7 +277,7 @@ impl Rig {
             }),
             lost: self.link.is_lost(),
             setup: match self.link.loss_cause() {
-                Some(LossCause::Setup(f)) => Some(f),
+                Some(LossCause::Setup(f)) => Some(f.into()),
                 _ => None,
             },
             refused: matches!(

@@ -338,7 +338,10 @@ fn a_cut_link_is_lost_within_the_retry_budget_with_safe_outputs() {
     let c = drive_link::link::LinkConfig::for_baud(115_200).unwrap();
     let attempt_ms = f64::from(c.failed_attempt_us()) / 1000.0;
     let bound = (3.0 * attempt_ms + 9.3 + 10.0).ceil() as u32;
-    assert!(lost >= at && lost - at <= bound, "cut {at} -> lost {lost}, bound {bound}");
+    assert!(
+        lost >= at && lost - at <= bound,
+        "cut {at} -> lost {lost}, bound {bound}"
+    );
     // Outputs safe at the next control step (≤ 100 ms required).
     assert!(alarm - lost <= 10, "lost {lost} -> alarm {alarm}");
     let (t, ccr) = ccr_after(&logs, alarm + 1);

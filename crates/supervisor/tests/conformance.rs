@@ -95,6 +95,19 @@ fn run_commanded(l: &mut Line, transactions: u32) {
     }
 }
 
+/// The peer's own view: the offline time written from the settings, and
+/// never tripped (the driver never stopped itself for want of requests).
+fn assert_peer_online(l: &mut Line, what: &str) {
+    let offline = l.peer.cmd(json!({"cmd": "get", "reg": "0x2000"}));
+    assert_eq!(
+        offline["value"],
+        json!(drive_link::link::LinkTiming::DEFAULT.offline_time_ms),
+        "{what}: 0x2000"
+    );
+    let st = l.peer.cmd(json!({"cmd": "state"}));
+    assert_eq!(st["offline_stop"], json!(false), "{what}: {st}");
+}
+
 fn assert_clean(l: &Line, what: &str) {
     let c = l.link.counters();
     assert_eq!(c.losses, 0, "{what}: link lost: {c:?} {:?}", l.stats);
@@ -124,6 +137,7 @@ fn answer_times_up_to_50_ms_lose_nothing_and_every_value_is_exact() {
             run_commanded(&mut l, 120);
             let what = format!("{baud} baud, answer {delay_ms} ms");
             assert_clean(&l, &what);
+            assert_peer_online(&mut l, &what);
             let c = l.link.counters();
             assert_eq!((c.timeouts, c.retries), (0, 0), "{what}: {c:?}");
             assert!(
@@ -164,6 +178,7 @@ fn crc_errors_drops_and_noise_bursts_lose_nothing() {
             run_commanded(&mut l, 2000);
             let what = format!("{baud} baud, answer {delay_ms} ms, errors");
             assert_clean(&l, &what);
+            assert_peer_online(&mut l, &what);
             let s = l.stats;
             assert!(
                 s.crc_injected > 0 && s.dropped > 0 && s.noise_bursts > 0,

@@ -5,16 +5,25 @@
 //! (driver-enable high before the first bit), calls [`Link::sent`] at the
 //! transmission-complete interrupt (TC, not TXE: the last stop bit has left;
 //! then driver-enable low), hands every received frame (bytes ended by a
-//! 3.5-character silence) to [`Link::received`] and calls [`Link::tick`]
-//! from its timer. Time is in µs of a monotonic clock. Nothing here blocks.
+//! 3.5-character silence) to [`Link::received`], tells it while bytes are
+//! arriving ([`Link::line_busy`]) and calls [`Link::tick`] from its timer.
+//! Time is in µs of a monotonic clock. Nothing here blocks.
 //!
 //! Rules (docs/drive-link.md):
 //! - one request at a time; the next one no earlier than the 3.5-character
-//!   silent interval after the last frame on the line;
+//!   silent interval after the last frame on the line, and never while
+//!   bytes arrive;
 //! - a reply is due within [`LinkConfig::reply_timeout_us`] of the request's
-//!   end; a corrupted reply (CRC), an exception or no reply is a failed
-//!   attempt and the same request is sent again, up to
-//!   [`LinkConfig::retries`] times;
+//!   end (the driver's answer time, a setting, plus the reply's time on the
+//!   line); a corrupt frame ends nothing (the valid reply may follow); an
+//!   exception or no valid reply by then is a failed attempt, and the same
+//!   request is sent again once the line has been quiet for the retry gap,
+//!   up to [`LinkConfig::retries`] times;
+//! - the fault word is read every [`FAULT_POLL_EVERY`]th poll whatever else
+//!   is due; control words are written in the order asked;
+//! - the driver's set-up (mode, offline time, speed resolution, maximum
+//!   speed) is done at start and after every loss, and can refuse it
+//!   ([`LossCause::Setup`]);
 //! - when a request's retries are used up the link is **lost**: latched
 //!   ([`Event::Lost`]) until it answers again ([`Event::Restored`]) **and**
 //!   the operator acknowledges ([`Link::acknowledge`]); polling goes on

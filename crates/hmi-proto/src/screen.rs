@@ -345,32 +345,14 @@ impl LinkParameter {
         }
     }
 
-    /// The next parameter (the last wraps to the first).
-    pub const fn next(self) -> Self {
-        match self {
-            Self::Feedback => Self::Command,
-            Self::Command => Self::Driver,
-            Self::Driver => Self::Slave,
-            Self::Slave => Self::Baud,
-            Self::Baud => Self::ReplyTimeout,
-            Self::ReplyTimeout => Self::RetryGap,
-            Self::RetryGap => Self::OfflineTime,
-            Self::OfflineTime => Self::Scale,
-            Self::Scale => Self::SpeedRegister,
-            Self::SpeedRegister => Self::FaultRegister,
-            Self::FaultRegister => Self::CommandRegister,
-            Self::CommandRegister => Self::CommandScale,
-            Self::CommandScale => Self::ControlRegister,
-            Self::ControlRegister => Self::EnableValue,
-            Self::EnableValue => Self::DisableValue,
-            Self::DisableValue => Self::ClearValue,
-            Self::ClearValue => Self::ModeRegister,
-            Self::ModeRegister => Self::ModeValue,
-            Self::ModeValue => Self::OfflineRegister,
-            Self::OfflineRegister => Self::ResolutionRegister,
-            Self::ResolutionRegister => Self::MaxSpeedRegister,
-            Self::MaxSpeedRegister => Self::Feedback,
-        }
+    /// The next parameter (the last wraps to the first): the one after it
+    /// in [`LinkParameter::ALL`], whose order is the declaration's.
+    #[must_use]
+    pub fn next(self) -> Self {
+        Self::ALL
+            .get((self as usize).saturating_add(1))
+            .copied()
+            .unwrap_or(Self::Feedback)
     }
 }
 

@@ -14,8 +14,8 @@
 //! | [`app::stop_input`] | 5 | each edge of the stop input (PB10, EXTI10) | 1 µs |
 //! | [`app::usart1`] | 4 | each touchscreen byte in or out (≤ 11.5 kHz each way) | 2 µs |
 //! | [`app::hall_capture`] | 3 | each Hall edge (≤ 1 kHz) and TIM2 overflow | 2 µs |
-//! | `app::usart2` | 3 | each RS-485 byte in or out (≤ 11.5 kHz), TC (feature `drive-link`) | 2 µs |
-//! | `app::drive_link` | 3 | every 1 ms while a driver profile is set (feature `drive-link`) | 20 µs |
+//! | `app::usart2` | 3 | each RS-485 byte in or out (≤ 11.5 kHz), TC, while a driver profile is set | 2 µs |
+//! | `app::drive_link` | 3 | every 1 ms while a driver profile is set | 20 µs |
 //! | [`app::control`] | 2 | every 10 ms | 1 ms |
 //! | [`app::hmi`] | 1 | touchscreen bytes, the transmit ring at half, at least every 20 ms | 1 ms |
 //! | [`app::status`] | 1 | every 200 ms (5 Hz) | 2 ms |
@@ -23,9 +23,6 @@
 //! | `idle` | 0 | — | sleeps in `wfi` |
 #![no_std]
 #![no_main]
-
-#[cfg(not(any(feature = "profile-a", feature = "profile-b")))]
-compile_error!("enable at least one machine: feature `profile-a` or `profile-b`");
 
 mod board;
 mod div64;
@@ -76,15 +73,12 @@ mod app {
         HMI_TICK_MS, RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS, TX_RING,
     };
     use crate::edge_queue::DropMark;
-    #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     use ::drive_link::link::ControlAction;
-    #[cfg(feature = "drive-link")]
     use ::drive_link::link::{Event as LinkEvent, Link, LossCause, SetupFault};
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
-    use hmi_proto::screen::{Command, MachineProfile};
-    #[cfg(feature = "profile-a")]
+    use hmi_proto::screen::Command;
     use kinematics::units::Ticks;
     use rtic::Mutex as _;
     use rtic_monotonics::systick::prelude::*;
@@ -93,18 +87,16 @@ mod app {
         make_channel,
     };
     use screen_line::LineItem;
-    #[cfg(feature = "profile-a")]
     use supervisor::control::{Alarm, RunState, Supervisor};
-    #[cfg(feature = "profile-a")]
     use supervisor::work_switch::{WorkChange, WorkSwitch};
     use supervisor::{
         control::Effect,
         machine::Machine,
+        migrate::{migrate, Migration},
         settings::{Profile, Settings},
         stop_input::{StopChange, StopLatch},
         store::{LoadStatus, SettingsStore},
     };
-    #[cfg(feature = "profile-b")]
     use supervisor::{
         machine::BeltMachine,
         profile_b::{PlanterAlarm, PlanterState, ProfileBHardware},
@@ -115,23 +107,19 @@ mod app {
     /// The motor outputs of the profile in force.
     pub enum Actuators {
         /// Profile A: the drum motor's PWM and enable.
-        #[cfg(feature = "profile-a")]
         Drum(board::DrumDrive),
         /// Profile B: the two step-pulse outputs.
-        #[cfg(feature = "profile-b")]
         Steppers(board::Steppers),
     }
 
     /// What a control step decided, per profile.
     enum Step {
-        #[cfg(feature = "profile-a")]
         Drum(
             supervisor::control::Actuation,
             Option<Alarm>,
             RunState,
             (Option<i32>, bool),
         ),
-        #[cfg(feature = "profile-b")]
         Belt(
             supervisor::profile_b::StepperCommand,
             Option<PlanterAlarm>,
@@ -156,9 +144,7 @@ mod app {
         /// The drum driver's Modbus master: its task (3) and the control
         /// task (2, the read-back in, the command and enable out).
         drive: &'static mut DriveState,
-        /// USART2 and DE (PA1): its interrupt (3) and the link task (3);
-        /// `()` without the feature `drive-link`.
-        #[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
+        /// USART2 and DE (PA1): its interrupt (3) and the link task (3).
         drive_line: board::DriveLineRef,
     }
 
@@ -166,11 +152,8 @@ mod app {
     /// it (docs/drive-link.md).
     pub struct DriveState {
         /// The master, when the settings name a driver (profile A).
-        #[cfg(feature = "drive-link")]
         link: Option<Link>,
         /// The driver's enable as last asked through its control word.
-        #[cfg(feature = "drive-link")]
-        #[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
         enabled: Option<bool>,
     }
 
@@ -193,7 +176,6 @@ mod app {
         saves_in: Sender<'static, (), 1>,
         saves_out: Receiver<'static, (), 1>,
         sensors: board::SensorsRef,
-        #[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
         work_switch: board::WorkSwitchInput,
         actuators: Actuators,
         watchdog: board::Watchdog,
@@ -231,9 +213,7 @@ mod app {
         let mut drum = board.drum;
         drum.set_enabled(false);
         let actuators = match machine {
-            #[cfg(feature = "profile-a")]
             Machine::DrumBelt(_) => Actuators::Drum(drum),
-            #[cfg(feature = "profile-b")]
             Machine::SeedlingBelt(_) => {
                 Actuators::Steppers(board::Steppers::new(drum, board.feed_step))
             }
@@ -246,7 +226,6 @@ mod app {
         status::spawn().ok();
         hmi::spawn().ok();
         settings::spawn().ok();
-        #[cfg(feature = "drive-link")]
         if drive.link.is_some() {
             drive_link::spawn().ok();
         }
@@ -288,19 +267,16 @@ mod app {
     // Init helpers, each in its own stack frame: inlined into `init`, their
     // temporaries would all be live at once (3.4 KB of stack).
 
-    /// Settings: the newest valid record, or the defaults, said out loud;
-    /// then the machine built from them. Two frames of their own: the
-    /// loaded record (≈ 0.3 KB) never sits in `init`'s frame, under which
-    /// RTIC runs the first tasks (it enables the interrupts inside it; the
-    /// first control step builds the fuzzy controller on top: the deepest
-    /// moment of a boot), and the load's deep decode path carries
-    /// one record, not two.
+    /// Settings: the newest valid record (moved from where the earlier
+    /// layout kept it, once), or the defaults, said out loud; then the
+    /// machine built from them.
     #[inline(never)]
     fn load_settings(
         flash: Option<board::SettingsFlash>,
         slot: &'static mut MaybeUninit<Machine>,
     ) -> (Option<Store>, &'static mut Machine, Option<&'static str>) {
-        let mut store = flash.and_then(|flash| SettingsStore::new(flash, 0).ok());
+        let mut store =
+            flash.and_then(|flash| SettingsStore::new(flash, board::SETTINGS_BASE).ok());
         let mut notice = None;
         // The record returned straight into the call's argument: no copy
         // of it in this frame.
@@ -310,83 +286,62 @@ mod app {
 
     /// The saved settings (the defaults without a valid record or a
     /// store) and the screen's notice, loaded in place into the value
-    /// returned: the machine is built from that one record (a second copy
-    /// of it, 352 B, sat under the supervisor built on the stack, on the
-    /// QEMU board's boot path).
+    /// returned, which the machine is built from.
     #[inline(never)]
     fn load_record(store: &mut Option<Store>, notice: &mut Option<&'static str>) -> Settings {
         let mut settings = Settings::default();
-        *notice = match store.as_mut().map(|s| s.load_into(&mut settings)) {
-            Some(LoadStatus::Saved { sequence }) => {
+        let Some(store) = store.as_mut() else {
+            defmt::warn!("settings: no settings store, defaults in use");
+            *notice = Some("No settings store: defaults");
+            return settings;
+        };
+        let mut status = store.load_into(&mut settings);
+        if let Some(old_base) = board::OLD_SETTINGS_BASE {
+            let migration;
+            (status, migration) = migrate(store, old_base, status, &mut settings);
+            log_migration(migration);
+        }
+        *notice = match status {
+            LoadStatus::Saved { sequence } => {
                 defmt::info!("settings: loaded record {=u32}", sequence);
                 None
             }
-            Some(LoadStatus::Defaults { reason }) => {
+            LoadStatus::Defaults { reason } => {
                 defmt::warn!("settings: defaults in use ({})", reason);
                 Some(reason.message())
-            }
-            None => {
-                defmt::warn!("settings: no settings store, defaults in use");
-                Some("No settings store: defaults")
             }
         };
         settings
     }
 
-    /// Whether this image carries the machine of `profile` (the real board
-    /// takes one image per machine; the QEMU board carries both).
-    const fn built_in(profile: Profile) -> bool {
-        match profile {
-            Profile::DrumBelt => cfg!(feature = "profile-a"),
-            Profile::SeedlingBelt => cfg!(feature = "profile-b"),
+    /// The log line of the move of the earlier layout's settings.
+    fn log_migration(migration: Migration) {
+        match migration {
+            Migration::None => {}
+            Migration::Moved { from, to } => defmt::info!(
+                "settings: record {=u32} moved from the earlier layout's pages into the store as record {=u32}, old pages erased",
+                from,
+                to
+            ),
+            Migration::OldErased => {
+                defmt::info!("settings: the earlier layout's settings pages erased")
+            }
+            Migration::Failed => defmt::warn!(
+                "settings: the earlier layout's record could not be moved (flash error): in use, moved at the next boot"
+            ),
         }
     }
-
-    /// The screen's message when the operator picks, or the saved settings
-    /// name, a machine this image does not carry.
-    const NOT_BUILT_IN: &str = if cfg!(feature = "profile-a") {
-        "This firmware runs profile A only"
-    } else {
-        "This firmware runs profile B only"
-    };
-
-    // The screen's message when the saved settings name a drum driver on
-    // an image without the link.
-    #[cfg(not(feature = "drive-link"))]
-    const NO_DRIVE_LINK: &str = "Drive link not in this image";
 
     /// Builds the machine of the saved profile in its static slot; the
     /// notice says why it is not the saved one.
     #[inline(never)]
     fn build_machine(
         slot: &'static mut MaybeUninit<Machine>,
-        mut settings: Settings,
+        settings: Settings,
     ) -> (&'static mut Machine, Option<&'static str>) {
-        let mut notice = None;
-        if !built_in(settings.profile) {
-            // A saved record from the other machine's image: run this
-            // image's machine, stopped, and say so; the record is kept
-            // until the operator saves.
-            defmt::warn!("settings: saved profile not in this image");
-            settings.profile = if cfg!(feature = "profile-a") {
-                Profile::DrumBelt
-            } else {
-                Profile::SeedlingBelt
-            };
-            notice = Some(NOT_BUILT_IN);
-        }
-        // Saved link settings on an image without the link (docs/drive-link.md,
-        // "Images"): the drum runs on its encoder and the PWM, and the
-        // screen says so; the record keeps them until the operator saves.
-        #[cfg(not(feature = "drive-link"))]
-        if settings.drive_link.kind != supervisor::drive_link::DriverKind::None {
-            defmt::warn!("settings: the drive link is not in this image: encoder and PWM");
-            settings.drive_link = supervisor::drive_link::DriveLinkSettings::default();
-            notice = Some(NO_DRIVE_LINK);
-        }
         let profile = settings.profile;
         match build_profile(slot, settings) {
-            Ok(machine) => (machine, notice),
+            Ok(machine) => (machine, None),
             Err(slot) => build_defaults(slot, profile),
         }
     }
@@ -421,25 +376,20 @@ mod app {
         slot: &'static mut MaybeUninit<Machine>,
         settings: Settings,
     ) -> Result<&'static mut Machine, &'static mut MaybeUninit<Machine>> {
-        #[allow(unreachable_patterns)]
         match settings.profile {
-            #[cfg(feature = "profile-a")]
             Profile::DrumBelt => {
                 defmt::info!("machine: profile A, drum-belt transplanter");
                 build_drum_belt(slot, settings)
             }
-            #[cfg(feature = "profile-b")]
             Profile::SeedlingBelt => {
                 defmt::info!("machine: profile B, seedling-belt planter");
                 build_seedling_belt(slot, settings)
             }
-            _ => Err(slot),
         }
     }
 
     /// Profile A, in its own stack frame (the two profiles' temporaries
     /// must not add up).
-    #[cfg(feature = "profile-a")]
     #[inline(never)]
     fn build_drum_belt(
         slot: &'static mut MaybeUninit<Machine>,
@@ -452,7 +402,6 @@ mod app {
     }
 
     /// Profile B, in its own stack frame.
-    #[cfg(feature = "profile-b")]
     #[inline(never)]
     fn build_seedling_belt(
         slot: &'static mut MaybeUninit<Machine>,
@@ -466,7 +415,6 @@ mod app {
 
     /// The drum driver's link in its static slot: a Modbus master when the
     /// settings name a driver (profile A only), else none.
-    #[cfg(feature = "drive-link")]
     #[inline(never)]
     fn build_drive(
         slot: &'static mut MaybeUninit<DriveState>,
@@ -474,7 +422,6 @@ mod app {
     ) -> &'static mut DriveState {
         #[allow(unreachable_patterns)]
         let link = match machine {
-            #[cfg(feature = "profile-a")]
             Machine::DrumBelt(sup) => sup.settings().drive_link.config().ok().flatten(),
             _ => None,
         };
@@ -496,15 +443,6 @@ mod app {
             state.link = Some(Link::new(p, config));
         }
         state
-    }
-
-    /// Without the link (feature `drive-link` off): an empty state.
-    #[cfg(not(feature = "drive-link"))]
-    fn build_drive(
-        slot: &'static mut MaybeUninit<DriveState>,
-        _machine: &Machine,
-    ) -> &'static mut DriveState {
-        slot.write(DriveState {})
     }
 
     /// Builds the screen link in its static slot.
@@ -587,7 +525,6 @@ mod app {
     ///   characters).
     /// - Released by each byte in or out and by TC: ≤ 11.5 k times a second.
     /// - Budget: 2 µs.
-    #[cfg(feature = "drive-link")]
     #[task(binds = USART2, priority = 3, shared = [drive_line])]
     fn usart2(mut cx: usart2::Context) {
         let now = board::now_us64();
@@ -603,7 +540,6 @@ mod app {
     /// - Period 1 ms while the settings name a driver; not started
     ///   otherwise.
     /// - Budget: 20 µs (a frame's encoding or a reply's parse).
-    #[cfg(feature = "drive-link")]
     #[task(priority = 3, shared = [drive, drive_line])]
     async fn drive_link(mut cx: drive_link::Context) {
         let baud = cx
@@ -663,7 +599,6 @@ mod app {
 
     /// The log line of a lost link: what the last attempt met, so that a
     /// technician knows whether to check the wiring or the profile.
-    #[cfg(feature = "drive-link")]
     fn log_link_loss(cause: Option<LossCause>) {
         match cause {
             Some(LossCause::Refused {
@@ -700,7 +635,6 @@ mod app {
     }
 
     /// The link's sample for a control step (profile A).
-    #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     fn link_sample(d: &DriveState, now_us: u64) -> supervisor::drive_link::LinkSample {
         let Some(link) = d.link.as_ref() else {
             return supervisor::drive_link::LinkSample::default();
@@ -726,30 +660,12 @@ mod app {
     }
 
     /// The link's clock (µs), for the read-back's age.
-    #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     fn link_now() -> u64 {
         board::now_us64()
     }
 
-    /// Without the link: no clock needed.
-    #[cfg(all(feature = "profile-a", not(feature = "drive-link")))]
-    fn link_now() -> u64 {
-        0
-    }
-
-    /// Without the link: no sample.
-    #[cfg(all(feature = "profile-a", not(feature = "drive-link")))]
-    fn link_sample(_: &DriveState, _: u64) -> supervisor::drive_link::LinkSample {
-        supervisor::drive_link::LinkSample::default()
-    }
-
-    /// Without the link: nothing to tell the driver.
-    #[cfg(all(feature = "profile-a", not(feature = "drive-link")))]
-    fn link_apply(_: &mut DriveState, _: bool, _: Option<i32>, _: bool) {}
-
     /// The control step's decisions for the driver: its enable through the
     /// control word (on a change), the bus speed command, a clear request.
-    #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     fn link_apply(d: &mut DriveState, enabled: bool, command: Option<i32>, clear: bool) {
         let Some(link) = d.link.as_mut() else {
             return;
@@ -805,18 +721,14 @@ mod app {
     #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop, drive])]
     async fn control(mut cx: control::Context) {
         let mut next = mono_now();
-        #[cfg(feature = "profile-a")]
         let (mut last_alarm, mut last_run) = (None::<Alarm>, RunState::Stopped);
         // The work switch (PB11), debounced here every period (profile A;
         // docs/firmware.md "Work switch").
-        #[cfg(feature = "profile-a")]
         let mut work = WorkSwitch::new();
-        #[cfg(feature = "profile-b")]
         let (mut last_belt_alarm, mut last_belt_state) =
             (None::<PlanterAlarm>, PlanterState::Stopped);
         loop {
             let sample = cx.local.sensors.sample(uptime_ms());
-            #[cfg(feature = "profile-a")]
             let now = Ticks(cx.shared.hall.lock(|h| h.now()));
             // The stop input: sampled every period (the interrupt has
             // already switched the outputs off on an opening).
@@ -825,15 +737,12 @@ mod app {
                 let change = stop.latch.sample(open, CONTROL_PERIOD_MS * 1000);
                 (change, stop.latch.is_latched())
             });
-            #[cfg(feature = "profile-a")]
             let work_change =
                 work.sample(cx.local.work_switch.is_closed(), CONTROL_PERIOD_MS * 1000);
-            #[cfg(feature = "profile-a")]
             let work_down = work.is_down();
             // In a block: the step's values are not kept across the await
             // below (the task's future is a static).
             {
-                #[cfg(feature = "profile-a")]
                 let drive = &mut cx.shared.drive;
                 let edges_out = &mut cx.local.edges_out;
                 let step = cx.shared.machine.lock(|m| {
@@ -842,7 +751,6 @@ mod app {
                         let _ = m.command(hmi_proto::screen::Command::Stop);
                     }
                     match m {
-                        #[cfg(feature = "profile-a")]
                         Machine::DrumBelt(sup) => {
                             while let Some(edge) = edges_out.dequeue() {
                                 if edge.after_lost {
@@ -860,7 +768,6 @@ mod app {
                             let bus = (sup.bus_speed_command(), sup.take_driver_clear());
                             Step::Drum(a, sup.alarm(), sup.run_state(), bus)
                         }
-                        #[cfg(feature = "profile-b")]
                         Machine::SeedlingBelt(belt) => {
                             // Profile B wiring: TIM3 counts the ground-wheel encoder,
                             // TIM2 captures one index pulse per feeding-roller turn.
@@ -891,12 +798,10 @@ mod app {
                     }
                     #[allow(unreachable_patterns)]
                     match (&step, actuators) {
-                        #[cfg(feature = "profile-a")]
                         (Step::Drum(a, ..), Actuators::Drum(drum)) => {
                             drum.set_enabled(a.driver_enabled);
                             drum.set_compare(a.ccr);
                         }
-                        #[cfg(feature = "profile-b")]
                         (Step::Belt(c, ..), Actuators::Steppers(steppers)) => {
                             steppers.set(c.feed_step_hz, c.plant_step_hz, c.enabled);
                         }
@@ -904,7 +809,6 @@ mod app {
                         _ => board::safe_state(),
                     }
                 });
-                #[cfg(feature = "profile-a")]
                 #[allow(irrefutable_let_patterns)]
                 if let Step::Drum(a, _, _, (command, clear)) = &step {
                     let on = a.driver_enabled && !stop_latched;
@@ -927,7 +831,6 @@ mod app {
                 }
 
                 match step {
-                    #[cfg(feature = "profile-a")]
                     Step::Drum(actuation, alarm, run, _) => {
                         if alarm != last_alarm {
                             match alarm {
@@ -977,7 +880,6 @@ mod app {
                         #[cfg(not(feature = "board-qemu"))]
                         let _ = actuation;
                     }
-                    #[cfg(feature = "profile-b")]
                     Step::Belt(command, alarm, state) => {
                         if alarm != last_belt_alarm {
                             if let Some(a) = alarm {
@@ -1077,29 +979,15 @@ mod app {
         match event {
             Event::Command(cmd) => {
                 defmt::info!("screen: {}", cmd);
-                let effect = match cmd {
-                    Command::SelectProfile(p) if !built_in(profile_of(p)) => {
-                        // Put the screen's selector back as well.
-                        refresh_settings(cx);
-                        Effect::Message(NOT_BUILT_IN)
-                    }
-                    // Page 10 is read-only on an image without the link
-                    // (either machine).
-                    #[cfg(not(feature = "drive-link"))]
-                    Command::SetLinkValue(_) => Effect::Message(NO_DRIVE_LINK),
-                    _ => {
-                        // Start only with the stop input proven closed; it
-                        // also releases the stop latch. (One lock site for
-                        // every command: each costs flash.)
-                        let refused = match cmd {
-                            Command::Start => cx.shared.stop.lock(|s| s.latch.start()).err(),
-                            _ => None,
-                        };
-                        match refused {
-                            Some(e) => Effect::Message(e.message()),
-                            None => cx.shared.machine.lock(|m| m.command(cmd)),
-                        }
-                    }
+                // Start only with the stop input proven closed; it also
+                // releases the stop latch.
+                let refused = match cmd {
+                    Command::Start => cx.shared.stop.lock(|s| s.latch.start()).err(),
+                    _ => None,
+                };
+                let effect = match refused {
+                    Some(e) => Effect::Message(e.message()),
+                    None => cx.shared.machine.lock(|m| m.command(cmd)),
                 };
                 match effect {
                     Effect::None => {}
@@ -1148,11 +1036,9 @@ mod app {
                 // restarted, goes back on it.
                 // (Both read first, then one lock of the screen: each lock
                 // site costs flash.)
-                #[cfg(feature = "profile-a")]
                 let alarm = cx.shared.machine.lock(|m| latched_alarm(m));
                 let stop_latched = cx.shared.stop.lock(|s| s.latch.is_latched());
                 cx.shared.hmi.lock(|hmi| {
-                    #[cfg(feature = "profile-a")]
                     if let Some(alarm) = alarm {
                         show_alarm(hmi, alarm);
                     }
@@ -1193,7 +1079,6 @@ mod app {
 
     /// A change of the work switch, and at a lift the figures of the pass
     /// that ended (profile A; `running`: the drum was running).
-    #[cfg(feature = "profile-a")]
     fn log_work_change(machine: &Machine, change: WorkChange, running: RunState) {
         #[allow(unreachable_patterns)]
         let sup = match machine {
@@ -1215,7 +1100,6 @@ mod app {
     /// The planting quality of the pass that ended (`why`: "lift" or
     /// "stop") and since Start, in the log (profile A; docs/firmware.md,
     /// "Work switch"). Shares and CV in 0.1 %.
-    #[cfg(feature = "profile-a")]
     fn log_quality(machine: &Machine, why: &str) {
         #[allow(unreachable_patterns)]
         let sup = match machine {
@@ -1247,7 +1131,6 @@ mod app {
     const STOP_INPUT_ALARM: &str = "Stop input open (stop switch)";
 
     /// Profile A's alarm on the screen's alarm page.
-    #[cfg(feature = "profile-a")]
     fn show_alarm(hmi: &mut Hmi, alarm: Alarm) {
         let mut text: heapless::String<40> = heapless::String::new();
         let _ = alarm.write_text(&mut text);
@@ -1257,18 +1140,12 @@ mod app {
     }
 
     /// Profile A's latched alarm, if that is the machine running.
-    #[cfg(feature = "profile-a")]
     fn latched_alarm(machine: &Machine) -> Option<Alarm> {
         #[allow(unreachable_patterns)]
         match machine {
             Machine::DrumBelt(sup) => sup.alarm(),
             _ => None,
         }
-    }
-
-    /// The settings' profile for the screen's.
-    const fn profile_of(p: MachineProfile) -> Profile {
-        supervisor::machine::profile_from_screen(p)
     }
 
     /// Live status on the screen and a 1 Hz summary in the log; ends a QEMU
@@ -1317,7 +1194,6 @@ mod app {
     /// lines when they happen.
     fn log_status(machine: &Machine, uptime: u32) {
         match machine {
-            #[cfg(feature = "profile-a")]
             Machine::DrumBelt(sup) => {
                 let snapshot = sup.snapshot();
                 defmt::info!(
@@ -1340,7 +1216,6 @@ mod app {
                     stats::HMI_RX_BYTES.get()
                 );
             }
-            #[cfg(feature = "profile-b")]
             Machine::SeedlingBelt(belt) => {
                 let s = belt.planter().snapshot();
                 defmt::info!(
@@ -1367,9 +1242,7 @@ mod app {
     /// drum; profile B: the steppers).
     fn motors_commanded(machine: &Machine) -> bool {
         match machine {
-            #[cfg(feature = "profile-a")]
             Machine::DrumBelt(sup) => sup.run_state() == RunState::Running,
-            #[cfg(feature = "profile-b")]
             Machine::SeedlingBelt(belt) => belt.planter().state() == PlanterState::Running,
         }
     }
@@ -1456,11 +1329,11 @@ mod app {
 /// Panic: outputs to their safe state first, then a log line, then a
 /// HardFault (an attached probe-rs halts there and prints the backtrace).
 ///
-/// The real board logs no panic location or message: keeping them links
-/// every panic site's file path and `core::fmt` into the image (≈ 2.5 KB of
-/// the 32 KB flash budget), and the defmt log is only ever read with a probe
-/// attached, which prints the backtrace of the `udf` below anyway. The QEMU
-/// board, with no flash budget, logs the location for the tests.
+/// The real board logs no panic location or message: the defmt log is only
+/// ever read with a probe attached, which prints the backtrace of the `udf`
+/// below anyway, and the locations would link every panic site's file path
+/// and `core::fmt` into the image. The QEMU board logs the location for the
+/// tests.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::interrupt::disable();

@@ -12,6 +12,7 @@ pub mod crc;
 pub mod drive;
 pub mod drive_link;
 pub mod machine;
+pub mod migrate;
 pub mod phase;
 pub mod planting;
 pub mod profile_b;

@@ -428,6 +428,24 @@ impl<F: NorFlash> SettingsStore<F> {
         self.flash
     }
 
+    /// The flash, for another store on other pages of it
+    /// ([`crate::migrate`]).
+    pub fn flash_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
+
+    /// Erases both slots, slot 0 first: the store is blank afterwards.
+    pub fn erase(&mut self) -> Result<(), StoreError<F::Error>> {
+        for slot in [0, 1] {
+            let start = self.page_offset(slot).ok_or(StoreError::OutOfBounds)?;
+            let end = start
+                .checked_add(self.page)
+                .ok_or(StoreError::OutOfBounds)?;
+            self.flash.erase(start, end)?;
+        }
+        Ok(())
+    }
+
     /// Reads both slots and returns the newest valid settings, or the
     /// defaults with the reason. Never writes.
     #[inline(never)]

@@ -39,7 +39,6 @@ use stm32f1xx_hal::{
     pac::{self, USART2},
     serial::{self, Tx},
 };
-#[cfg(feature = "drive-link")]
 use stm32f1xx_hal::{prelude::*, rcc};
 
 use defmt_semihosting as _;
@@ -109,7 +108,7 @@ static WORK_SWITCH_CLOSED: AtomicBool = AtomicBool::new(false);
 static STOP_OPENED_US: AtomicU32 = AtomicU32::new(0);
 static STOP_SAFE_US: AtomicU32 = AtomicU32::new(0);
 
-// The drum driver's line (feature `drive-link`, docs/drive-link.md).
+// The drum driver's line (docs/drive-link.md).
 
 /// Longest frame the virtual driver's gate record carries (a Modbus RTU
 /// reply of this link is at most 9 bytes; a corrupted one the same).
@@ -128,25 +127,18 @@ pub struct DriveFrame {
 pub type SensorsRef = &'static mut Sensors;
 
 /// The drum driver's line as the application holds it.
-#[cfg(feature = "drive-link")]
 pub type DriveLineRef = &'static mut DriveLine;
-/// Without the feature `drive-link`: nothing.
-#[cfg(not(feature = "drive-link"))]
-pub type DriveLineRef = ();
 
 /// Reply frames from the gate to [`DriveLine`] (three at a time at most).
-#[cfg(feature = "drive-link")]
 type DriveRxQueue = heapless::spsc::Queue<DriveFrame, 4>;
 /// When each request frame's last bit left (firmware µs), for the truth
 /// record (see [`Sensors::sample`]): at most two requests fit in a 10 ms
 /// period at 115 200 baud.
-#[cfg(feature = "drive-link")]
 type DriveTxQueue = heapless::spsc::Queue<u32, 4>;
 /// Most request end times one truth record carries.
 const TRUTH_MAX_FRAMES: usize = 3;
 
 /// USART2, the RS-485 line to the drum driver (QEMU: DE on PA1 is a no-op).
-#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 ///
 /// QEMU's USART sends a byte the moment it is written, so the line's time
 /// is modelled here: a request of `n` bytes ends `n` character times
@@ -163,7 +155,6 @@ pub struct DriveLine {
     tx_ends: heapless::spsc::Producer<'static, u32>,
 }
 
-#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 impl DriveLine {
     /// The line's speed (QEMU's USART ignores it; the model uses it).
     pub fn set_baud(&mut self, baud: u32) {
@@ -230,9 +221,7 @@ pub struct Board {
     pub hmi_tx: super::HmiTx,
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
-    /// The drum driver's RS-485 line (USART2), in a static (the QEMU
-    /// board's boot stack has no room to move it through `init`); `()`
-    /// without the feature `drive-link`.
+    /// The drum driver's RS-485 line (USART2), in a static.
     pub drive_line: DriveLineRef,
     /// Drum PWM stand-in.
     pub drum: DrumDrive,
@@ -249,7 +238,6 @@ pub struct Board {
     /// The watchdog stand-in.
     pub watchdog: Watchdog,
     /// Profile B's feeding step output stand-in.
-    #[cfg(feature = "profile-b")]
     pub feed_step: FeedStep,
     /// The settings flash stand-in, if the command line named a file.
     pub settings_flash: Option<SettingsFlash>,
@@ -377,15 +365,11 @@ pub fn init(dp: pac::Peripherals) -> Board {
     // (the F1's USART2 address is the F205's too; its RCC, AFIO and GPIO
     // writes land on unmapped addresses, which this machine ignores, and
     // HSI is the one clock that needs no ready flag).
-    #[cfg(feature = "drive-link")]
     let mut rcc = dp
         .RCC
         .freeze(rcc::Config::hsi(), &mut dp.FLASH.constrain().acr);
-    #[cfg(feature = "drive-link")]
     let mut gpioa = dp.GPIOA.split(&mut rcc);
-    #[cfg(feature = "drive-link")]
     let tx2 = gpioa.pa2.into_alternate_push_pull(&mut gpioa.crl);
-    #[cfg(feature = "drive-link")]
     let drive_uart = dp.USART2.serial(
         (tx2, gpioa.pa3),
         serial::Config::default()
@@ -393,18 +377,14 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
-    #[cfg(feature = "drive-link")]
     let (drive_tx, _drive_rx) = drive_uart.split();
-    #[cfg(feature = "drive-link")]
     let (Some(drive_rx_queue), Some(drive_tx_queue)) = (
         cortex_m::singleton!(: DriveRxQueue = DriveRxQueue::new()),
         cortex_m::singleton!(: DriveTxQueue = DriveTxQueue::new()),
     ) else {
         fatal()
     };
-    #[cfg(feature = "drive-link")]
     let (drive_rx_in, drive_rx_out) = drive_rx_queue.split();
-    #[cfg(feature = "drive-link")]
     let (drive_tx_in, drive_tx_out) = drive_tx_queue.split();
     DRUM_CCR.store(0, Relaxed);
     DRIVER_ENABLE.store(false, Relaxed);
@@ -420,7 +400,6 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let gate_path = cmd.gate.get(..cmd.gate_len).filter(|p| !p.is_empty());
     let gate = gate_path.and_then(|p| sh::open(p, 1, None));
     // Mode 5 = "wb": the truth FIFO is the gate's path with a `t`.
-    #[cfg(feature = "drive-link")]
     let truth = gate_path
         .filter(|_| cmd.scenario.drive_link && gate.is_some())
         .and_then(|p| sh::open(p, 5, Some(b't')));
@@ -487,7 +466,6 @@ pub fn init(dp: pac::Peripherals) -> Board {
     if let Some(v) = scenario.speed_mm_s {
         machine.set_travel_speed_m_s(v as f32 / 1000.0);
     }
-    #[cfg(feature = "drive-link")]
     let Some(drive_line) = cortex_m::singleton!(: DriveLine = DriveLine {
         tx: drive_tx,
         baud: 9_600,
@@ -497,7 +475,6 @@ pub fn init(dp: pac::Peripherals) -> Board {
     }) else {
         fatal()
     };
-    #[cfg(feature = "drive-link")]
     let drive = match truth {
         Some(truth) => cortex_m::singleton!(: DriveSim = DriveSim {
             truth,
@@ -508,8 +485,6 @@ pub fn init(dp: pac::Peripherals) -> Board {
         }),
         None => None,
     };
-    #[cfg(not(feature = "drive-link"))]
-    let (drive, drive_line) = (None, ());
     // In a static: moved through `init` by value, its ≈ 0.25 KB sat twice
     // in the frame under which RTIC runs the first tasks.
     let Some(sensors) = cortex_m::singleton!(: Sensors = Sensors {
@@ -536,7 +511,6 @@ pub fn init(dp: pac::Peripherals) -> Board {
         stop_input: StopInput,
         work_switch: WorkSwitchInput,
         watchdog: Watchdog,
-        #[cfg(feature = "profile-b")]
         feed_step: FeedStep,
         settings_flash,
         run_limit_ms: cmd.run_ms,
@@ -582,17 +556,14 @@ impl DrumDrive {
 
 /// Profile B's two step-pulse outputs (stand-ins for TIM1 CH1 and TIM4 CH1)
 /// and the drivers' enable.
-#[cfg(feature = "profile-b")]
 pub struct Steppers {
     _drum: DrumDrive,
     _feed: FeedStep,
 }
 
 /// Profile B's feeding step output stand-in (TIM4 is not emulated).
-#[cfg(feature = "profile-b")]
 pub struct FeedStep;
 
-#[cfg(feature = "profile-b")]
 impl Steppers {
     /// Takes over the drum PWM's timer for step pulses (profile B).
     pub fn new(drum: DrumDrive, feed: FeedStep) -> Self {
@@ -642,7 +613,6 @@ pub struct Sensors {
 }
 
 /// The QEMU board's side of the host's virtual drum driver.
-#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 struct DriveSim {
     /// The truth FIFO (semihosting handle).
     truth: usize,
@@ -684,7 +654,6 @@ fn due(at: Option<u32>, from: u32, to: u32) -> bool {
 /// since the last record and each one's end (firmware µs, u32); all little
 /// endian. Written before the gate is read, so that the host, having read
 /// it, knows the period before has ended and its requests are on USART2.
-#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 fn write_truth(d: &mut DriveSim, drum_rpm: f32) {
     const HEAD: usize = 9;
     let mut rec = [0u8; HEAD + 4 * TRUTH_MAX_FRAMES];
@@ -715,7 +684,6 @@ fn write_truth(d: &mut DriveSim, drum_rpm: f32) {
 /// frames, each with the firmware time its last byte arrives (µs, u32),
 /// its length and bytes; then the driver's flags and bus speed command
 /// (drum milli-r/min, i32). False when the host's end is gone.
-#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 fn read_drive(h: usize, d: &mut DriveSim) -> bool {
     let mut count = [0u8; 1];
     if !sh::read(h, &mut count) {
@@ -1254,6 +1222,15 @@ fn parse_i32(text: &[u8]) -> Option<i32> {
     }
 }
 
+/// Where the settings store's two pages start in [`SettingsFlash`] (the
+/// host file holds just those pages, the real board's 0x0801E000).
+pub const SETTINGS_BASE: u32 = 0;
+/// This board has no earlier layout's settings to move.
+pub const OLD_SETTINGS_BASE: Option<u32> = None;
+/// The pages [`SettingsFlash`] reaches.
+#[allow(clippy::single_range_in_vec_init)] // one window, the file's two pages
+const SETTINGS_WINDOWS: [core::ops::Range<u32>; 1] = [0..SETTINGS_FLASH_BYTES];
+
 /// The settings flash stand-in: a host file through semihosting, with the
 /// F103's NOR rules enforced (erase to 0xFF in 1 KB pages, programming in
 /// half-words onto erased half-words only).
@@ -1336,7 +1313,7 @@ impl ReadNorFlash for SettingsFlash {
     const READ_SIZE: usize = 1;
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
-        check_flash_access(offset, bytes.len(), 1)?;
+        check_flash_access(offset, bytes.len(), 1, &SETTINGS_WINDOWS)?;
         if sh::seek(self.handle, offset) && sh::read(self.handle, bytes) {
             Ok(())
         } else {
@@ -1354,7 +1331,7 @@ impl NorFlash for SettingsFlash {
     const ERASE_SIZE: usize = SETTINGS_PAGE_BYTES as usize;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
-        check_flash_erase(from, to)?;
+        check_flash_erase(from, to, &SETTINGS_WINDOWS)?;
         let erased = [0xFFu8; 256];
         let mut at = from;
         while at < to {
@@ -1367,7 +1344,7 @@ impl NorFlash for SettingsFlash {
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
-        check_flash_access(offset, bytes.len(), 2)?;
+        check_flash_access(offset, bytes.len(), 2, &SETTINGS_WINDOWS)?;
         // Check erased first, like the F103 refuses to program over data.
         let mut at = offset;
         for chunk in bytes.chunks(64) {

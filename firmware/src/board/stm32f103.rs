@@ -69,7 +69,8 @@ pub struct Board {
     /// Hall capture timer (its interrupt is TIM2).
     pub hall: HallCapture,
     /// RS-485 link to the motor driver (docs/drive-link.md): USART2 with
-    /// driver-enable on PA1, receiving until a frame is sent; in a static.
+    /// driver-enable on PA1, idle until the link task sets its baud rate;
+    /// in a static.
     pub drive_line: DriveLineRef,
     /// Status LED.
     pub led: StatusLed,
@@ -79,10 +80,9 @@ pub struct Board {
     pub work_switch: WorkSwitchInput,
     /// The independent watchdog (running).
     pub watchdog: Watchdog,
-    /// Profile B's feeding-motor step output (TIM4 CH1 on PB6), idle. The
-    /// profile A image leaves TIM4 and its pins in their reset state.
-    #[cfg(feature = "profile-b")]
-    pub feed_step: FeedStep,
+    /// Profile B's feeding-motor step output (TIM4 CH1 on PB6) and the
+    /// direction pins, in their reset state until profile B takes them.
+    pub feed_step: FeedStepPins,
     /// The settings pages of the MCU's flash.
     pub settings_flash: Option<SettingsFlash>,
     /// The real board runs until it is switched off.
@@ -95,9 +95,7 @@ pub struct Board {
 /// value).
 pub type SensorsRef = Sensors;
 
-/// The drum driver's line as the application holds it (the same with or
-/// without the feature `drive-link`: USART2 is set up either way, idle
-/// without it).
+/// The drum driver's line as the application holds it.
 pub type DriveLineRef = &'static mut DriveLine;
 
 /// Longest Modbus RTU frame this link sends or takes (its replies are at
@@ -119,10 +117,9 @@ const DRIVE_FRAME_MAX: usize = 16;
 ///   characters of silence ([`DriveLine::receive`], polled by the link task
 ///   every 1 ms: the F103's idle-line flag is one character, too short for
 ///   RTU). Bytes while DE is high (an echo) are dropped.
-#[cfg_attr(not(feature = "drive-link"), allow(dead_code))]
 pub struct DriveLine {
     _tx: Tx<USART2>,
-    _rx: Rx<USART2>,
+    usart_rx: Rx<USART2>,
     de: PA1<Output<PushPull>>,
     out: [u8; DRIVE_FRAME_MAX],
     out_len: u8,
@@ -136,21 +133,14 @@ pub struct DriveLine {
 }
 
 /// USART_SR / USART_CR1 bits (RM0008 §27.6.1, §27.6.4).
-#[cfg(feature = "drive-link")]
 const SR_RXNE: u16 = 1 << 5;
-#[cfg(feature = "drive-link")]
 const SR_TC: u16 = 1 << 6;
-#[cfg(feature = "drive-link")]
 const SR_TXE: u16 = 1 << 7;
-#[cfg(feature = "drive-link")]
 const CR1_TCIE: u16 = 1 << 6;
-#[cfg(feature = "drive-link")]
 const CR1_TXEIE: u16 = 1 << 7;
 /// USART2's clock: PCLK1 = 36 MHz.
-#[cfg(feature = "drive-link")]
 const PCLK1_HZ: u32 = 36_000_000;
 
-#[cfg(feature = "drive-link")]
 impl DriveLine {
     fn regs() -> &'static pac::usart1::RegisterBlock {
         // SAFETY: USART2's registers; only this type touches them after
@@ -160,7 +150,8 @@ impl DriveLine {
 
     /// Sets the line's speed: BRR = PCLK1 / baud, rounded (RM0008
     /// §27.3.4: 36 MHz / 9600 = 3750.0; / 115 200 = 312.5 → 313, +0.16 %).
-    /// Called while the line is idle.
+    /// Called while the line is idle, by the link task when it starts:
+    /// the receive interrupt is on from then.
     pub fn set_baud(&mut self, baud: u32) {
         let brr = PCLK1_HZ.saturating_add(baud / 2) / baud.max(1);
         self.silent_us = drive_link::timing::silent_interval_us(baud).unwrap_or(4_011);
@@ -168,6 +159,7 @@ impl DriveLine {
         Self::regs()
             .brr()
             .write(|w| unsafe { w.bits(u16::try_from(brr).unwrap_or(u16::MAX)) });
+        self.usart_rx.listen();
     }
 
     /// Sends a request frame: DE high, then the bytes from the interrupt.
@@ -352,10 +344,11 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
-    let (tx, mut rx) = rs.split();
+    // Idle, receive interrupt off, until the link task sets the baud rate
+    // (only when the settings name a driver).
+    let (tx, rx) = rs.split();
     // DE low (receive) from the start.
     let de = gpioa.pa1.into_push_pull_output(&mut gpioa.crl);
-    rx.listen();
 
     // Drum PWM, TIM1 CH1 on PA8; driver enable and direction. PA8 is handed
     // to the timer only once the timer drives it low (PA8 stays a GPIO
@@ -366,16 +359,9 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let drum = DrumDrive::new(tim1, enable, direction);
     let _pwm_pin = gpioa.pa8.into_alternate_push_pull(&mut gpioa.crh);
 
-    // Profile B: feeding STEP on PB6 (TIM4 CH1), directions on PB14/PB15.
-    #[cfg(feature = "profile-b")]
-    let feed_step = {
-        let feed_dir = gpiob.pb14.into_push_pull_output(&mut gpiob.crh);
-        let plant_dir = gpiob.pb15.into_push_pull_output(&mut gpiob.crh);
-        let tim4 = Timer::new(dp.TIM4, &mut rcc).release();
-        let feed_step = FeedStep::new(tim4, feed_dir, plant_dir);
-        let _feed_pin = gpiob.pb6.into_alternate_push_pull(&mut gpiob.crl);
-        feed_step
-    };
+    // Profile B's feeding STEP (TIM4 CH1 on PB6) and directions (PB14,
+    // PB15): clocked here, set up only for profile B (`Steppers::new`).
+    let tim4 = Timer::new(dp.TIM4, &mut rcc).release();
 
     // Hall input capture, TIM2 CH1 on PA0 (NPN switch: pull-up, falling edge).
     let _hall_pin = gpioa.pa0.into_pull_up_input(&mut gpioa.crl);
@@ -405,9 +391,18 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let work_switch = WorkSwitchInput {
         pin: gpiob.pb11.into_pull_up_input(&mut gpiob.crh),
     };
+    let feed_step = FeedStepPins {
+        tim: tim4,
+        step: gpiob.pb6,
+        feed_dir: gpiob.pb14,
+        plant_dir: gpiob.pb15,
+        crl: gpiob.crl,
+        crh: gpiob.crh,
+    };
 
     let Some(drive_line) = cortex_m::singleton!(: DriveLine = DriveLine {
-            _tx: tx,            _rx: rx,
+            _tx: tx,
+            usart_rx: rx,
             de,
             out: [0; DRIVE_FRAME_MAX],
             out_len: 0,
@@ -432,7 +427,6 @@ pub fn init(dp: pac::Peripherals) -> Board {
         stop_input,
         work_switch,
         watchdog,
-        #[cfg(feature = "profile-b")]
         feed_step,
         settings_flash: Some(SettingsFlash { flash }),
         run_limit_ms: None,
@@ -446,7 +440,6 @@ pub fn init(dp: pac::Peripherals) -> Board {
 const CR1_CEN: u32 = 1;
 /// TIMx_CR1 UDIS (bit 1): update events disabled, the shadow registers
 /// (PSC, ARR, CCRx) keep their values (§15.4.1).
-#[cfg(feature = "profile-b")]
 const CR1_UDIS: u32 = 1 << 1;
 /// TIMx_CR1 ARPE (bit 7): ARR preloaded.
 const CR1_ARPE: u32 = 1 << 7;
@@ -460,7 +453,6 @@ const CCMR1_OC1M_PWM1: u32 = 0b110 << 4;
 /// (§15.4.7: the mode bits are not preloaded).
 const CCMR1_OC1M_FORCE_INACTIVE: u32 = 0b100 << 4;
 /// TIMx_CCMR1 OC1M field mask.
-#[cfg(feature = "profile-b")]
 const CCMR1_OC1M_MASK: u32 = 0b111 << 4;
 /// TIMx_CCER CC1E (bit 0): OC1 output enabled, CC1P = 0 (active high).
 const CCER_CC1E: u32 = 1;
@@ -548,7 +540,6 @@ impl DrumDrive {
 /// Timer settings for a square wave of `rate` (U16F16 Hz) from 72 MHz:
 /// `(PSC, ARR)`, the finest prescaler that keeps ARR within 16 bits; `None`
 /// for 0 Hz (or a rate below 0.14 Hz).
-#[cfg(feature = "profile-b")]
 fn step_timing(rate_bits: u32) -> Option<(u16, u16)> {
     if rate_bits == 0 {
         return None;
@@ -578,7 +569,6 @@ fn step_timing(rate_bits: u32) -> Option<(u16, u16)> {
 ///   counter still wraps on the old ARR), then UDIS = 0: the first update
 ///   after that loads all three together. The current pulse finishes on the
 ///   old values, so a change takes effect within one old period.
-#[cfg(feature = "profile-b")]
 macro_rules! set_step_rate {
     ($tim:expr, $rate_bits:expr) => {{
         let tim = &$tim;
@@ -613,16 +603,36 @@ macro_rules! set_step_rate {
     }};
 }
 
+/// TIM4 and the pins of profile B's feeding-motor step output and both
+/// motors' directions, as the reset left them (profile A leaves them so).
+pub struct FeedStepPins {
+    tim: pac::TIM4,
+    step: stm32f1xx_hal::gpio::PB6,
+    feed_dir: stm32f1xx_hal::gpio::PB14,
+    plant_dir: stm32f1xx_hal::gpio::PB15,
+    crl: stm32f1xx_hal::gpio::Cr<'B', false>,
+    crh: stm32f1xx_hal::gpio::Cr<'B', true>,
+}
+
+impl FeedStepPins {
+    /// The step output, idle, and the direction pins, forward.
+    fn into_feed_step(mut self) -> FeedStep {
+        let feed_dir = self.feed_dir.into_push_pull_output(&mut self.crh);
+        let plant_dir = self.plant_dir.into_push_pull_output(&mut self.crh);
+        let feed_step = FeedStep::new(self.tim, feed_dir, plant_dir);
+        let _step_pin = self.step.into_alternate_push_pull(&mut self.crl);
+        feed_step
+    }
+}
+
 /// Profile B's feeding-motor step output, TIM4 CH1 on PB6, with both
 /// motors' direction pins (forward = low).
-#[cfg(feature = "profile-b")]
 pub struct FeedStep {
     tim: pac::TIM4,
     _feed_dir: stm32f1xx_hal::gpio::PB14<Output<PushPull>>,
     _plant_dir: stm32f1xx_hal::gpio::PB15<Output<PushPull>>,
 }
 
-#[cfg(feature = "profile-b")]
 impl FeedStep {
     fn new(
         tim: pac::TIM4,
@@ -659,19 +669,20 @@ impl FeedStep {
 /// Profile B's two step outputs: the planting motor on TIM1 CH1 (PA8, the
 /// drum PWM pin of profile A) and the feeding motor on TIM4 CH1 (PB6); the
 /// drivers share the enable on PB12.
-#[cfg(feature = "profile-b")]
 pub struct Steppers {
     drum: DrumDrive,
     feed: FeedStep,
 }
 
-#[cfg(feature = "profile-b")]
 impl Steppers {
     /// Takes over the drum PWM's timer for step pulses (profile B), forced
     /// inactive (no pulses) until a rate is set.
-    pub fn new(drum: DrumDrive, feed: FeedStep) -> Self {
+    pub fn new(drum: DrumDrive, feed: FeedStepPins) -> Self {
         set_step_rate!(drum.tim, 0);
-        Self { drum, feed }
+        Self {
+            drum,
+            feed: feed.into_feed_step(),
+        }
     }
 
     /// Sets both pulse rates (U16F16 Hz) and the drivers' enable.
@@ -873,23 +884,23 @@ impl Watchdog {
     }
 }
 
-/// Offset of the settings pages from the start of flash (0x0800E000, see
-/// memory-stm32f103.x).
-#[cfg(not(feature = "drive-link"))]
-const SETTINGS_OFFSET: u32 = 0xE000;
-/// With the drive link, the 128 KB parts' layout: 0x0801E000, see
-/// memory-stm32f103-128k.x.
-#[cfg(feature = "drive-link")]
-const SETTINGS_OFFSET: u32 = 0x1_E000;
-/// The flash the HAL's writer may reach: the settings pages at 0x0800E000
-/// lie in the first 64 KB, those of the image with the drive link in the
-/// 128 KB parts' last 8 KB.
-#[cfg(not(feature = "drive-link"))]
-const FLASH_SIZE: FlashSize = FlashSize::Sz64K;
-/// See above.
-#[cfg(feature = "drive-link")]
+/// Where the settings store's two pages start, from the start of flash:
+/// 0x0801E000, the first pages of the last 8 KB of the 128 KB
+/// (memory-stm32f103.x).
+pub const SETTINGS_BASE: u32 = 0x1_E000;
+/// Where images of the earlier layout kept them: 0x0800E000 (moved once
+/// at boot, `supervisor::migrate`; no loaded byte of this image falls on
+/// those two pages).
+pub const OLD_SETTINGS_BASE: Option<u32> = Some(0xE000);
+/// The pages [`SettingsFlash`] reaches: the store's and the old store's.
+const SETTINGS_WINDOWS: [core::ops::Range<u32>; 2] = [
+    SETTINGS_BASE..SETTINGS_BASE + SETTINGS_FLASH_BYTES,
+    0xE000..0xE000 + SETTINGS_FLASH_BYTES,
+];
+/// The flash the HAL's writer may reach: all 128 KB.
 const FLASH_SIZE: FlashSize = FlashSize::Sz128K;
-/// The settings pages of the MCU's own flash as a NOR flash.
+/// The MCU's own flash as a NOR flash (offsets from 0x08000000) that reaches
+/// the settings pages only ([`SETTINGS_WINDOWS`]).
 pub struct SettingsFlash {
     flash: flash::Parts,
 }
@@ -902,17 +913,17 @@ impl ReadNorFlash for SettingsFlash {
     const READ_SIZE: usize = 1;
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
-        check_flash_access(offset, bytes.len(), 1)?;
+        check_flash_access(offset, bytes.len(), 1, &SETTINGS_WINDOWS)?;
         let writer = self.flash.writer(SectorSize::Sz1K, FLASH_SIZE);
         let data = writer
-            .read(SETTINGS_OFFSET + offset, bytes.len())
+            .read(offset, bytes.len())
             .map_err(|_| FlashError::Device)?;
         bytes.copy_from_slice(data);
         Ok(())
     }
 
     fn capacity(&self) -> usize {
-        SETTINGS_FLASH_BYTES as usize
+        128 * 1024
     }
 }
 
@@ -921,19 +932,17 @@ impl NorFlash for SettingsFlash {
     const ERASE_SIZE: usize = SETTINGS_PAGE_BYTES as usize;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
-        check_flash_erase(from, to)?;
+        check_flash_erase(from, to, &SETTINGS_WINDOWS)?;
         let mut writer = self.flash.writer(SectorSize::Sz1K, FLASH_SIZE);
         writer
-            .erase(SETTINGS_OFFSET + from, (to - from) as usize)
+            .erase(from, (to - from) as usize)
             .map_err(|_| FlashError::Device)
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
-        check_flash_access(offset, bytes.len(), 2)?;
+        check_flash_access(offset, bytes.len(), 2, &SETTINGS_WINDOWS)?;
         let mut writer = self.flash.writer(SectorSize::Sz1K, FLASH_SIZE);
-        writer
-            .write(SETTINGS_OFFSET + offset, bytes)
-            .map_err(|_| FlashError::Device)
+        writer.write(offset, bytes).map_err(|_| FlashError::Device)
     }
 }
 
@@ -987,7 +996,6 @@ pub fn stop_outputs() {
         let tim1 = &*TIM1::ptr();
         tim1.ccr1().write(|w| w.ccr().set(0));
         tim1.egr().write(|w| w.ug().set_bit());
-        #[cfg(feature = "profile-b")]
         {
             let tim4 = &*pac::TIM4::ptr();
             tim4.ccr1().write(|w| w.ccr().set(0));
@@ -1063,7 +1071,6 @@ pub fn safe_state() {
         gpiob
             .crh()
             .modify(|r, w| w.bits((r.bits() & !(0xF << 16)) | (GPIO_OUT_PP_2MHZ << 16)));
-        #[cfg(feature = "profile-b")]
         gpiob
             .crl()
             .modify(|r, w| w.bits((r.bits() & !(0xF << 24)) | (GPIO_OUT_PP_2MHZ << 24)));
@@ -1072,7 +1079,6 @@ pub fn safe_state() {
             .write(|w| w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE));
         tim1.ccr1().write(|w| w.ccr().set(0));
         tim1.bdtr().write(|w| w.bits(BDTR_OSSR_OSSI));
-        #[cfg(feature = "profile-b")]
         {
             let tim4 = &*pac::TIM4::ptr();
             tim4.ccmr1_output()

@@ -47,3 +47,14 @@ pub fn pages_with(settings: &Settings) -> Vec<u8> {
     store.save(settings).unwrap();
     store.into_inner().0
 }
+
+/// The settings the store on `pages` (two 1 KB pages) loads, if it holds a
+/// valid record.
+#[allow(dead_code)] // not every test file reads pages back
+pub fn saved_in(pages: &[u8]) -> Option<Settings> {
+    let mut store = SettingsStore::new(Pages(pages.to_vec()), 0).unwrap();
+    match store.load() {
+        supervisor::store::Loaded::Saved { settings, .. } => Some(settings),
+        supervisor::store::Loaded::Defaults { .. } => None,
+    }
+}

@@ -25,7 +25,6 @@
 #![no_main]
 
 mod board;
-mod div64;
 mod edge_queue;
 mod screen_line;
 mod stats;
@@ -38,14 +37,7 @@ defmt::timestamp!("{=u32:ms}", uptime_ms());
 
 /// Milliseconds since boot (the monotonic runs at 1 kHz; wraps after 49 days).
 fn uptime_ms() -> u32 {
-    mono_now().duration_since_epoch().as_millis()
-}
-
-/// The monotonic's time. Not inlined: reading it takes a critical section
-/// and an overflow check, ≈ 34 B of code at each of its calls.
-#[inline(never)]
-fn mono_now() -> <Mono as rtic_monotonics::Timebase>::Instant {
-    Mono::now()
+    Mono::now().duration_since_epoch().as_millis()
 }
 
 /// Control period.
@@ -69,8 +61,8 @@ const EDGE_QUEUE: usize = 16;
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [CAN_RX1, CAN_SCE, ADC1_2])]
 mod app {
     use super::{
-        board, mono_now, screen_line, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE,
-        HMI_TICK_MS, RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS, TX_RING,
+        board, screen_line, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS,
+        RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS, TX_RING,
     };
     use crate::edge_queue::DropMark;
     use ::drive_link::link::ControlAction;
@@ -353,17 +345,15 @@ mod app {
     /// first boot of any board. In its own stack frame: the defaults'
     /// temporaries must not add to `build_machine`'s.
     #[inline(never)]
-    #[allow(clippy::field_reassign_with_default)] // see `defaults` below
     fn build_defaults(
         slot: &'static mut MaybeUninit<Machine>,
         profile: Profile,
     ) -> (&'static mut Machine, Option<&'static str>) {
         defmt::error!("machine settings rejected, defaults in use");
-        // Built in place, then the profile set: the struct-update
-        // expression clippy prefers copied every other field one by one
-        // (120 B of flash).
-        let mut defaults = Settings::default();
-        defaults.profile = profile;
+        let defaults = Settings {
+            profile,
+            ..Settings::default()
+        };
         match build_profile(slot, defaults) {
             Ok(machine) => (machine, Some("Saved settings rejected: defaults")),
             Err(_) => board::fatal(),
@@ -420,18 +410,11 @@ mod app {
         slot: &'static mut MaybeUninit<DriveState>,
         machine: &Machine,
     ) -> &'static mut DriveState {
-        #[allow(unreachable_patterns)]
         let link = match machine {
             Machine::DrumBelt(sup) => sup.settings().drive_link.config().ok().flatten(),
-            _ => None,
+            Machine::SeedlingBelt(_) => None,
         };
-        // The empty state first, then the link built in its place (built
-        // aside and moved in, it was copied field by field: 140 B of flash).
-        let state = slot.write(DriveState {
-            link: None,
-            enabled: None,
-        });
-        if let Some((p, config)) = link {
+        let link = link.map(|(p, config)| {
             defmt::info!(
                 "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us, retry gap {=u32} us, driver offline time {=u16} ms",
                 p.slave,
@@ -440,9 +423,12 @@ mod app {
                 config.retry_gap_us,
                 config.offline_time_ms
             );
-            state.link = Some(Link::new(p, config));
-        }
-        state
+            Link::new(p, config)
+        });
+        slot.write(DriveState {
+            link,
+            enabled: None,
+        })
     }
 
     /// Builds the screen link in its static slot.
@@ -720,7 +706,7 @@ mod app {
     /// - Budget: 1 ms (measured cost: docs/PERFORMANCE.md).
     #[task(priority = 2, local = [sensors, work_switch, actuators, watchdog, edges_out], shared = [machine, hmi, hall, stop, drive])]
     async fn control(mut cx: control::Context) {
-        let mut next = mono_now();
+        let mut next = Mono::now();
         let (mut last_alarm, mut last_run) = (None::<Alarm>, RunState::Stopped);
         // The work switch (PB11), debounced here every period (profile A;
         // docs/firmware.md "Work switch").
@@ -918,7 +904,7 @@ mod app {
             }
             stats::CONTROL_LOOPS.inc();
             next += CONTROL_PERIOD_MS.millis();
-            if mono_now() > next {
+            if Mono::now() > next {
                 stats::CONTROL_OVERRUNS.inc();
             } else {
                 cx.local.watchdog.feed();
@@ -1034,8 +1020,6 @@ mod app {
                 refresh_settings(cx);
                 // An alarm latched while the screen was away, or before it
                 // restarted, goes back on it.
-                // (Both read first, then one lock of the screen: each lock
-                // site costs flash.)
                 let alarm = cx.shared.machine.lock(|m| latched_alarm(m));
                 let stop_latched = cx.shared.stop.lock(|s| s.latch.is_latched());
                 cx.shared.hmi.lock(|hmi| {
@@ -1058,9 +1042,7 @@ mod app {
         }
     }
 
-    /// Shows `text` in the screen's message box (hmi task; one copy of the
-    /// lock for the event handler's messages, to keep the image small).
-    #[inline(never)]
+    /// Shows `text` in the screen's message box (hmi task).
     fn say(cx: &mut hmi::Context, text: &str) {
         cx.shared.hmi.lock(|hmi| {
             let _ = hmi.show_message(text);
@@ -1069,7 +1051,6 @@ mod app {
 
     /// Writes the machine's settings to the screen (hmi task; what changed
     /// since the screen last got them).
-    #[inline(never)]
     fn refresh_settings(cx: &mut hmi::Context) {
         let screen = cx.shared.machine.lock(|m| m.screen_settings());
         cx.shared.hmi.lock(|hmi| {
@@ -1156,7 +1137,7 @@ mod app {
     /// - Budget: 2 ms.
     #[task(priority = 1, local = [led, run_limit_ms], shared = [machine, hmi])]
     async fn status(mut cx: status::Context) {
-        let mut next = mono_now();
+        let mut next = Mono::now();
         let mut runs: u32 = 0;
         loop {
             let uptime = uptime_ms();
@@ -1277,8 +1258,8 @@ mod app {
         while let Ok(()) = cx.local.saves_out.recv().await {
             let mut waited = 0;
             let text = loop {
-                // The check and the save under one lock (one lock site in
-                // flash; nothing can start the motors in between).
+                // The check and the save under one lock: nothing can start
+                // the motors in between.
                 let store = &mut *cx.local.store;
                 let done = cx.shared.machine.lock(|m| {
                     if motors_commanded(m) {

@@ -12,6 +12,7 @@ pub mod crc;
 pub mod drive;
 pub mod drive_link;
 pub mod machine;
+pub mod machine_step;
 pub mod migrate;
 pub mod phase;
 pub mod planting;

@@ -7,8 +7,10 @@
 //!
 //! Used by the integration tests in `tests/tests/` and by `cargo xtask qemu`.
 
+pub mod browser;
 pub mod drive;
 pub mod images;
+pub mod screen_web;
 pub mod thumb;
 
 use std::io::{self, BufRead, BufReader, Read, Write};
@@ -637,6 +639,14 @@ impl Firmware {
             self.allow(1)?;
         }
         Ok(())
+    }
+
+    /// A second handle on the socket of the firmware's USART1, for a
+    /// screen served elsewhere (the browser screen's server,
+    /// [`screen_web::ScreenServer`]). Whoever holds it reads the firmware's
+    /// bytes: do not also call the `read_serial_*` methods.
+    pub fn serial_stream(&self) -> io::Result<TcpStream> {
+        self.serial.try_clone()
     }
 
     /// Sends bytes into the firmware's USART1 (the touchscreen's TX line);

@@ -349,7 +349,7 @@
   function setText(c, t) {
     c.txt = t;
     paint(c);
-    if (t && (c.def.role === 'alarm' || c.def.role === 'message')) {
+    if (t && c.def.page !== 0 && (c.def.role === 'alarm' || c.def.role === 'message')) {
       logEvent(c.def.role === 'alarm' ? 'alarm' : 'message', t);
     }
   }
@@ -636,13 +636,15 @@
         used.add(c);
         tiles.append(tile(c));
       }
-      if (tiles.childElementCount) right.append(tiles);
+      const hasStatus = comps.some((c) => c.def.role === 'status');
+      if (tiles.childElementCount) (hasStatus ? right : left).append(tiles);
       for (const s of statics) {
         const sc = makeComp({ page: pd.id, id: s.id, name: s.name, kind: 'text', decimals: 0,
           role: 'static', detail: '', press: false, release: false, starts_motor: false,
           stop: false, label: null, unit: '' });
         sc.static = s.text;
         sc.txt = s.text;
+        used.add(sc);
         const t = el('div', 'static-text');
         tag(t, sc);
         t.textContent = s.text;
@@ -679,7 +681,10 @@
       if (p.run) {
         right.append(monitorPanel(p));
       }
-      if (!right.childElementCount) sec.classList.add('wide');
+      if (!hasStatus) {
+        sec.classList.add('wide');
+        left.append(...right.childNodes);
+      }
       const body = el('div', 'body');
       body.append(left, right);
       foot.prepend(nav);
@@ -749,11 +754,14 @@
       const paths = [];
       let max = 0;
       const data = m.lines.map((c) => (series.get(c.def.detail) || []).filter((pt) => now - pt.t <= WINDOW_MS));
-      for (const d of data) for (const pt of d) max = Math.max(max, pt.v);
+      // The chart spans the last minute, or the time since the first value.
+      let first = now;
+      for (const d of data) for (const pt of d) { max = Math.max(max, pt.v); first = Math.min(first, pt.t); }
+      const span = Math.min(WINDOW_MS, Math.max(5000, now - first));
       max = max > 0 ? max * 1.1 : 1;
       data.forEach((d, i) => {
         if (!d.length) return;
-        const pts = d.map((pt) => ((600 * (1 - (now - pt.t) / WINDOW_MS)).toFixed(1)) + ',' +
+        const pts = d.map((pt) => ((600 * (1 - (now - pt.t) / span)).toFixed(1)) + ',' +
           (150 - 150 * pt.v / max).toFixed(1)).join(' ');
         paths.push('<polyline fill="none" stroke-width="3" vector-effect="non-scaling-stroke" stroke="' +
           m.colours[i % m.colours.length] + '" points="' + pts + '"/>');

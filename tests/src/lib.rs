@@ -10,6 +10,7 @@
 pub mod browser;
 pub mod drive;
 pub mod images;
+pub mod screen_shots;
 pub mod screen_web;
 pub mod thumb;
 

@@ -1,0 +1,529 @@
+//! The operator's screen in a real browser (Debian's `chromium`, headless,
+//! over the DevTools protocol: `qemu_tests::browser`), docs/screen-web.md.
+//!
+//! * `the_qemu_board_is_driven_from_the_page`: the firmware in QEMU in
+//!   real time, its USART1 joined to the page's WebSocket; the operator
+//!   taps Speed-Adaptive, 7.0 cm, Low 2 and Start (press and release); the
+//!   line is cut mid-run and restored; Stop. Checks the drum, the plants
+//!   and the indices against the simulator's truth, the link state's time,
+//!   the firmware's screen-loss handling, the Stop's period and that the
+//!   page sent nothing but answers and the operator's touches.
+//! * `every_component_on_its_page_and_nothing_sent_on_bad_input`: no
+//!   firmware; the test writes the firmware's side. Every page of the
+//!   contract, both machines, at 1024×600 and 1280×800: every component
+//!   shown, every touch target ≥ 12 mm on a 7" screen; random bytes and
+//!   bit-flipped instructions; the Web Serial transport with a stubbed
+//!   `navigator.serial` (a headless browser cannot answer the port chooser):
+//!   115 200 8N1, the adapter pulled and plugged back, a port in use.
+
+use std::time::{Duration, Instant};
+
+use hmi_proto::screen::{Kind, Page, COMPONENTS};
+use machine_sim::SpacingAccumulator;
+use qemu_tests::browser::Browser;
+use qemu_tests::screen_shots::page_bytes;
+use qemu_tests::screen_web::ScreenServer;
+use qemu_tests::{log_time_ms, number_after, sim_samples, BootOptions, Firmware, Image};
+
+fn sel(page: u8, name: &str) -> String {
+    format!("section[data-page=\"{page}\"] [data-name=\"{name}\"]")
+}
+
+fn wait_connected(server: &ScreenServer) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !server.connected() {
+        assert!(Instant::now() < deadline, "the page never connected");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn value(b: &mut Browser, page: u8, name: &str) -> i64 {
+    b.eval(&format!("transplanterScreen.value({page}, '{name}')"))
+        .unwrap()
+        .as_i64()
+        .unwrap_or(i64::MIN)
+}
+
+/// The touch frames in what the page sent: (page, id, event).
+fn touches(server: &ScreenServer) -> Vec<(u8, u8, u8)> {
+    let mut all = Vec::new();
+    for m in server.from_page() {
+        all.extend(m.bytes);
+    }
+    let mut out = Vec::new();
+    for f in qemu_tests::instructions(&all) {
+        if let [0x65, p, id, ev] = f {
+            out.push((*p, *id, *ev));
+        }
+    }
+    out
+}
+
+fn id_of(page: Page, name: &str) -> u8 {
+    COMPONENTS
+        .iter()
+        .find(|c| c.page == page && c.name() == name)
+        .map(|c| c.id())
+        .unwrap()
+}
+
+/// The script that tells, for every component of `page`, whether it is on
+/// the page and shown, and the size of each touch target (CSS px).
+fn check_script(page: Page) -> String {
+    let list: Vec<String> = COMPONENTS
+        .iter()
+        .filter(|c| c.page == page)
+        .map(|c| {
+            format!(
+                "[{}, \"{}\", {}]",
+                c.id(),
+                c.name(),
+                matches!(c.kind(), Kind::Button) || matches!(c.role, hmi_proto::screen::Role::Input(_))
+            )
+        })
+        .collect();
+    format!(
+        "(() => {{ const out = []; for (const [id, name, target] of [{}]) {{ \
+         const e = document.querySelector('section[data-page=\"{p}\"] [data-name=\"' + name + '\"][data-id=\"' + id + '\"]'); \
+         const r = e ? e.getBoundingClientRect() : null; \
+         out.push({{name, present: !!e, shown: !!(r && r.width > 0 && r.height > 0 && r.bottom <= innerHeight + 1 && r.right <= innerWidth + 1), \
+         target, w: r ? r.width : 0, h: r ? r.height : 0}}); }} return out; }})()",
+        list.join(","),
+        p = page.id()
+    )
+}
+
+/// Problems with `page` as shown: components missing or not shown, touch
+/// targets below 12 mm on a 7" screen of this viewport.
+fn page_problems(b: &mut Browser, page: Page, viewport: (u32, u32)) -> Vec<String> {
+    let mm_per_px = 177.8 / f64::from(viewport.0).hypot(f64::from(viewport.1));
+    let v = b.eval(&check_script(page)).unwrap();
+    let mut problems = Vec::new();
+    for c in v.as_array().unwrap() {
+        let name = c["name"].as_str().unwrap_or("?");
+        if c["present"] != true {
+            problems.push(format!("page {} `{name}` missing", page.id()));
+        } else if c["shown"] != true {
+            problems.push(format!("page {} `{name}` not shown", page.id()));
+        } else if c["target"] == true {
+            let (w, h) = (
+                c["w"].as_f64().unwrap_or(0.0) * mm_per_px,
+                c["h"].as_f64().unwrap_or(0.0) * mm_per_px,
+            );
+            if w < 12.0 || h < 12.0 {
+                problems.push(format!(
+                    "page {} `{name}` {w:.1} x {h:.1} mm at {}x{}",
+                    page.id(),
+                    viewport.0,
+                    viewport.1
+                ));
+            }
+        }
+    }
+    problems
+}
+
+/// Reply frames a Nextion sends for an instruction (NIS §7): results,
+/// `sendme`'s page, `get`'s data, `rest`'s start-up and ready.
+const ANSWERS: &[u8] = &[
+    0x00, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x09, 0x11, 0x12, 0x1A, 0x1B, 0x1C, 0x1D, 0x1E,
+    0x1F, 0x20, 0x23, 0x66, 0x70, 0x71, 0x88,
+];
+
+/// A Web Serial port the test controls, in place of `navigator.serial`.
+const SERIAL_STUB: &str = r#"
+(() => {
+  const s = { opened: [], written: [], busy: false, gone: false, ctl: null };
+  window.__serial = s;
+  class FakePort {
+    constructor() { this.readable = null; this.writable = null; }
+    async open(opts) {
+      if (s.busy) throw new DOMException('The port is already open.', 'InvalidStateError');
+      if (s.gone) throw new DOMException('The device has been lost.', 'NetworkError');
+      s.opened.push(opts);
+      this.readable = new ReadableStream({ start: (c) => { s.ctl = c; } });
+      this.writable = new WritableStream({ write: (chunk) => { s.written.push(...chunk); } });
+    }
+    async close() { this.readable = null; this.writable = null; }
+    getInfo() { return { usbVendorId: 0x1a86, usbProductId: 0x7523 }; }
+  }
+  const port = new FakePort();
+  let granted = [];
+  const serial = new EventTarget();
+  serial.requestPort = async () => { granted = [port]; return port; };
+  serial.getPorts = async () => granted.slice();
+  Object.defineProperty(navigator, 'serial', { value: serial, configurable: true });
+  s.feed = (bytes) => s.ctl.enqueue(new Uint8Array(bytes));
+  s.unplug = () => {
+    s.gone = true; granted = [];
+    s.ctl.error(new DOMException('The device has been lost.', 'NetworkError'));
+    serial.dispatchEvent(new Event('disconnect'));
+  };
+  s.replug = () => { s.gone = false; granted = [port]; serial.dispatchEvent(new Event('connect')); };
+})();
+"#;
+
+/// A small deterministic generator for the bad input.
+struct XorShift(u64);
+
+impl XorShift {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+}
+
+#[test]
+fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
+    let server = ScreenServer::start(0, None).unwrap();
+    let mut b = Browser::launch(1280, 800).unwrap();
+    b.goto(&server.url()).unwrap();
+    wait_connected(&server);
+
+    // Every page, both machines, two tablet sizes.
+    let mut problems = Vec::new();
+    for viewport in [(1024, 600), (1280, 800)] {
+        b.viewport(viewport.0, viewport.1).unwrap();
+        for page in Page::ALL {
+            assert!(server.inject(&page_bytes(page, 1.0)));
+            assert!(
+                b.wait_for(
+                    &format!("transplanterScreen.shown() === {}", page.id()),
+                    Duration::from_secs(5)
+                )
+                .unwrap(),
+                "page {} not shown",
+                page.id()
+            );
+            problems.extend(page_problems(&mut b, page, viewport));
+        }
+    }
+    assert!(problems.is_empty(), "{problems:#?}");
+    // The check fails when a component is missing (one taken out).
+    server.inject(&page_bytes(Page::Adaptive, 1.0));
+    b.wait_for("transplanterScreen.shown() === 3", Duration::from_secs(5))
+        .unwrap();
+    b.eval(&format!("document.querySelector('{}').remove()", sel(3, "xcv")))
+        .unwrap();
+    assert_eq!(
+        page_problems(&mut b, Page::Adaptive, (1280, 800)),
+        vec!["page 3 `xcv` missing".to_string()]
+    );
+    assert!(touches(&server).is_empty(), "the page touched by itself");
+
+    // Bad input from the firmware's side: random bytes, then every
+    // instruction of a page change with one bit flipped, then an
+    // instruction for a component the contract does not have.
+    let before = server.from_page().len();
+    let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
+    let random: Vec<u8> = (0..4096).map(|_| (rng.next() >> 24) as u8).collect();
+    for chunk in random.chunks(256) {
+        server.inject(chunk);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let mut flipped = Vec::new();
+    for ins in qemu_tests::instructions(&page_bytes(Page::Adaptive, 2.0)) {
+        let mut ins = ins.to_vec();
+        let bit = (rng.next() % (ins.len() as u64 * 8)) as usize;
+        ins[bit / 8] ^= 1 << (bit % 8);
+        flipped.extend(ins);
+        flipped.extend([0xFF; 3]);
+    }
+    server.inject(&flipped);
+    server.inject(b"xfoo.val=12\xFF\xFF\xFF");
+    std::thread::sleep(Duration::from_millis(400));
+    let injected: Vec<u8> = random.iter().chain(&flipped).copied().collect();
+    let terminated = qemu_tests::instructions(&injected).len() + 1;
+    let answers: Vec<Vec<u8>> = server.from_page()[before..]
+        .iter()
+        .map(|m| m.bytes.clone())
+        .collect();
+    for a in &answers {
+        assert!(
+            a.len() >= 4 && a.ends_with(&[0xFF; 3]) && ANSWERS.contains(&a[0]),
+            "not an answer: {a:02x?}"
+        );
+    }
+    assert!(
+        answers.len() <= terminated,
+        "{} frames for {terminated} instructions",
+        answers.len()
+    );
+    assert!(touches(&server).is_empty(), "a touch without an operator");
+    assert!(b.exceptions().is_empty(), "{:?}", b.exceptions());
+    let notice = b.eval("document.getElementById('notice').textContent").unwrap();
+    let stats = b.eval("transplanterScreen.stats()").unwrap();
+    assert!(stats["garbled"].as_u64().unwrap_or(0) > 0, "{stats}");
+    assert!(stats["unknown_names"]["xfoo"].as_u64().unwrap_or(0) == 1, "{stats}");
+    assert!(notice.as_str().unwrap_or("").contains("xfoo"), "{notice}");
+    // Still a screen: it answers the handshake.
+    let n = server.from_page().len();
+    server.inject(b"\xFF\xFF\xFFpage 3\xFF\xFF\xFFsendme\xFF\xFF\xFF");
+    assert!(b
+        .wait_for("transplanterScreen.shown() === 3", Duration::from_secs(2))
+        .unwrap());
+    std::thread::sleep(Duration::from_millis(100));
+    assert_eq!(
+        server.from_page()[n..].last().map(|m| m.bytes.clone()),
+        Some(vec![0x66, 3, 0xFF, 0xFF, 0xFF])
+    );
+
+    // A second page on the simulator gets the busy code and says so.
+    let mut second = Browser::launch(800, 480).unwrap();
+    second.goto(&server.url()).unwrap();
+    assert!(second
+        .wait_for(
+            "document.getElementById('link-detail').textContent.includes('another')",
+            Duration::from_secs(5)
+        )
+        .unwrap());
+    assert_eq!(server.sessions(), 1);
+    drop(second);
+
+    // Web Serial, stubbed: the operator chooses the port.
+    b.before_page(SERIAL_STUB).unwrap();
+    b.goto(&format!("http://127.0.0.1:{}/", server.port())).unwrap();
+    b.tap("#use-serial").unwrap();
+    assert!(b
+        .wait_for("window.__serial.opened.length === 1", Duration::from_secs(5))
+        .unwrap());
+    let opened = b.eval("window.__serial.opened[0]").unwrap();
+    assert_eq!(opened["baudRate"], 115_200, "{opened}");
+    assert_eq!(opened["dataBits"], 8);
+    assert_eq!(opened["stopBits"], 1);
+    assert_eq!(opened["parity"], "none");
+    b.eval("window.__serial.feed([0xFF,0xFF,0xFF,0x73,0x65,0x6E,0x64,0x6D,0x65,0xFF,0xFF,0xFF])")
+        .unwrap();
+    assert!(b
+        .wait_for(
+            "JSON.stringify(window.__serial.written) === '[102,0,255,255,255]'",
+            Duration::from_secs(2)
+        )
+        .unwrap());
+    assert!(b
+        .wait_for("transplanterScreen.link() === 'ok'", Duration::from_secs(2))
+        .unwrap());
+    // The adapter pulled: said within 1 s; plugged back: open again.
+    b.eval("window.__serial.unplug()").unwrap();
+    let pulled = Instant::now();
+    assert!(b
+        .wait_for("transplanterScreen.link() === 'lost'", Duration::from_secs(1))
+        .unwrap());
+    eprintln!("screen_web: adapter pulled, the page said so in {:?}", pulled.elapsed());
+    b.eval("window.__serial.replug()").unwrap();
+    assert!(b
+        .wait_for("window.__serial.opened.length === 2", Duration::from_secs(3))
+        .unwrap());
+    b.eval("window.__serial.feed([0x70,0x61,0x67,0x65,0x20,0x31,0xFF,0xFF,0xFF])")
+        .unwrap();
+    assert!(b
+        .wait_for(
+            "transplanterScreen.link() === 'ok' && transplanterScreen.shown() === 1",
+            Duration::from_secs(2)
+        )
+        .unwrap());
+    // The port in use (another tab or program): said plainly.
+    b.eval("window.__serial.busy = true; window.__serial.unplug(); window.__serial.replug()")
+        .unwrap();
+    assert!(b
+        .wait_for(
+            "document.getElementById('link-detail').textContent.includes('in use')",
+            Duration::from_secs(3)
+        )
+        .unwrap());
+    assert_eq!(
+        b.eval("window.__serial.written.length").unwrap(),
+        5,
+        "the serial page sent more than its one answer"
+    );
+    assert!(b.exceptions().is_empty(), "{:?}", b.exceptions());
+}
+
+/// The ISO 7256-1 indices of the simulator's plants after `from_ms`, in
+/// 0.1 % (quality of feed, multiples, misses, precision CV), and the count.
+fn true_indices(logs: &[String], from_ms: u32, spacing_m: f64) -> ([f64; 4], u32) {
+    let mut acc = SpacingAccumulator::new(spacing_m, 0.1).unwrap();
+    let mut n = 0;
+    for l in logs.iter().filter(|l| l.contains(" sim: plant ")) {
+        if log_time_ms(l).unwrap_or(0) < from_ms {
+            continue;
+        }
+        if let Some(um) = number_after(l, " at ") {
+            acc.push_plant(um / 1e6);
+            n += 1;
+        }
+    }
+    let m = acc.metrics(0.0);
+    (
+        [
+            m.quality_of_feed_pct,
+            m.multiple_index_pct,
+            m.miss_index_pct,
+            m.precision_pct,
+        ],
+        n,
+    )
+}
+
+#[test]
+fn the_qemu_board_is_driven_from_the_page() {
+    let elf = Image::BothMachines.elf().unwrap();
+    // Real time: QEMU's clock is the host's, the page answers when it does.
+    let fw = Firmware::boot(
+        &elf,
+        &BootOptions {
+            run_ms: Some(90_000),
+            scenario: vec!["gear=2".into(), "plant_log=1".into(), "noise=0".into()],
+            lockstep: false,
+            accelerated: false,
+            ..BootOptions::default()
+        },
+    )
+    .unwrap();
+    let server = ScreenServer::start(0, Some(fw.serial_stream().unwrap())).unwrap();
+    let mut b = Browser::launch(1280, 800).unwrap();
+    b.goto(&server.url()).unwrap();
+    assert!(
+        b.wait_for("transplanterScreen.shown() === 1", Duration::from_secs(20))
+            .unwrap(),
+        "the firmware never set the page up; log:\n{}",
+        fw.logs().join("\n")
+    );
+    let log_has = |fw: &Firmware, what: &str, secs: u64| {
+        fw.wait_log(Duration::from_secs(secs), |l| l.contains(what))
+            .unwrap_or_else(|| panic!("no `{what}` in the log:\n{}", fw.logs().join("\n")))
+    };
+    // The operator: Speed-Adaptive, 7.0 cm, Low 2, Start.
+    b.tap(&sel(1, "badapt")).unwrap();
+    assert!(b
+        .wait_for("transplanterScreen.shown() === 3", Duration::from_secs(5))
+        .unwrap());
+    b.tap(&sel(3, "nspacing")).unwrap();
+    b.eval(&format!("document.querySelector('{}').select()", sel(3, "nspacing")))
+        .unwrap();
+    b.type_text("7.0").unwrap();
+    b.tap(&sel(3, "bapply")).unwrap();
+    log_has(&fw, "screen: SetSpacing", 5);
+    b.tap(&sel(3, "bgearup")).unwrap();
+    assert!(b
+        .wait_for(
+            "transplanterScreen.text(3, 'tgear') === 'Low 2'",
+            Duration::from_secs(5)
+        )
+        .unwrap());
+    b.tap(&sel(3, "bstart")).unwrap();
+    let running = log_has(&fw, "drum: Running", 5);
+    let started_ms = log_time_ms(&running).unwrap();
+    assert!(
+        b.wait_for("transplanterScreen.value(3, 'nplants') >= 10", Duration::from_secs(20))
+            .unwrap(),
+        "no plants counted on the page"
+    );
+
+    // The line cut mid-run, and kept out for 3.5 s.
+    server.set_accepting(false);
+    server.cut();
+    let cut = Instant::now();
+    assert!(b
+        .wait_for("transplanterScreen.link() === 'lost'", Duration::from_secs(1))
+        .unwrap());
+    let said_in = cut.elapsed();
+    let silent = log_has(&fw, "touchscreen silent: running on the last settings", 6);
+    std::thread::sleep(Duration::from_millis(800));
+    server.set_accepting(true);
+    let connected = fw
+        .wait_log(Duration::from_secs(10), |l| {
+            l.contains("touchscreen connected")
+                && log_time_ms(l).unwrap_or(0) > log_time_ms(&silent).unwrap_or(0)
+        })
+        .expect("the firmware never took the page back");
+    let reconnected_in = cut.elapsed();
+    assert!(b
+        .wait_for(
+            "transplanterScreen.link() === 'ok' && transplanterScreen.shown() === 1",
+            Duration::from_secs(5)
+        )
+        .unwrap());
+    // The drum ran on the last settings while the screen was away.
+    let logs = fw.logs();
+    let during: Vec<_> = sim_samples(&logs)
+        .into_iter()
+        .filter(|s| {
+            s.t_ms > log_time_ms(&silent).unwrap() && s.t_ms < log_time_ms(&connected).unwrap()
+        })
+        .collect();
+    assert!(
+        !during.is_empty() && during.iter().all(|s| s.drum_rpm > 1.0),
+        "drum while the screen was lost: {:?}",
+        during.iter().map(|s| s.drum_rpm).collect::<Vec<_>>()
+    );
+    assert!(!logs.iter().any(|l| l.contains("drum: Stopped")));
+
+    // Back to the run page, and Stop.
+    b.tap(&sel(1, "badapt")).unwrap();
+    assert!(b
+        .wait_for("transplanterScreen.shown() === 3", Duration::from_secs(5))
+        .unwrap());
+    std::thread::sleep(Duration::from_millis(600));
+    b.tap(&sel(3, "bstop")).unwrap();
+    let taken = log_has(&fw, "screen: Stop", 5);
+    let stopped = log_has(&fw, "drum: Stopped", 5);
+    let (taken_ms, stopped_ms) = (log_time_ms(&taken).unwrap(), log_time_ms(&stopped).unwrap());
+    assert!(
+        stopped_ms >= taken_ms && stopped_ms <= taken_ms + 10,
+        "Stop taken at {taken_ms} ms, drum stopped at {stopped_ms} ms"
+    );
+    // The values settle (status writes go on after the Stop).
+    std::thread::sleep(Duration::from_millis(1500));
+    let logs = fw.logs();
+    let truth_plants = sim_samples(&logs).last().map(|s| s.plants).unwrap();
+    let page_plants = value(&mut b, 3, "nplants");
+    let (truth, n) = true_indices(&logs, started_ms, 0.07);
+    let shown_idx = [
+        value(&mut b, 3, "xqf"),
+        value(&mut b, 3, "xmult"),
+        value(&mut b, 3, "xmiss"),
+        value(&mut b, 3, "xcv"),
+    ];
+    eprintln!(
+        "screen_web: plants page {page_plants}, simulator {truth_plants} ({n} logged); indices \
+         page {shown_idx:?} x0.1 %, simulator {truth:.2?} %; link lost said in {said_in:?}, \
+         firmware back in {reconnected_in:?}; Stop taken {taken_ms} ms, drum stopped {stopped_ms} ms"
+    );
+    assert!(
+        (page_plants - i64::from(truth_plants)).abs() <= 1,
+        "plants: page {page_plants}, simulator {truth_plants}"
+    );
+    for (shown, truth) in shown_idx.iter().zip(truth) {
+        assert!(
+            (*shown as f64 / 10.0 - truth).abs() <= 0.5,
+            "indices: page {shown_idx:?} x0.1 %, simulator {truth:?} %"
+        );
+    }
+    // The monitor drew the last minute and logged the link's loss.
+    let travel = b.eval("transplanterScreen.series('TravelSpeed').length").unwrap();
+    assert!(travel.as_u64().unwrap_or(0) > 20, "{travel}");
+    let events = b.eval("transplanterScreen.events()").unwrap().to_string();
+    assert!(events.contains("Link lost") && events.contains("Link restored"), "{events}");
+    // The page sent touches only for the operator's taps: Speed-Adaptive,
+    // Apply, Gear +, Start (press, release), Speed-Adaptive, Stop (press,
+    // release).
+    let (m, a) = (Page::Mode, Page::Adaptive);
+    assert_eq!(
+        touches(&server),
+        vec![
+            (1, id_of(m, "badapt"), 0),
+            (3, id_of(a, "bapply"), 0),
+            (3, id_of(a, "bgearup"), 0),
+            (3, id_of(a, "bstart"), 1),
+            (3, id_of(a, "bstart"), 0),
+            (1, id_of(m, "badapt"), 0),
+            (3, id_of(a, "bstop"), 1),
+            (3, id_of(a, "bstop"), 0),
+        ]
+    );
+    assert!(b.exceptions().is_empty(), "{:?}", b.exceptions());
+    qemu_tests::check_stack(&fw.logs()).unwrap();
+}

@@ -150,13 +150,12 @@
   function execute(bytes) {
     stats.instructions++;
     if (bytes.length === 0) return; // FF FF FF alone: nothing (ends a half instruction)
+    // The controller sends 7-bit ASCII only (docs/hmi.md §5): anything
+    // else is a line error, or bytes at another baud rate. The instruction
+    // is still run as a Nextion runs it (and answered the same way).
     const printable = bytes.every((b) => b >= 0x20 && b < 0x7f);
-    if (!printable) {
-      noteGarbled(bytes.length);
-      report(R.INVALID_INSTRUCTION);
-      return;
-    }
-    link.lastInstruction = performance.now();
+    if (!printable) noteGarbled(bytes.length);
+    else link.lastInstruction = performance.now();
     const s = String.fromCharCode(...bytes);
     let failure = null;
     let data = false;
@@ -197,26 +196,74 @@
     'unknown');
   }
 
-  /** Runs one instruction: undefined/null success, 'data' answered, or a code. */
+  /** Index of the first character `want` outside a quoted text, or -1. */
+  function outsideQuotes(s, want) {
+    let quoted = false;
+    let escaped = false;
+    for (let i = 0; i < s.length; i++) {
+      const ch = s[i];
+      if (quoted) {
+        if (escaped) escaped = false;
+        else if (ch === '\\') escaped = true;
+        else if (ch === '"') quoted = false;
+      } else if (ch === '"') {
+        quoted = true;
+      } else if (ch === want) {
+        return i;
+      }
+    }
+    return -1;
+  }
+
+  /** The operational commands of NIS §3 and §4, by name. */
+  const COMMANDS = new Set(['page', 'ref', 'click', 'ref_stop', 'ref_star', 'get', 'sendme',
+    'covx', 'cov', 'touch_j', 'substr', 'vis', 'tsw', 'com_stop', 'com_star', 'randset', 'code_c',
+    'prints', 'print', 'printh', 'add', 'addt', 'cle', 'rest', 'doevents', 'strlen', 'btlen',
+    'wepo', 'repo', 'wept', 'rept', 'cfgpio', 'ucopy', 'move', 'play', 'twfile', 'delfile',
+    'refile', 'findfile', 'rdfile', 'setlayer', 'newdir', 'deldir', 'redir', 'finddir', 'udelete',
+    'crcrest', 'crcputs', 'crcputh', 'crcputu', 'spstr', 'newfile', 'cls', 'pic', 'picq', 'xpic',
+    'xstr', 'fill', 'line', 'draw', 'draw3d', 'cir', 'cirs', 'qrcode']);
+
+  /**
+   * Runs one instruction (NIS §1.x: a command word and its parameters, or
+   * an assignment): undefined/null success, 'data' answered, or a code.
+   */
   function run(s) {
-    if (s === 'sendme') {
+    const space = outsideQuotes(s, ' ');
+    const word = space < 0 ? s : s.slice(0, space);
+    const arg = space < 0 ? '' : s.slice(space + 1);
+    if (COMMANDS.has(word)) return command(word, arg);
+    const eq = outsideQuotes(s, '=');
+    if (eq >= 0) {
+      const op = '+-*/%'.includes(s[eq - 1]) ? s[eq - 1] : '';
+      return assign(s.slice(0, op ? eq - 1 : eq), s.slice(eq + 1), op);
+    }
+    if (space < 0) {
+      if (s.endsWith('++') || s.endsWith('--')) return assign(s.slice(0, -2), '1', s[s.length - 1]);
+      return R.INVALID_VARIABLE; // a bare word
+    }
+    return R.INVALID_INSTRUCTION;
+  }
+
+  function command(name, arg) {
+    if (name === 'sendme') {
       answer(R.PAGE, [shown]);
       return 'data';
     }
-    if (s.startsWith('page ')) {
-      const id = pageId(s.slice(5).trim());
+    if (name === 'page') {
+      const id = pageId(arg.trim());
       if (id === null) return R.INVALID_PAGE;
       showPage(id);
       return null;
     }
-    if (s.startsWith('get ')) {
-      const arg = s.slice(4).trim();
-      const dot = arg.lastIndexOf('.');
+    if (name === 'get') {
+      const a = arg.trim();
+      const dot = a.lastIndexOf('.');
       if (dot < 0) return R.INVALID_VARIABLE;
-      const c = findComp(arg.slice(0, dot));
-      const attr = arg.slice(dot + 1);
+      const c = findComp(a.slice(0, dot));
+      const attr = a.slice(dot + 1);
       if (!c) {
-        unknownComponent(arg.slice(0, dot));
+        unknownComponent(a.slice(0, dot));
         return R.INVALID_VARIABLE;
       }
       if (attr === 'val' && hasVal(c)) {
@@ -234,7 +281,7 @@
       }
       return R.INVALID_VARIABLE;
     }
-    if (s === 'rest') {
+    if (name === 'rest') {
       showPage(0);
       bkcmd = 2;
       // A reset screen announces itself: the start-up frame, then ready.
@@ -242,42 +289,56 @@
       answer(R.READY);
       return 'data';
     }
-    for (const [cmd, isVis] of [['vis ', true], ['tsw ', false]]) {
-      if (s.startsWith(cmd)) {
-        const parts = s.slice(4).split(',');
-        if (parts.length !== 2) return R.INVALID_PARAMS;
-        const on = parts[1].trim();
-        if (on !== '0' && on !== '1') return R.INVALID_OPERATION;
-        const target = parts[0].trim();
-        const list = target === '255' ? pages.get(shown).comps : [findComp(target)];
-        if (list.some((c) => !c)) return R.INVALID_COMPONENT;
-        for (const c of list) {
-          if (isVis) c.visible = on === '1';
-          else c.touch = on === '1';
-          paint(c);
-        }
-        return null;
+    if (name === 'vis' || name === 'tsw') {
+      const parts = arg.split(',');
+      if (parts.length !== 2) return R.INVALID_PARAMS;
+      const on = parts[1].trim();
+      if (on !== '0' && on !== '1') return R.INVALID_OPERATION;
+      const target = parts[0].trim();
+      const list = target === '255' ? pages.get(shown).comps : [findComp(target)];
+      if (list.some((c) => !c)) return R.INVALID_COMPONENT;
+      for (const c of list) {
+        if (name === 'vis') c.visible = on === '1';
+        else c.touch = on === '1';
+        paint(c);
       }
+      return null;
     }
-    if (s.startsWith('ref ')) return findComp(s.slice(4).trim()) ? null : R.INVALID_COMPONENT;
-    const eq = s.indexOf('=');
-    if (eq > 0) return assign(s.slice(0, eq), s.slice(eq + 1));
-    if (/^[A-Za-z_][A-Za-z0-9_.]*$/.test(s)) return R.INVALID_VARIABLE;
-    return R.INVALID_INSTRUCTION;
+    if (name === 'ref') return findComp(arg.trim()) ? null : R.INVALID_COMPONENT;
+    // `click` would make the screen send a touch the operator did not
+    // make: this page never does. The other commands draw, print or use
+    // files, which the contract does not use: taken, nothing done.
+    return null;
   }
 
   function hasVal(c) { return c.def.kind === 'number' || c.def.kind === 'xfloat'; }
   function hasTxt(c) { return c.def.kind === 'text' || c.def.kind === 'button'; }
 
+  /** A decimal or `0x` hex constant (NIS 1.18, 1.26), wrapped to 32 bits. */
   function number(rhs) {
+    if (/^0x([0-9A-Fa-f]{2}){1,4}$/.test(rhs)) return Number(rhs) | 0;
     if (!/^-?[0-9]+$/.test(rhs)) return null;
     const v = Number(rhs);
     return Number.isSafeInteger(v) ? v : null;
   }
 
-  function assign(lhs, rhs) {
+  function arith(old, op, v) {
+    switch (op) {
+      case '': return v;
+      case '+': return (old + v) | 0;
+      case '-': return (old - v) | 0;
+      case '*': return Math.imul(old, v);
+      case '/': return v === 0 ? null : (old / v) | 0;
+      case '%': return v === 0 ? null : (old % v) | 0;
+      default: return null;
+    }
+  }
+
+  function assign(lhs, rhs, op) {
     if (lhs in sys || lhs === 'dim' || lhs === 'bauds' || lhs === 'bkcmd') {
-      const v = number(rhs);
+      const n = number(rhs);
+      if (n === null) return R.INVALID_OPERATION;
+      const v = arith(lhs === 'bkcmd' ? bkcmd : (sys[lhs === 'dim' ? 'dims' : lhs] || 0), op, n);
       if (v === null) return R.INVALID_OPERATION;
       if (lhs === 'bkcmd') {
         if (v < 0 || v > 3) return R.ASSIGNMENT_FAILED;
@@ -303,22 +364,28 @@
       return R.INVALID_VARIABLE;
     }
     if (attr === 'val' && hasVal(c)) {
-      const v = number(rhs);
+      const n = number(rhs);
+      const v = n === null ? null : arith(c.val, op, n | 0); // the screen keeps 32 bits
       if (v === null) return R.INVALID_OPERATION;
-      setValue(c, v | 0); // the screen keeps 32 bits
+      setValue(c, v);
       return null;
     }
     if (attr === 'txt' && hasTxt(c)) {
-      const t = unescape(rhs);
-      if (t === null) return R.INVALID_ESCAPE;
+      if (op !== '' && op !== '+') return R.INVALID_OPERATION;
+      const u = unescape(rhs);
+      if (u.code !== undefined) return u.code;
+      const t = op === '' ? u.text : c.txt + u.text;
       setText(c, t.slice(0, 40));
       return null;
     }
     return R.INVALID_VARIABLE;
   }
 
+  /** A quoted text with its escapes (NIS 1.x), or the failure's code. */
   function unescape(rhs) {
-    if (rhs.length < 2 || rhs[0] !== '"' || rhs[rhs.length - 1] !== '"') return null;
+    if (rhs.length < 2 || rhs[0] !== '"' || rhs[rhs.length - 1] !== '"') {
+      return { code: R.INVALID_OPERATION };
+    }
     const inner = rhs.slice(1, -1);
     let out = '';
     for (let i = 0; i < inner.length; i++) {
@@ -328,14 +395,14 @@
         if (n === '"') out += '"';
         else if (n === '\\') out += '\\';
         else if (n === 'r') out += '\n';
-        else return null;
+        else return { code: R.INVALID_ESCAPE };
       } else if (ch === '"') {
-        return null;
+        return { code: R.INVALID_OPERATION }; // two texts, not one
       } else {
         out += ch;
       }
     }
-    return out;
+    return { text: out };
   }
 
   // ------------------------------------------------------------ components

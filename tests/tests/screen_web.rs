@@ -224,16 +224,57 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
         std::thread::sleep(Duration::from_millis(5));
     }
     let mut flipped = Vec::new();
-    for ins in qemu_tests::instructions(&page_bytes(Page::Adaptive, 2.0)) {
+    let every_page: Vec<u8> = (0..8)
+        .flat_map(|_| Page::ALL.iter().flat_map(|p| page_bytes(*p, 2.0)))
+        .collect();
+    for ins in qemu_tests::instructions(&every_page) {
         let mut ins = ins.to_vec();
         let bit = (rng.next() % (ins.len() as u64 * 8)) as usize;
         ins[bit / 8] ^= 1 << (bit % 8);
         flipped.extend(ins);
         flipped.extend([0xFF; 3]);
     }
+    let n_flipped = server.from_page().len();
     server.inject(&flipped);
+    std::thread::sleep(Duration::from_millis(300));
+    // The same instructions into the independent Nextion model (written
+    // from the Nextion Instruction Set), from the same page: the same
+    // answers, frame for frame.
+    let mut model = nextion_model::Screen::new();
+    model.receive(1_000, b"page 3\xFF\xFF\xFF");
+    model.take_output();
+    // The model's answer to each instruction.
+    let mut expected: Vec<(String, Vec<u8>)> = Vec::new();
+    for (i, ins) in qemu_tests::instructions(&flipped).into_iter().enumerate() {
+        let mut one = ins.to_vec();
+        one.extend([0xFF; 3]);
+        model.receive(2_000 + i as u64 * 100, &one);
+        for a in qemu_tests::instructions(&model.take_output()) {
+            expected.push((String::from_utf8_lossy(ins).into_owned(), a.to_vec()));
+        }
+    }
+    let mut got = Vec::new();
+    for m in &server.from_page()[n_flipped..] {
+        got.extend_from_slice(&m.bytes);
+    }
+    let got: Vec<Vec<u8>> = qemu_tests::instructions(&got)
+        .into_iter()
+        .map(<[u8]>::to_vec)
+        .collect();
+    if let Some(k) = (0..expected.len().max(got.len()))
+        .find(|&k| expected.get(k).map(|e| &e.1) != got.get(k))
+    {
+        panic!(
+            "answer {k}: the page {:02x?}, the Nextion model {:02x?} (to {:?}; {} and {} answers)",
+            got.get(k),
+            expected.get(k).map(|e| &e.1),
+            expected.get(k).map(|e| &e.0),
+            got.len(),
+            expected.len()
+        );
+    }
     server.inject(b"xfoo.val=12\xFF\xFF\xFF");
-    std::thread::sleep(Duration::from_millis(400));
+    std::thread::sleep(Duration::from_millis(100));
     let injected: Vec<u8> = random.iter().chain(&flipped).copied().collect();
     let terminated = qemu_tests::instructions(&injected).len() + 1;
     let answers: Vec<Vec<u8>> = server.from_page()[before..]

@@ -343,6 +343,9 @@
       if (lhs === 'bkcmd') {
         if (v < 0 || v > 3) return R.ASSIGNMENT_FAILED;
         bkcmd = v;
+        // The controller sets the screen up after its start and after a
+        // lost link (docs/hmi.md §2).
+        logEvent('link', 'Controller set the screen up (its start, or the link back)');
       } else if (lhs === 'baud' || lhs === 'bauds') {
         if (!BAUDS.includes(v)) return R.INVALID_BAUD;
         sys.baud = v;
@@ -472,13 +475,13 @@
   function refuse(c) {
     c.el.classList.add('refused');
     setTimeout(() => c.el.classList.remove('refused'), 400);
-    notice('No link to the controller: nothing was sent.', 'nolink');
+    notice('The link to the controller is not up: nothing was sent.', 'nolink');
   }
 
   function press(c, ev) {
     if (!ev.isTrusted || !touchable(c)) return;
     ev.preventDefault();
-    if (!link.open) {
+    if (linkState() !== 'ok') {
       refuse(c);
       return;
     }
@@ -501,7 +504,7 @@
     const r = c.el.getBoundingClientRect();
     const inside = ev.clientX >= r.left && ev.clientX <= r.right &&
       ev.clientY >= r.top && ev.clientY <= r.bottom;
-    if (!inside || !touchable(c) || !c.def.release || !link.open) return;
+    if (!inside || !touchable(c) || !c.def.release || linkState() !== 'ok') return;
     stats.touches++;
     transmit(touchFrame(c, 0x00), 'touch');
   }
@@ -517,7 +520,7 @@
       if ((ev.key === ' ' || ev.key === 'Enter') && !ev.repeat && ev.isTrusted) {
         ev.preventDefault();
         if (!touchable(c)) return;
-        if (!link.open) { refuse(c); return; }
+        if (linkState() !== 'ok') { refuse(c); return; }
         held.set('key', c);
         c.el.classList.add('down');
         if (c.def.press) transmit(touchFrame(c, 0x01), 'touch');
@@ -528,7 +531,7 @@
         ev.preventDefault();
         held.delete('key');
         c.el.classList.remove('down');
-        if (touchable(c) && c.def.release && link.open) transmit(touchFrame(c, 0x00), 'touch');
+        if (touchable(c) && c.def.release && linkState() === 'ok') transmit(touchFrame(c, 0x00), 'touch');
       }
     });
   }

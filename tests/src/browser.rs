@@ -44,8 +44,7 @@ impl Browser {
     pub fn launch(width: u32, height: u32) -> io::Result<Self> {
         static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
         let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let profile =
-            std::env::temp_dir().join(format!("screen-web-{}-{n}", std::process::id()));
+        let profile = std::env::temp_dir().join(format!("screen-web-{}-{n}", std::process::id()));
         let _ = std::fs::remove_dir_all(&profile);
         std::fs::create_dir_all(&profile)?;
         let mut child = Command::new(chromium_path())

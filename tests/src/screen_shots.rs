@@ -96,7 +96,9 @@ pub fn page_bytes(page: Page, t: f64) -> Vec<u8> {
         }
     }
     if page == Page::Alarm {
-        if let Ok(ins) = Instruction::set_text(ObjName::new_unchecked("talarm"), "Drum motor stalled") {
+        if let Ok(ins) =
+            Instruction::set_text(ObjName::new_unchecked("talarm"), "Drum motor stalled")
+        {
             emit(&mut out, &ins);
         }
     }
@@ -119,7 +121,11 @@ pub fn show(server: &ScreenServer, page: Page) -> io::Result<()> {
     if !server.inject(&page_bytes(page, 0.0)) {
         return Err(io::Error::other("no page connected"));
     }
-    let samples = if matches!(page, Page::Fixed | Page::Adaptive | Page::Belt) { 40 } else { 3 };
+    let samples = if matches!(page, Page::Fixed | Page::Adaptive | Page::Belt) {
+        40
+    } else {
+        3
+    };
     for i in 1..=samples {
         std::thread::sleep(Duration::from_millis(100));
         server.inject(&status_bytes(page, f64::from(i) * 0.5));
@@ -137,7 +143,10 @@ pub fn take(dir: &Path) -> io::Result<Vec<PathBuf>> {
     for (w, h) in SIZES {
         let mut b = Browser::launch(w, h)?;
         b.goto(&server.url())?;
-        if !b.wait_for("transplanterScreen.link() !== 'off'", Duration::from_secs(10))? {
+        if !b.wait_for(
+            "transplanterScreen.link() !== 'off'",
+            Duration::from_secs(10),
+        )? {
             return Err(io::Error::other("the page did not connect"));
         }
         let deadline = std::time::Instant::now() + Duration::from_secs(10);

@@ -303,7 +303,11 @@ impl ScreenServer {
 
     /// Whether a page is connected.
     pub fn connected(&self) -> bool {
-        self.shared.client.lock().map(|c| c.is_some()).unwrap_or(false)
+        self.shared
+            .client
+            .lock()
+            .map(|c| c.is_some())
+            .unwrap_or(false)
     }
 
     /// WebSocket sessions accepted so far.
@@ -388,7 +392,9 @@ fn peek_path(stream: &TcpStream) -> io::Result<String> {
                     return Ok(path);
                 }
             }
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {}
+            Err(e)
+                if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {
+            }
             Err(e) => return Err(e),
         }
         if Instant::now() > deadline {
@@ -496,7 +502,8 @@ fn session(
             Ok(Message::Close(_)) => return Ok(()),
             Ok(_) => {}
             Err(tungstenite::Error::Io(e))
-                if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {}
+                if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {
+            }
             Err(e) => return Err(io::Error::other(e)),
         }
         while let Ok(bytes) = rx.try_recv() {

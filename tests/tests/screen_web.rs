@@ -78,7 +78,8 @@ fn check_script(page: Page) -> String {
                 "[{}, \"{}\", {}]",
                 c.id(),
                 c.name(),
-                matches!(c.kind(), Kind::Button) || matches!(c.role, hmi_proto::screen::Role::Input(_))
+                matches!(c.kind(), Kind::Button)
+                    || matches!(c.role, hmi_proto::screen::Role::Input(_))
             )
         })
         .collect();
@@ -126,8 +127,8 @@ fn page_problems(b: &mut Browser, page: Page, viewport: (u32, u32)) -> Vec<Strin
 /// Reply frames a Nextion sends for an instruction (NIS §7): results,
 /// `sendme`'s page, `get`'s data, `rest`'s start-up and ready.
 const ANSWERS: &[u8] = &[
-    0x00, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x09, 0x11, 0x12, 0x1A, 0x1B, 0x1C, 0x1D, 0x1E,
-    0x1F, 0x20, 0x23, 0x66, 0x70, 0x71, 0x88,
+    0x00, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x09, 0x11, 0x12, 0x1A, 0x1B, 0x1C, 0x1D, 0x1E, 0x1F,
+    0x20, 0x23, 0x66, 0x70, 0x71, 0x88,
 ];
 
 /// A Web Serial port the test controls, in place of `navigator.serial`.
@@ -205,8 +206,11 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
     server.inject(&page_bytes(Page::Adaptive, 1.0));
     b.wait_for("transplanterScreen.shown() === 3", Duration::from_secs(5))
         .unwrap();
-    b.eval(&format!("document.querySelector('{}').remove()", sel(3, "xcv")))
-        .unwrap();
+    b.eval(&format!(
+        "document.querySelector('{}').remove()",
+        sel(3, "xcv")
+    ))
+    .unwrap();
     assert_eq!(
         page_problems(&mut b, Page::Adaptive, (1280, 800)),
         vec!["page 3 `xcv` missing".to_string()]
@@ -261,8 +265,8 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
         .into_iter()
         .map(<[u8]>::to_vec)
         .collect();
-    if let Some(k) = (0..expected.len().max(got.len()))
-        .find(|&k| expected.get(k).map(|e| &e.1) != got.get(k))
+    if let Some(k) =
+        (0..expected.len().max(got.len())).find(|&k| expected.get(k).map(|e| &e.1) != got.get(k))
     {
         panic!(
             "answer {k}: the page {:02x?}, the Nextion model {:02x?} (to {:?}; {} and {} answers)",
@@ -294,10 +298,15 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
     );
     assert!(touches(&server).is_empty(), "a touch without an operator");
     assert!(b.exceptions().is_empty(), "{:?}", b.exceptions());
-    let notice = b.eval("document.getElementById('notice').textContent").unwrap();
+    let notice = b
+        .eval("document.getElementById('notice').textContent")
+        .unwrap();
     let stats = b.eval("transplanterScreen.stats()").unwrap();
     assert!(stats["garbled"].as_u64().unwrap_or(0) > 0, "{stats}");
-    assert!(stats["unknown_names"]["xfoo"].as_u64().unwrap_or(0) == 1, "{stats}");
+    assert!(
+        stats["unknown_names"]["xfoo"].as_u64().unwrap_or(0) == 1,
+        "{stats}"
+    );
     assert!(notice.as_str().unwrap_or("").contains("xfoo"), "{notice}");
     // Still a screen: it answers the handshake.
     let n = server.from_page().len();
@@ -325,10 +334,14 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
 
     // Web Serial, stubbed: the operator chooses the port.
     b.before_page(SERIAL_STUB).unwrap();
-    b.goto(&format!("http://127.0.0.1:{}/", server.port())).unwrap();
+    b.goto(&format!("http://127.0.0.1:{}/", server.port()))
+        .unwrap();
     b.tap("#use-serial").unwrap();
     assert!(b
-        .wait_for("window.__serial.opened.length === 1", Duration::from_secs(5))
+        .wait_for(
+            "window.__serial.opened.length === 1",
+            Duration::from_secs(5)
+        )
         .unwrap());
     let opened = b.eval("window.__serial.opened[0]").unwrap();
     assert_eq!(opened["baudRate"], 115_200, "{opened}");
@@ -350,12 +363,21 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
     b.eval("window.__serial.unplug()").unwrap();
     let pulled = Instant::now();
     assert!(b
-        .wait_for("transplanterScreen.link() === 'lost'", Duration::from_secs(1))
+        .wait_for(
+            "transplanterScreen.link() === 'lost'",
+            Duration::from_secs(1)
+        )
         .unwrap());
-    eprintln!("screen_web: adapter pulled, the page said so in {:?}", pulled.elapsed());
+    eprintln!(
+        "screen_web: adapter pulled, the page said so in {:?}",
+        pulled.elapsed()
+    );
     b.eval("window.__serial.replug()").unwrap();
     assert!(b
-        .wait_for("window.__serial.opened.length === 2", Duration::from_secs(3))
+        .wait_for(
+            "window.__serial.opened.length === 2",
+            Duration::from_secs(3)
+        )
         .unwrap());
     b.eval("window.__serial.feed([0x70,0x61,0x67,0x65,0x20,0x31,0xFF,0xFF,0xFF])")
         .unwrap();
@@ -442,8 +464,11 @@ fn the_qemu_board_is_driven_from_the_page() {
         .wait_for("transplanterScreen.shown() === 3", Duration::from_secs(5))
         .unwrap());
     b.tap(&sel(3, "nspacing")).unwrap();
-    b.eval(&format!("document.querySelector('{}').select()", sel(3, "nspacing")))
-        .unwrap();
+    b.eval(&format!(
+        "document.querySelector('{}').select()",
+        sel(3, "nspacing")
+    ))
+    .unwrap();
     b.type_text("7.0").unwrap();
     b.tap(&sel(3, "bapply")).unwrap();
     log_has(&fw, "screen: SetSpacing", 5);
@@ -458,8 +483,11 @@ fn the_qemu_board_is_driven_from_the_page() {
     let running = log_has(&fw, "drum: Running", 5);
     let started_ms = log_time_ms(&running).unwrap();
     assert!(
-        b.wait_for("transplanterScreen.value(3, 'nplants') >= 10", Duration::from_secs(20))
-            .unwrap(),
+        b.wait_for(
+            "transplanterScreen.value(3, 'nplants') >= 10",
+            Duration::from_secs(20)
+        )
+        .unwrap(),
         "no plants counted on the page"
     );
 
@@ -468,7 +496,10 @@ fn the_qemu_board_is_driven_from_the_page() {
     server.cut();
     let cut = Instant::now();
     assert!(b
-        .wait_for("transplanterScreen.link() === 'lost'", Duration::from_secs(1))
+        .wait_for(
+            "transplanterScreen.link() === 'lost'",
+            Duration::from_secs(1)
+        )
         .unwrap());
     let said_in = cut.elapsed();
     let silent = log_has(&fw, "touchscreen silent: running on the last settings", 6);
@@ -544,10 +575,15 @@ fn the_qemu_board_is_driven_from_the_page() {
         );
     }
     // The monitor drew the last minute and logged the link's loss.
-    let travel = b.eval("transplanterScreen.series('TravelSpeed').length").unwrap();
+    let travel = b
+        .eval("transplanterScreen.series('TravelSpeed').length")
+        .unwrap();
     assert!(travel.as_u64().unwrap_or(0) > 20, "{travel}");
     let events = b.eval("transplanterScreen.events()").unwrap().to_string();
-    assert!(events.contains("Link lost") && events.contains("Link restored"), "{events}");
+    assert!(
+        events.contains("Link lost") && events.contains("Link restored"),
+        "{events}"
+    );
     // The page sent touches only for the operator's taps: Speed-Adaptive,
     // Apply, Gear +, Start (press, release), Speed-Adaptive, Stop (press,
     // release).

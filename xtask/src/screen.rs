@@ -22,7 +22,10 @@ pub fn ensure_browser() -> Result {
 
 /// Where the built page goes.
 pub fn page_path() -> PathBuf {
-    root().join("target").join("screen").join("transplanter-screen.html")
+    root()
+        .join("target")
+        .join("screen")
+        .join("transplanter-screen.html")
 }
 
 /// `cargo xtask screen`: builds the page (one self-contained HTML file)
@@ -57,7 +60,12 @@ pub fn qemu_screen(elf: &std::path::Path, seconds: Option<u32>, port: u16) -> Re
     let options = BootOptions {
         run_ms: seconds.map(|s| s.saturating_mul(1000)),
         echo_logs: true,
-        flash: Some(root().join("target").join("qemu").join("settings-flash-screen.bin")),
+        flash: Some(
+            root()
+                .join("target")
+                .join("qemu")
+                .join("settings-flash-screen.bin"),
+        ),
         scenario: vec!["gear=2".into()],
         lockstep: false,
         accelerated: false,
@@ -74,7 +82,9 @@ pub fn qemu_screen(elf: &std::path::Path, seconds: Option<u32>, port: u16) -> Re
          Low 2); drive it from the page. The same page for a real board (USB serial): {}",
         page.display()
     );
-    eprintln!("xtask: open the operator's screen in Chrome, Edge or Chromium (Ctrl-C ends the run):");
+    eprintln!(
+        "xtask: open the operator's screen in Chrome, Edge or Chromium (Ctrl-C ends the run):"
+    );
     println!("{}", server.url());
     let started = Instant::now();
     loop {

@@ -189,7 +189,12 @@ pub fn contract_json() -> String {
             Kind::Number => ("number", 0),
             Kind::Xfloat(d) => ("xfloat", d),
         };
-        let _ = write!(out, "{{\"page\":{},\"id\":{},\"name\":", c.page.id(), c.id());
+        let _ = write!(
+            out,
+            "{{\"page\":{},\"id\":{},\"name\":",
+            c.page.id(),
+            c.id()
+        );
         string(&mut out, c.name());
         out.push_str(",\"kind\":");
         string(&mut out, kind);
@@ -253,7 +258,10 @@ mod tests {
             assert_eq!(json.matches(&head).count(), 1, "{head}");
             let at = json.find(&head).unwrap();
             let row = &json[at..at + json[at..].find('}').unwrap()];
-            let press = matches!(c.role, Role::Action(Action::Stop | Action::Start | Action::IdentifyDrive));
+            let press = matches!(
+                c.role,
+                Role::Action(Action::Stop | Action::Start | Action::IdentifyDrive)
+            );
             assert!(row.contains(&std::format!("\"press\":{press}")), "{row}");
             assert!(
                 row.contains(&std::format!("\"release\":{}", c.kind() == Kind::Button)),
@@ -261,7 +269,11 @@ mod tests {
             );
         }
         for p in Page::ALL {
-            assert!(json.contains(&std::format!("{{\"id\":{},\"name\":\"{}\"", p.id(), p.name())));
+            assert!(json.contains(&std::format!(
+                "{{\"id\":{},\"name\":\"{}\"",
+                p.id(),
+                p.name()
+            )));
         }
     }
 

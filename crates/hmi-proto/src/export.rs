@@ -1,7 +1,7 @@
 //! The screen contract as JSON, for screens built outside the firmware
 //! (feature `std`): the browser screen (`web/`, docs/screen-web.md) is
 //! generated from it, so that a page or component added to
-//! [`COMPONENTS`](crate::screen::COMPONENTS) appears on the page.
+//! [`COMPONENTS`] appears on the page.
 //!
 //! Everything a screen must know comes from the contract itself: page ids
 //! and names, component ids, names, kinds and decimals, which events send

@@ -197,6 +197,61 @@ fn control_step_cost(slot: &mut Slot, baseline_per_call_x10: u64) {
     hprintln!("cost control_step {}", per_call_x10);
 }
 
+/// The hmi task's heaviest wake, and more: a touch frame decoded
+/// (Speed-Adaptive on page 1), the page change it makes (page 3 with its
+/// settings values), the live status of that page at its widest, and every
+/// byte moved out of the link (as `firmware/src/screen_line.rs` moves them
+/// to the transmit ring): 313 bytes; plus the page change back to page 1
+/// that sets up the next call. The link is built in a frame of its own
+/// (≈ 0.7 KB).
+#[inline(never)]
+fn hmi_wake_cost(baseline_per_call_x10: u64) {
+    use hmi_proto::hmi::Hmi;
+    use hmi_proto::screen::{Page, Settings, Status};
+    let mut hmi = Hmi::new(Settings::default(), "bench");
+    hmi.tick(0);
+    hmi.push_slice(&[0x88, 0xFF, 0xFF, 0xFF]);
+    while hmi.pop_tx().is_some() {}
+    while hmi.poll_event().is_some() {}
+    let status = Status {
+        travel_speed_kmh_x100: u16::MAX,
+        target_drum_rpm_x100: u16::MAX,
+        actual_drum_rpm_x100: u16::MAX,
+        plants: u32::MAX,
+        distance_dm: u32::MAX,
+        quality_of_feed_x10: u16::MAX,
+        multiples_x10: u16::MAX,
+        misses_x10: u16::MAX,
+        precision_cv_x10: u16::MAX,
+        within_10_pct_x10: u16::MAX,
+        plants_per_m_x100: u16::MAX,
+        ..Status::default()
+    };
+    let mut moved = 0u32;
+    let start = SYST::get_current();
+    for i in 0..N {
+        let _ = hmi.show_page(Page::Mode);
+        while hmi.pop_tx().is_some() {}
+        for b in [0x65, 0x01, 0x02, 0x00, 0xFF, 0xFF, 0xFF] {
+            hmi.push_at(black_box(b), i);
+        }
+        hmi.tick(black_box(i));
+        while let Some(e) = hmi.poll_event() {
+            black_box(e);
+        }
+        let _ = hmi.write_status(black_box(&status));
+        while let Some(b) = hmi.pop_tx() {
+            moved = moved.wrapping_add(u32::from(black_box(b)));
+        }
+    }
+    let end = SYST::get_current();
+    black_box(moved);
+    let ticks = u64::from(start.wrapping_sub(end) & 0x00FF_FFFF);
+    let per_call_x10 =
+        (ticks * 10_000 / SYSTICK_MHZ / u64::from(N)).saturating_sub(baseline_per_call_x10);
+    hprintln!("cost hmi_wake {}", per_call_x10);
+}
+
 #[entry]
 fn main() -> ! {
     // Note(unwrap): taken once at the top of the program.
@@ -238,6 +293,7 @@ fn main() -> ! {
         slot,
         u64::from(baseline) * 10_000 / SYSTICK_MHZ / u64::from(N),
     );
+    hmi_wake_cost(u64::from(baseline) * 10_000 / SYSTICK_MHZ / u64::from(N));
 
     debug::exit(debug::EXIT_SUCCESS);
     loop {

@@ -12,12 +12,12 @@
 //! | task | priority | release | budget |
 //! |---|---|---|---|
 //! | [`app::stop_input`] | 5 | each edge of the stop input (PB10, EXTI10) | 1 µs |
-//! | [`app::usart1_rx`] | 4 | each touchscreen byte (≤ 11.5 kHz) | 2 µs |
+//! | [`app::usart1`] | 4 | each touchscreen byte in or out (≤ 11.5 kHz each way) | 2 µs |
 //! | [`app::hall_capture`] | 3 | each Hall edge (≤ 1 kHz) and TIM2 overflow | 2 µs |
 //! | `app::usart2` | 3 | each RS-485 byte in or out (≤ 11.5 kHz), TC (feature `drive-link`) | 2 µs |
 //! | `app::drive_link` | 3 | every 1 ms while a driver profile is set (feature `drive-link`) | 20 µs |
 //! | [`app::control`] | 2 | every 10 ms | 1 ms |
-//! | [`app::hmi`] | 1 | each touchscreen byte, at least every 20 ms | 3 ms |
+//! | [`app::hmi`] | 1 | touchscreen bytes, the transmit ring at half, at least every 20 ms | 1 ms |
 //! | [`app::status`] | 1 | every 200 ms (5 Hz) | 2 ms |
 //! | [`app::settings`] | 1 | each Save (drum stopped) | 50 ms (a flash page erase) |
 //! | `idle` | 0 | — | sleeps in `wfi` |
@@ -30,6 +30,7 @@ compile_error!("enable at least one machine: feature `profile-a` or `profile-b`"
 mod board;
 mod div64;
 mod edge_queue;
+mod screen_line;
 mod stats;
 
 use rtic_monotonics::systick::prelude::*;
@@ -60,6 +61,10 @@ const STATUS_LOG_EVERY: u32 = 5;
 const HMI_TICK_MS: u32 = 20;
 /// Bytes queued between the USART interrupt and the HMI task.
 const RX_QUEUE: usize = 64;
+/// The ring of bytes from the HMI task to the USART interrupt's transmitter
+/// (it holds one less): all the screen link can have queued
+/// (`TX_CAPACITY`), so one move of the HMI task empties the link's queue.
+const TX_RING: usize = hmi_proto::hmi::TX_CAPACITY + 1;
 /// Hall edges queued between the capture interrupt and the control task
 /// (the QEMU board's edges come with the sensor sample, not this queue).
 const EDGE_QUEUE: usize = 16;
@@ -67,8 +72,8 @@ const EDGE_QUEUE: usize = 16;
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [CAN_RX1, CAN_SCE, ADC1_2])]
 mod app {
     use super::{
-        board, mono_now, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS,
-        RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS,
+        board, mono_now, screen_line, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE,
+        HMI_TICK_MS, RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS, TX_RING,
     };
     use crate::edge_queue::DropMark;
     #[cfg(all(feature = "profile-a", feature = "drive-link"))]
@@ -87,6 +92,7 @@ mod app {
         channel::{Receiver, Sender},
         make_channel,
     };
+    use screen_line::LineItem;
     #[cfg(feature = "profile-a")]
     use supervisor::control::{Alarm, RunState, Supervisor};
     #[cfg(feature = "profile-a")]
@@ -178,8 +184,10 @@ mod app {
     struct Local {
         hmi_rx: board::HmiRx,
         hmi_tx: board::HmiTx,
-        bytes_in: Sender<'static, u8, RX_QUEUE>,
-        bytes_out: Receiver<'static, u8, RX_QUEUE>,
+        bytes_in: Sender<'static, LineItem, RX_QUEUE>,
+        bytes_out: Receiver<'static, LineItem, RX_QUEUE>,
+        tx_in: Producer<'static, u8>,
+        tx_out: Consumer<'static, u8>,
         edges_in: Producer<'static, board::HallEdge>,
         edges_out: Consumer<'static, board::HallEdge>,
         saves_in: Sender<'static, (), 1>,
@@ -200,11 +208,13 @@ mod app {
         edge_queue: Queue<board::HallEdge, EDGE_QUEUE> = Queue::new(),
         machine_slot: MaybeUninit<Machine> = MaybeUninit::uninit(),
         hmi_slot: MaybeUninit<Hmi> = MaybeUninit::uninit(),
+        tx_ring: Queue<u8, TX_RING> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let board = board::init(cx.device);
         Mono::start(cx.core.SYST, board.sysclk_hz);
-        let (bytes_in, bytes_out) = make_channel!(u8, RX_QUEUE);
+        let (bytes_in, bytes_out) = make_channel!(LineItem, RX_QUEUE);
+        let (tx_in, tx_out) = cx.local.tx_ring.split();
         let (saves_in, saves_out) = make_channel!((), 1);
         let (edges_in, edges_out) = cx.local.edge_queue.split();
         defmt::info!(
@@ -257,6 +267,8 @@ mod app {
                 hmi_tx: board.hmi_tx,
                 bytes_in,
                 bytes_out,
+                tx_in,
+                tx_out,
                 edges_in,
                 edges_out,
                 saves_in,
@@ -529,21 +541,31 @@ mod app {
         });
     }
 
-    /// Touchscreen bytes: drains USART1 into the queue of [`hmi`].
+    /// The touchscreen's USART1: each byte in goes to the queue of [`hmi`]
+    /// with its arrival time; bytes out go from the transmit ring while the
+    /// data register is empty (TXE).
     ///
-    /// - Priority 4 (highest): the F103's USART has no FIFO, so a byte must
-    ///   be read within one character time (87 µs at 115200 baud).
-    /// - Released by USART1 RXNE, at most 11.5 k times a second.
-    /// - Budget: 2 µs per byte.
-    #[task(binds = USART1, priority = 4, local = [hmi_rx, bytes_in])]
-    fn usart1_rx(cx: usart1_rx::Context) {
+    /// - Priority 4 (highest but the stop input): the F103's USART has no
+    ///   FIFO, so a byte must be read within one character time (87 µs at
+    ///   115200 baud).
+    /// - Released by RXNE and TXE (and pended by [`hmi`] to start sending),
+    ///   at most 11.5 k times a second each way.
+    /// - Budget: 2 µs.
+    #[task(binds = USART1, priority = 4, local = [hmi_rx, hmi_tx, bytes_in, tx_out])]
+    fn usart1(cx: usart1::Context) {
+        let now = uptime_ms();
         // A few bytes at most are pending; the bound keeps an error storm
         // from holding the CPU.
         for _ in 0..4 {
             match cx.local.hmi_rx.read() {
                 Ok(byte) => {
                     stats::HMI_RX_BYTES.inc();
-                    if cx.local.bytes_in.try_send(byte).is_err() {
+                    if cx
+                        .local
+                        .bytes_in
+                        .try_send(LineItem::new(byte, now))
+                        .is_err()
+                    {
                         stats::HMI_RX_DROPPED.inc();
                     }
                 }
@@ -551,6 +573,7 @@ mod app {
                 Err(nb::Error::Other(_)) => stats::HMI_RX_ERRORS.inc(),
             }
         }
+        cx.local.hmi_tx.send(cx.local.tx_out);
     }
 
     /// USART2, the RS-485 line to the drum driver: the next byte out (TXE),
@@ -989,8 +1012,11 @@ mod app {
     /// - Priority 1.
     /// - Released by received bytes, and at least every 20 ms to time the
     ///   link (handshake retries, heartbeats, `get` timeouts).
-    /// - Budget: 3 ms, most of it writing instructions at 115200 baud.
-    #[task(priority = 1, local = [bytes_out, hmi_tx, saves_in, boot_notice], shared = [machine, hmi, stop])]
+    /// - Budget: 1 ms (the bytes received, a tick, the events, a page's
+    ///   instructions encoded and moved to the transmit ring: `cargo xtask
+    ///   bench`'s `hmi_wake`, 26 312 instructions with a second page change);
+    ///   it never waits on the line: [`usart1`] sends the bytes.
+    #[task(priority = 1, local = [bytes_out, tx_in, saves_in, boot_notice], shared = [machine, hmi, stop])]
     async fn hmi(mut cx: hmi::Context) {
         // Whether the screen has answered, or its silence was logged, since boot.
         let mut link_reported = false;
@@ -998,13 +1024,14 @@ mod app {
             let first = Mono::timeout_after(HMI_TICK_MS.millis(), cx.local.bytes_out.recv()).await;
             let bytes_out = &mut cx.local.bytes_out;
             cx.shared.hmi.lock(|hmi| {
-                if let Ok(Ok(byte)) = first {
-                    hmi.push(byte);
-                    while let Ok(byte) = bytes_out.try_recv() {
-                        hmi.push(byte);
-                    }
+                let now = uptime_ms();
+                // One call site: the link's receive path is inlined once.
+                let mut item = first.ok().and_then(Result::ok);
+                while let Some(i) = item {
+                    screen_line::deliver(hmi, i, now);
+                    item = bytes_out.try_recv().ok();
                 }
-                hmi.tick(uptime_ms());
+                hmi.tick(now);
             });
             while let Some(event) = cx.shared.hmi.lock(|hmi| hmi.poll_event()) {
                 link_reported |= matches!(event, Event::Connected);
@@ -1014,15 +1041,14 @@ mod app {
                 defmt::warn!("touchscreen silent since boot: running on the saved settings");
                 link_reported = true;
             }
-            // Drain the transmit queue (blocking writes at priority 1).
-            let mut buf = [0u8; 32];
-            loop {
-                let n = cx.shared.hmi.lock(|hmi| hmi.poll_transmit(&mut buf));
-                if n == 0 {
+            // The queued instructions to the transmit ring (on the QEMU
+            // board, whose interrupt empties it at once, again until the
+            // link's queue is empty).
+            let tx_in = &mut cx.local.tx_in;
+            while cx.shared.hmi.lock(|hmi| screen_line::refill(hmi, tx_in)) > 0 {
+                board::kick_screen_tx();
+                if !cfg!(feature = "board-qemu") {
                     break;
-                }
-                for &b in buf.get(..n).unwrap_or(&[]) {
-                    let _ = nb::block!(cx.local.hmi_tx.write_u8(b));
                 }
             }
         }

@@ -1405,13 +1405,7 @@ const SOURCE: &[Source] = &[
     ),
     c(P::Mode, 7, "tmsg", K::Text, R::Message),
     // 2 fixed
-    c(
-        P::Fixed,
-        1,
-        "nspeed",
-        K::Xfloat(2),
-        R::Input(Field::FixedDrumSpeed),
-    ),
+    c(P::Fixed, 1, "bstart", K::Button, R::Action(A::Start)),
     c(
         P::Fixed,
         2,
@@ -1419,21 +1413,27 @@ const SOURCE: &[Source] = &[
         K::Button,
         R::Action(A::Apply(Field::FixedDrumSpeed)),
     ),
-    c(P::Fixed, 3, "bstart", K::Button, R::Action(A::Start)),
+    c(
+        P::Fixed,
+        3,
+        "nspeed",
+        K::Xfloat(2),
+        R::Input(Field::FixedDrumSpeed),
+    ),
     c(P::Fixed, 4, "bstop", K::Button, R::Action(A::Stop)),
     c(
         P::Fixed,
         5,
-        "bback",
-        K::Button,
-        R::Action(A::ShowPage(P::Mode)),
+        "xtravel",
+        K::Xfloat(2),
+        R::Status(StatusField::TravelSpeed),
     ),
     c(
         P::Fixed,
         6,
-        "xtravel",
-        K::Xfloat(2),
-        R::Status(StatusField::TravelSpeed),
+        "bback",
+        K::Button,
+        R::Action(A::ShowPage(P::Mode)),
     ),
     c(
         P::Fixed,
@@ -1482,7 +1482,13 @@ const SOURCE: &[Source] = &[
     c(P::Adaptive, 3, "bgeardn", K::Button, R::Action(A::GearDown)),
     c(P::Adaptive, 4, "bgearup", K::Button, R::Action(A::GearUp)),
     c(P::Adaptive, 5, "tgear", K::Text, R::GearLabel),
-    c(P::Adaptive, 6, "bstart", K::Button, R::Action(A::Start)),
+    c(
+        P::Adaptive,
+        6,
+        "xdist",
+        K::Xfloat(1),
+        R::Status(StatusField::Distance),
+    ),
     c(P::Adaptive, 7, "bstop", K::Button, R::Action(A::Stop)),
     c(
         P::Adaptive,
@@ -1519,13 +1525,7 @@ const SOURCE: &[Source] = &[
         K::Number,
         R::Status(StatusField::Plants),
     ),
-    c(
-        P::Adaptive,
-        13,
-        "xdist",
-        K::Xfloat(1),
-        R::Status(StatusField::Distance),
-    ),
+    c(P::Adaptive, 13, "bstart", K::Button, R::Action(A::Start)),
     c(P::Adaptive, 14, "tmsg", K::Text, R::Message),
     // Planting quality since Start (the control's, not the seedlings' fall:
     // the page's static label says so, docs/hmi.md).
@@ -1745,9 +1745,9 @@ const SOURCE: &[Source] = &[
     c(
         P::Belt,
         3,
-        "bpar",
-        K::Button,
-        R::Action(A::ShowPage(P::BeltParameters)),
+        "xn1",
+        K::Xfloat(2),
+        R::Status(StatusField::PlantMotorSpeed),
     ),
     c(
         P::Belt,
@@ -1766,9 +1766,9 @@ const SOURCE: &[Source] = &[
     c(
         P::Belt,
         6,
-        "xn1",
-        K::Xfloat(2),
-        R::Status(StatusField::PlantMotorSpeed),
+        "bpar",
+        K::Button,
+        R::Action(A::ShowPage(P::BeltParameters)),
     ),
     c(
         P::Belt,
@@ -1911,9 +1911,9 @@ const SOURCE: &[Source] = &[
     c(
         P::Drive,
         1,
-        "bident",
-        K::Button,
-        R::Action(A::IdentifyDrive),
+        "xtau",
+        K::Xfloat(1),
+        R::Status(StatusField::DriveTau),
     ),
     c(
         P::Drive,
@@ -1939,9 +1939,9 @@ const SOURCE: &[Source] = &[
     c(
         P::Drive,
         5,
-        "xtau",
-        K::Xfloat(1),
-        R::Status(StatusField::DriveTau),
+        "bident",
+        K::Button,
+        R::Action(A::IdentifyDrive),
     ),
     c(
         P::Drive,

@@ -16,6 +16,8 @@
 //! [`drivers_enabled`], [`fatal`] and [`run_limit_ms`].
 
 mod fault;
+mod screen_tx;
+pub use screen_tx::{kick as kick_screen_tx, HmiTx};
 // The run-time memory and division routines of the target (they take the
 // place of compiler_builtins' weak symbols; `unsafe` by their ABI).
 mod mem;

@@ -52,8 +52,8 @@ use super::{
 mod stack_guard;
 mod usart1;
 
-/// Transmit half of the touchscreen UART.
-pub type HmiTx = usart1::Tx;
+/// USART1's transmit half, driven by [`super::HmiTx`].
+pub type ScreenUsartTx = usart1::Tx;
 
 /// Most screen bytes one lock-step period carries (a real line carries
 /// ≈ 115 per 10 ms; the tests send at most this many).
@@ -213,7 +213,7 @@ impl DriveLine {
 /// Everything the application owns after [`init`].
 pub struct Board {
     /// Touchscreen transmitter.
-    pub hmi_tx: HmiTx,
+    pub hmi_tx: super::HmiTx,
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
     /// The drum driver's RS-485 line (USART2), in a static (the QEMU
@@ -346,7 +346,8 @@ const WORK_VALUE: u32 = WORK_GROUND - 1;
 #[inline(never)]
 pub fn init(dp: pac::Peripherals) -> Board {
     stack_guard::enable();
-    let (hmi_tx, mut uart_rx) = usart1::split(dp.USART1);
+    let (tx, mut uart_rx) = usart1::split(dp.USART1);
+    let hmi_tx = super::HmiTx::new(tx);
     uart_rx.listen();
     // Note: `init` runs once, so the singleton is still free.
     let Some(gate_queue) = cortex_m::singleton!(: GateQueue = GateQueue::new()) else {

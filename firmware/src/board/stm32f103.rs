@@ -46,8 +46,8 @@ use super::{
 /// Frequency of the Hall capture timer: one tick is 1 µs.
 const HALL_TIMER_HZ: u32 = 1_000_000;
 
-/// Transmit half of the touchscreen UART.
-pub type HmiTx = Tx<USART1>;
+/// USART1's transmit half, driven by [`super::HmiTx`].
+pub type ScreenUsartTx = Tx<USART1>;
 /// Receive half of the touchscreen UART.
 pub type HmiRx = Rx<USART1>;
 
@@ -59,7 +59,7 @@ const TIMER_CLOCK_HZ: u32 = 72_000_000;
 /// Everything the application owns after [`init`].
 pub struct Board {
     /// Touchscreen transmitter.
-    pub hmi_tx: HmiTx,
+    pub hmi_tx: super::HmiTx,
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
     /// Drum motor PWM and driver pins.
@@ -330,7 +330,8 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
-    let (hmi_tx, mut hmi_rx) = hmi.split();
+    let (tx, mut hmi_rx) = hmi.split();
+    let hmi_tx = super::HmiTx::new(tx);
     hmi_rx.listen();
 
     // RS-485, USART2 on PA2/PA3, DE on PA1.

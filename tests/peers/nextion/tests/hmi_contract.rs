@@ -98,7 +98,7 @@ fn start_tapped_on_page_3_sends_press_then_release_at_the_baud_rate() {
     s.tap(1_000_000, "bstart");
     let out = s.take_output_timed();
     let (times, bytes): (Vec<u64>, Vec<u8>) = out.into_iter().unzip();
-    assert_eq!(bytes, [touch(3, 6, true), touch(3, 6, false)].concat());
+    assert_eq!(bytes, [touch(3, 13, true), touch(3, 13, false)].concat());
     // 7 bytes of 86.8 µs each, from the touch; the release 100 ms later.
     assert_eq!((times[0], times[6]), (1_000_087, 1_000_608));
     assert_eq!((times[7], times[13]), (1_100_087, 1_100_608));

@@ -838,11 +838,11 @@
       });
       m.chart.innerHTML = '<rect x="0" y="0" width="600" height="150" fill="none" stroke="#444"/>' + paths.join('');
       const perm = m.p.comps.find((c) => c.def.detail === 'PlantsPerMetre');
-      if (perm && perm.val > 0) {
-        m.spacing.textContent = 'Mean spacing since Start ' + (10000 / perm.val).toFixed(1) + ' cm';
-      } else {
-        m.spacing.textContent = '';
-      }
+      const parts = [];
+      const last10 = recentSpacing(now);
+      if (last10) parts.push('last 10 s ≈ ' + last10.cm.toFixed(1) + ' cm');
+      if (perm && perm.val > 0) parts.push('since Start ' + (10000 / perm.val).toFixed(1) + ' cm');
+      m.spacing.textContent = parts.length ? 'Spacing: ' + parts.join(', ') : '';
       const recent = events.slice(-4).reverse();
       m.log.replaceChildren(...recent.map((e) => {
         const li = el('li', 'ev ' + e.kind);
@@ -850,6 +850,22 @@
         return li;
       }));
     }
+  }
+
+  /**
+   * The mean spacing over the last 10 s from the plants and the distance
+   * the firmware shows (the distance in 0.1 m: ±0.1 m over the plants
+   * counted, so only from 10 plants on), or null.
+   */
+  function recentSpacing(now) {
+    const at = (d) => (series.get(d) || []).filter((p) => now - p.t <= 10000);
+    const plants = at('Plants');
+    const dist = at('Distance');
+    if (plants.length < 2 || dist.length < 2) return null;
+    const n = plants[plants.length - 1].v - plants[0].v;
+    const m = dist[dist.length - 1].v - dist[0].v;
+    if (n < 10 || m <= 0) return null;
+    return { cm: (100 * m) / n, plants: n };
   }
 
   function logEvent(kind, text) {
@@ -1077,5 +1093,6 @@
     text: (page, name) => { const c = byName.get(key(page, name)); return c ? c.txt : null; },
     series: (d) => (series.get(d) || []).map((p) => p.v),
     landed: () => monitorValue.landed,
+    recentSpacing: () => recentSpacing(performance.now()),
   };
 })();

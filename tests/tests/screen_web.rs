@@ -29,6 +29,20 @@ fn sel(page: u8, name: &str) -> String {
     format!("section[data-page=\"{page}\"] [data-name=\"{name}\"]")
 }
 
+/// Opens the page and checks its script runs (a syntax error shows here
+/// with the browser's message).
+fn open(b: &mut Browser, url: &str) {
+    b.goto(url).unwrap();
+    let ok = b
+        .eval("typeof window.transplanterScreen === 'object'")
+        .unwrap();
+    assert!(
+        ok == true,
+        "the page's script did not run: {:?}",
+        b.exceptions()
+    );
+}
+
 fn wait_connected(server: &ScreenServer) {
     let deadline = Instant::now() + Duration::from_secs(10);
     while !server.connected() {
@@ -180,7 +194,7 @@ impl XorShift {
 fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
     let server = ScreenServer::start(0, None).unwrap();
     let mut b = Browser::launch(1280, 800).unwrap();
-    b.goto(&server.url()).unwrap();
+    open(&mut b, &server.url());
     wait_connected(&server);
 
     // Every page, both machines, two tablet sizes.
@@ -433,23 +447,22 @@ fn true_indices(logs: &[String], from_ms: u32, spacing_m: f64) -> ([f64; 4], u32
 #[test]
 fn the_qemu_board_is_driven_from_the_page() {
     let elf = Image::BothMachines.elf().unwrap();
-    // Real time: QEMU's clock is the host's, the page answers when it does.
-    let fw = Firmware::boot(
+    // Real time, paced by the wall clock; the page answers when it does.
+    let mut fw = Firmware::boot(
         &elf,
         &BootOptions {
             run_ms: Some(90_000),
             scenario: vec!["gear=2".into(), "plant_log=1".into(), "noise=0".into()],
-            lockstep: false,
-            accelerated: false,
             ..BootOptions::default()
         },
     )
     .unwrap();
+    fw.pace_in_real_time().unwrap();
     let server = ScreenServer::start(0, Some(fw.serial_stream().unwrap())).unwrap();
     let mut b = Browser::launch(1280, 800).unwrap();
-    b.goto(&server.url()).unwrap();
+    open(&mut b, &server.url());
     assert!(
-        b.wait_for("transplanterScreen.shown() === 1", Duration::from_secs(20))
+        b.wait_for("transplanterScreen.shown() === 1", Duration::from_secs(60))
             .unwrap(),
         "the firmware never set the page up; log:\n{}",
         fw.logs().join("\n")
@@ -461,7 +474,7 @@ fn the_qemu_board_is_driven_from_the_page() {
     // The operator: Speed-Adaptive, 7.0 cm, Low 2, Start.
     b.tap(&sel(1, "badapt")).unwrap();
     assert!(b
-        .wait_for("transplanterScreen.shown() === 3", Duration::from_secs(5))
+        .wait_for("transplanterScreen.shown() === 3", Duration::from_secs(30))
         .unwrap());
     b.tap(&sel(3, "nspacing")).unwrap();
     b.eval(&format!(
@@ -471,26 +484,42 @@ fn the_qemu_board_is_driven_from_the_page() {
     .unwrap();
     b.type_text("7.0").unwrap();
     b.tap(&sel(3, "bapply")).unwrap();
-    log_has(&fw, "screen: SetSpacing", 5);
+    log_has(&fw, "screen: SetSpacing", 30);
     b.tap(&sel(3, "bgearup")).unwrap();
     assert!(b
         .wait_for(
             "transplanterScreen.text(3, 'tgear') === 'Low 2'",
-            Duration::from_secs(5)
+            Duration::from_secs(30)
         )
         .unwrap());
     b.tap(&sel(3, "bstart")).unwrap();
-    let running = log_has(&fw, "drum: Running", 5);
+    let running = log_has(&fw, "drum: Running", 30);
     let started_ms = log_time_ms(&running).unwrap();
     assert!(
         b.wait_for(
             "transplanterScreen.value(3, 'nplants') >= 10",
-            Duration::from_secs(20)
+            Duration::from_secs(90)
         )
         .unwrap(),
-        "no plants counted on the page"
+        "no plants counted on the page: page {} shows {} plants, link {}; the simulator {:?}; log:\n{}",
+        b.eval("transplanterScreen.shown()").unwrap(),
+        value(&mut b, 3, "nplants"),
+        b.eval("transplanterScreen.link()").unwrap(),
+        sim_samples(&fw.logs()).last(),
+        fw.logs().iter().filter(|l| !l.contains("sim:")).cloned().collect::<Vec<_>>().join("\n")
     );
 
+    // The monitor's spacing over the last 10 s (plants and distance as
+    // the firmware shows them: ±0.1 m over ≥ 10 plants).
+    assert!(
+        b.wait_for(
+            "(() => { const r = transplanterScreen.recentSpacing(); return !!r && Math.abs(r.cm - 7) <= 1; })()",
+            Duration::from_secs(60)
+        )
+        .unwrap(),
+        "monitor spacing {}",
+        b.eval("JSON.stringify(transplanterScreen.recentSpacing())").unwrap()
+    );
     // The line cut mid-run, and kept out for 3.5 s.
     server.set_accepting(false);
     server.cut();
@@ -502,11 +531,11 @@ fn the_qemu_board_is_driven_from_the_page() {
         )
         .unwrap());
     let said_in = cut.elapsed();
-    let silent = log_has(&fw, "touchscreen silent: running on the last settings", 6);
+    let silent = log_has(&fw, "touchscreen silent: running on the last settings", 60);
     std::thread::sleep(Duration::from_millis(800));
     server.set_accepting(true);
     let connected = fw
-        .wait_log(Duration::from_secs(10), |l| {
+        .wait_log(Duration::from_secs(60), |l| {
             l.contains("touchscreen connected")
                 && log_time_ms(l).unwrap_or(0) > log_time_ms(&silent).unwrap_or(0)
         })
@@ -515,7 +544,7 @@ fn the_qemu_board_is_driven_from_the_page() {
     assert!(b
         .wait_for(
             "transplanterScreen.link() === 'ok' && transplanterScreen.shown() === 1",
-            Duration::from_secs(5)
+            Duration::from_secs(30)
         )
         .unwrap());
     // The drum ran on the last settings while the screen was away.
@@ -536,12 +565,12 @@ fn the_qemu_board_is_driven_from_the_page() {
     // Back to the run page, and Stop.
     b.tap(&sel(1, "badapt")).unwrap();
     assert!(b
-        .wait_for("transplanterScreen.shown() === 3", Duration::from_secs(5))
+        .wait_for("transplanterScreen.shown() === 3", Duration::from_secs(30))
         .unwrap());
     std::thread::sleep(Duration::from_millis(600));
     b.tap(&sel(3, "bstop")).unwrap();
-    let taken = log_has(&fw, "screen: Stop", 5);
-    let stopped = log_has(&fw, "drum: Stopped", 5);
+    let taken = log_has(&fw, "screen: Stop", 30);
+    let stopped = log_has(&fw, "drum: Stopped", 30);
     let (taken_ms, stopped_ms) = (log_time_ms(&taken).unwrap(), log_time_ms(&stopped).unwrap());
     assert!(
         stopped_ms >= taken_ms && stopped_ms <= taken_ms + 10,

@@ -52,8 +52,9 @@ pub fn screenshots() -> Result {
     Ok(())
 }
 
-/// `cargo xtask qemu --screen`: the firmware in real time (no lock-step:
-/// QEMU's clock is the host's) against the simulated machine, its USART1
+/// `cargo xtask qemu --screen`: the firmware in real time (one control
+/// period every 10 ms of host time, `Firmware::pace_in_real_time`; no
+/// test pumping it) against the simulated machine, its USART1
 /// joined to the page on `http://127.0.0.1:PORT/`. Runs until Ctrl-C, or
 /// `seconds` of firmware time.
 pub fn qemu_screen(elf: &std::path::Path, seconds: Option<u32>, port: u16) -> Result {
@@ -67,11 +68,11 @@ pub fn qemu_screen(elf: &std::path::Path, seconds: Option<u32>, port: u16) -> Re
                 .join("settings-flash-screen.bin"),
         ),
         scenario: vec!["gear=2".into()],
-        lockstep: false,
-        accelerated: false,
         ..BootOptions::default()
     };
-    let fw = Firmware::boot(elf, &options).map_err(|e| e.to_string())?;
+    let mut fw = Firmware::boot(elf, &options).map_err(|e| e.to_string())?;
+    // Real time, paced by the wall clock (`Firmware::pace_in_real_time`).
+    fw.pace_in_real_time().map_err(|e| e.to_string())?;
     let serial = fw.serial_stream().map_err(|e| e.to_string())?;
     let server = ScreenServer::start(port, Some(serial))
         .or_else(|_| ScreenServer::start(0, fw.serial_stream().ok()))

@@ -725,6 +725,7 @@
       // Alarm text: the whole page.
       for (const c of comps.filter((c) => c.def.role === 'alarm')) {
         used.add(c);
+        sec.classList.add('alarm-page');
         const a = el('div', 'alarm-text');
         tag(a, c);
         c.el = a;
@@ -839,7 +840,8 @@
       m.chart.innerHTML = '<rect x="0" y="0" width="600" height="150" fill="none" stroke="#444"/>' + paths.join('');
       const perm = m.p.comps.find((c) => c.def.detail === 'PlantsPerMetre');
       const parts = [];
-      const last10 = recentSpacing(now);
+      const showsDistance = m.p.comps.some((c) => c.def.detail === 'Distance');
+      const last10 = showsDistance ? recentSpacing(now) : null;
       if (last10) parts.push('last 10 s ≈ ' + last10.cm.toFixed(1) + ' cm');
       if (perm && perm.val > 0) parts.push('since Start ' + (10000 / perm.val).toFixed(1) + ' cm');
       m.spacing.textContent = parts.length ? 'Spacing: ' + parts.join(', ') : '';

@@ -214,6 +214,22 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
             );
             problems.extend(page_problems(&mut b, page, viewport));
         }
+        // The link buttons of the top bar are touch targets too.
+        let mm_per_px = 177.8 / f64::from(viewport.0).hypot(f64::from(viewport.1));
+        for tool in ["use-serial", "use-ws"] {
+            let r = b
+                .eval(&format!(
+                    "(() => {{ const r = document.getElementById('{tool}').getBoundingClientRect(); return [r.width, r.height]; }})()"
+                ))
+                .unwrap();
+            let (w, h) = (
+                r[0].as_f64().unwrap_or(0.0) * mm_per_px,
+                r[1].as_f64().unwrap_or(0.0) * mm_per_px,
+            );
+            if w < 12.0 || h < 12.0 {
+                problems.push(format!("`{tool}` {w:.1} x {h:.1} mm at {viewport:?}"));
+            }
+        }
     }
     assert!(problems.is_empty(), "{problems:#?}");
     // The check fails when a component is missing (one taken out).

@@ -713,7 +713,10 @@ fn ci() -> Result {
     )?;
     let totals = test()?;
     // The operator's web screen for a real board (its tests ran above).
-    eprintln!("xtask: the operator's web screen: {}", screen::build()?.display());
+    eprintln!(
+        "xtask: the operator's web screen: {}",
+        screen::build()?.display()
+    );
     size()?;
     eprintln!("xtask: QEMU smoke run (the main job, 6 s)");
     qemu(&["--seconds".into(), "6".into()])?;

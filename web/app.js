@@ -1035,6 +1035,7 @@
     }
     try {
       const p = await navigator.serial.requestPort();
+      clearTimeout(wsTimer);
       if (ws) { const s = ws; ws = null; s.close(); }
       openSerial(p);
     } catch (e) {

@@ -210,6 +210,7 @@ pub struct FromPage {
 
 struct Shared {
     html: String,
+    port: u16,
     started: Instant,
     upstream: Mutex<Option<TcpStream>>,
     client: Mutex<Option<Sender<Vec<u8>>>>,
@@ -238,6 +239,7 @@ impl ScreenServer {
         let port = listener.local_addr()?.port();
         let shared = Arc::new(Shared {
             html,
+            port,
             started: Instant::now(),
             upstream: Mutex::new(None),
             client: Mutex::new(None),
@@ -447,7 +449,33 @@ fn websocket(stream: TcpStream, s: &Arc<Shared>) -> io::Result<()> {
     }
     stream.set_read_timeout(Some(Duration::from_secs(5)))?;
     let raw = stream.try_clone()?;
-    let mut ws = tungstenite::accept(stream).map_err(io::Error::other)?;
+    // Only the page this server serves: another site open in the same
+    // browser must not reach the machine's line (its Origin differs).
+    let own = [
+        format!("http://127.0.0.1:{}", s.port),
+        format!("http://localhost:{}", s.port),
+    ];
+    // The error type is tungstenite's (its handshake callback's).
+    #[allow(clippy::result_large_err)]
+    let check = move |req: &tungstenite::handshake::server::Request,
+                      resp: tungstenite::handshake::server::Response| {
+        let origin = req
+            .headers()
+            .get("origin")
+            .and_then(|o| o.to_str().ok())
+            .map(str::to_string);
+        match origin {
+            Some(o) if !own.contains(&o) => {
+                let mut refuse = tungstenite::handshake::server::ErrorResponse::new(Some(
+                    "only the page this server serves".into(),
+                ));
+                *refuse.status_mut() = tungstenite::http::StatusCode::FORBIDDEN;
+                Err(refuse)
+            }
+            _ => Ok(resp),
+        }
+    };
+    let mut ws = tungstenite::accept_hdr(stream, check).map_err(io::Error::other)?;
     let (tx, rx): (Sender<Vec<u8>>, Receiver<Vec<u8>>) = mpsc::channel();
     {
         let mut client = s.client.lock().map_err(|_| io::Error::other("poisoned"))?;
@@ -530,6 +558,29 @@ mod tests {
             .collect::<Vec<_>>()
             .join("\n");
         assert!(doc_json(&cut).is_err());
+    }
+
+    /// A WebSocket from another site's page is refused; the served page's
+    /// own origin is taken.
+    #[test]
+    fn only_the_served_page_reaches_the_line() {
+        let server = ScreenServer::start(0, None).unwrap();
+        let url = format!("ws://127.0.0.1:{}/ws", server.port());
+        let connect = |origin: &str| {
+            let mut req =
+                tungstenite::client::IntoClientRequest::into_client_request(url.as_str()).unwrap();
+            req.headers_mut().insert("Origin", origin.parse().unwrap());
+            let stream = TcpStream::connect(("127.0.0.1", server.port())).unwrap();
+            tungstenite::client(req, stream).map(|_| ())
+        };
+        assert!(connect("http://evil.example").is_err());
+        assert_eq!(server.sessions(), 0);
+        assert!(connect(&format!("http://127.0.0.1:{}", server.port())).is_ok());
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while server.sessions() == 0 && Instant::now() < deadline {
+            thread::sleep(Duration::from_millis(10));
+        }
+        assert_eq!(server.sessions(), 1);
     }
 
     #[test]

@@ -571,11 +571,11 @@ mod tests {
                 tungstenite::client::IntoClientRequest::into_client_request(url.as_str()).unwrap();
             req.headers_mut().insert("Origin", origin.parse().unwrap());
             let stream = TcpStream::connect(("127.0.0.1", server.port())).unwrap();
-            tungstenite::client(req, stream).map(|_| ())
+            tungstenite::client(req, stream).is_ok()
         };
-        assert!(connect("http://evil.example").is_err());
+        assert!(!connect("http://evil.example"));
         assert_eq!(server.sessions(), 0);
-        assert!(connect(&format!("http://127.0.0.1:{}", server.port())).is_ok());
+        assert!(connect(&format!("http://127.0.0.1:{}", server.port())));
         let deadline = Instant::now() + Duration::from_secs(5);
         while server.sessions() == 0 && Instant::now() < deadline {
             thread::sleep(Duration::from_millis(10));

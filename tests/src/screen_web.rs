@@ -270,6 +270,21 @@ impl ScreenServer {
         Ok(Self { shared, port })
     }
 
+    /// Joins the page to another firmware's USART1 (a board rebooted: a
+    /// new QEMU); what the old one sends is no longer passed on.
+    pub fn set_upstream(&self, upstream: TcpStream) -> io::Result<()> {
+        let reader = upstream.try_clone()?;
+        if let Ok(mut slot) = self.shared.upstream.lock() {
+            if let Some(old) = slot.take() {
+                let _ = old.shutdown(Shutdown::Both);
+            }
+            *slot = Some(upstream);
+        }
+        let s = self.shared.clone();
+        thread::spawn(move || firmware_reader(reader, s));
+        Ok(())
+    }
+
     /// The port it listens on.
     pub fn port(&self) -> u16 {
         self.port

@@ -648,4 +648,48 @@ fn the_qemu_board_is_driven_from_the_page() {
     );
     assert!(b.exceptions().is_empty(), "{:?}", b.exceptions());
     qemu_tests::check_stack(&fw.logs()).unwrap();
+
+    // The board reboots: the page hears nothing, says so, and follows the
+    // new firmware's set-up without a reload.
+    drop(fw);
+    let rebooted = Instant::now();
+    assert!(b
+        .wait_for(
+            "transplanterScreen.link() === 'lost'",
+            Duration::from_secs(4)
+        )
+        .unwrap());
+    let silent_in = rebooted.elapsed();
+    let mut fw = Firmware::boot(
+        &elf,
+        &BootOptions {
+            run_ms: Some(30_000),
+            ..BootOptions::default()
+        },
+    )
+    .unwrap();
+    fw.pace_in_real_time().unwrap();
+    server.set_upstream(fw.serial_stream().unwrap()).unwrap();
+    log_has(&fw, "touchscreen connected", 60);
+    assert!(b
+        .wait_for(
+            "transplanterScreen.link() === 'ok' && transplanterScreen.shown() === 1",
+            Duration::from_secs(30)
+        )
+        .unwrap());
+    // Set up three times: at the start, after the lost line, after the
+    // reboot.
+    let events = b.eval("transplanterScreen.events()").unwrap().to_string();
+    assert_eq!(
+        events.matches("Controller set the screen up").count(),
+        3,
+        "{events}"
+    );
+    eprintln!(
+        "screen_web: board rebooted: the page said the controller was silent in {silent_in:?}, \
+         back on the new firmware's home page in {:?}",
+        rebooted.elapsed()
+    );
+    // Still nothing sent but answers.
+    assert_eq!(touches(&server).len(), 8);
 }

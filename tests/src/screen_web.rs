@@ -3,7 +3,8 @@
 //! and joins its WebSocket to the QEMU board's USART1.
 //!
 //! [`page_html`] builds the one self-contained HTML file: `web/index.html`
-//! with `web/style.css` and `web/app.js` inlined, the screen contract from
+//! with `web/style.css` and the script's parts (`web/screen.js`, `page.js`,
+//! `monitor.js`, `link.js`) inlined, the screen contract from
 //! `hmi_proto::export::contract_json` (pages, components, ids, roles, which
 //! events send the id) and, from docs/hmi.md §6, the designer's button
 //! captions and static texts. A contract button without a caption in the
@@ -32,7 +33,14 @@ use tungstenite::{Message, WebSocket};
 
 const INDEX: &str = include_str!("../../web/index.html");
 const STYLE: &str = include_str!("../../web/style.css");
-const SCRIPT: &str = include_str!("../../web/app.js");
+/// The page's script, in parts (each a piece of one function: they share
+/// its names), joined in this order.
+const SCRIPTS: [&str; 4] = [
+    include_str!("../../web/screen.js"),
+    include_str!("../../web/page.js"),
+    include_str!("../../web/monitor.js"),
+    include_str!("../../web/link.js"),
+];
 const HMI_DOC: &str = include_str!("../../docs/hmi.md");
 
 /// The close code a second page gets while one is connected.
@@ -184,12 +192,13 @@ fn script_safe(s: &str) -> String {
 pub fn page_html() -> Result<String, String> {
     let contract = hmi_proto::export::contract_json();
     let doc = doc_json(HMI_DOC)?;
+    let script = format!("'use strict';\n(() => {{\n{}}})();\n", SCRIPTS.join("\n"));
     let mut html = INDEX.to_string();
     for (mark, text) in [
         ("/*STYLE*/", STYLE.to_string()),
         ("/*CONTRACT*/", script_safe(&contract)),
         ("/*DOC*/", script_safe(&doc)),
-        ("/*SCRIPT*/", script_safe(SCRIPT)),
+        ("/*SCRIPT*/", script_safe(&script)),
     ] {
         if !html.contains(mark) {
             return Err(format!("web/index.html lacks {mark}"));

@@ -79,7 +79,7 @@ mod app {
     #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     use ::drive_link::link::ControlAction;
     #[cfg(feature = "drive-link")]
-    use ::drive_link::link::{Event as LinkEvent, Link, LinkConfig, LossCause};
+    use ::drive_link::link::{Event as LinkEvent, Link, LossCause, SetupFault};
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
@@ -102,7 +102,7 @@ mod app {
         machine::Machine,
         settings::{Profile, Settings},
         stop_input::{StopChange, StopLatch},
-        store::{Loaded, SettingsStore},
+        store::{LoadStatus, SettingsStore},
     };
     #[cfg(feature = "profile-b")]
     use supervisor::{
@@ -301,13 +301,27 @@ mod app {
         slot: &'static mut MaybeUninit<Machine>,
     ) -> (Option<Store>, &'static mut Machine, Option<&'static str>) {
         let mut store = flash.and_then(|flash| SettingsStore::new(flash, 0).ok());
-        let loaded = store.as_mut().map(|s| s.load());
-        let notice = match &loaded {
-            Some(Loaded::Saved { sequence, .. }) => {
+        let mut notice = None;
+        // The record returned straight into the call's argument: no copy
+        // of it in this frame.
+        let (machine, machine_notice) = build_machine(slot, load_record(&mut store, &mut notice));
+        (store, machine, machine_notice.or(notice))
+    }
+
+    /// The saved settings (the defaults without a valid record or a
+    /// store) and the screen's notice, loaded in place into the value
+    /// returned: the machine is built from that one record (a second copy
+    /// of it, 352 B, sat under the supervisor built on the stack, on the
+    /// QEMU board's boot path).
+    #[inline(never)]
+    fn load_record(store: &mut Option<Store>, notice: &mut Option<&'static str>) -> Settings {
+        let mut settings = Settings::default();
+        *notice = match store.as_mut().map(|s| s.load_into(&mut settings)) {
+            Some(LoadStatus::Saved { sequence }) => {
                 defmt::info!("settings: loaded record {=u32}", sequence);
                 None
             }
-            Some(Loaded::Defaults { reason, .. }) => {
+            Some(LoadStatus::Defaults { reason }) => {
                 defmt::warn!("settings: defaults in use ({})", reason);
                 Some(reason.message())
             }
@@ -316,21 +330,7 @@ mod app {
                 Some("No settings store: defaults")
             }
         };
-        let (machine, machine_notice) = build_loaded(slot, loaded);
-        (store, machine, machine_notice.or(notice))
-    }
-
-    /// [`build_machine`] from what the store loaded (the defaults without a
-    /// store), in its own frame (see [`load_settings`]).
-    #[inline(never)]
-    fn build_loaded(
-        slot: &'static mut MaybeUninit<Machine>,
-        loaded: Option<Loaded>,
-    ) -> (&'static mut Machine, Option<&'static str>) {
-        build_machine(
-            slot,
-            loaded.map_or_else(Settings::default, Loaded::into_settings),
-        )
+        settings
     }
 
     /// Whether this image carries the machine of `profile` (the real board
@@ -473,9 +473,9 @@ mod app {
         machine: &Machine,
     ) -> &'static mut DriveState {
         #[allow(unreachable_patterns)]
-        let profile: Option<::drive_link::profile::DriverProfile> = match machine {
+        let link = match machine {
             #[cfg(feature = "profile-a")]
-            Machine::DrumBelt(sup) => sup.settings().drive_link.build().ok().flatten(),
+            Machine::DrumBelt(sup) => sup.settings().drive_link.config().ok().flatten(),
             _ => None,
         };
         // The empty state first, then the link built in its place (built
@@ -484,12 +484,14 @@ mod app {
             link: None,
             enabled: None,
         });
-        if let Some((p, config)) = profile.and_then(|p| Some((p, LinkConfig::for_baud(p.baud)?))) {
+        if let Some((p, config)) = link {
             defmt::info!(
-                "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us",
+                "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us, retry gap {=u32} us, driver offline time {=u16} ms",
                 p.slave,
                 p.baud,
-                config.reply_timeout_us
+                config.reply_timeout_us,
+                config.retry_gap_us,
+                config.offline_time_ms
             );
             state.link = Some(Link::new(p, config));
         }
@@ -624,6 +626,9 @@ mod app {
                 if let Some(n) = line.receive(now, &mut buf) {
                     event = link.received(now, buf.get(..n).unwrap_or(&[]));
                 }
+                if line.receiving(now) {
+                    link.line_busy(now);
+                }
                 event = event.or(link.tick(now));
                 if let Some(n) = link.next_frame(now, &mut buf) {
                     line.send(buf.get(..n).unwrap_or(&[]), now);
@@ -679,6 +684,15 @@ mod app {
             Some(LossCause::Corrupt) => defmt::warn!(
                 "drive link: lost: corrupt replies after the retries (noise, termination, baud)"
             ),
+            Some(LossCause::Setup(SetupFault::MaxSpeed { driver, needed })) => defmt::warn!(
+                "drive link: refused: the driver's maximum speed register holds {=u16}; the drum's top speed needs {=u32} through the gearbox: raise it (ZLAC8015D 0x2008, at most 1000 r/min) or use a smaller ratio",
+                driver,
+                needed
+            ),
+            Some(LossCause::Setup(SetupFault::Resolution(value))) => defmt::warn!(
+                "drive link: refused: the driver's speed resolution register holds {=u16}; set 1 to 10 (ZLAC8015D 0x2022: 1 = 1 r/min, 10 = 0.1 r/min)",
+                value
+            ),
             _ => defmt::warn!(
                 "drive link: lost: no reply after the retries (wiring, power, slave id, baud)"
             ),
@@ -697,6 +711,10 @@ mod app {
                 age_us: u32::try_from(now_us.saturating_sub(s.sampled_at_us)).unwrap_or(u32::MAX),
             }),
             lost: link.is_lost(),
+            setup: match link.loss_cause() {
+                Some(LossCause::Setup(f)) => Some(f.into()),
+                _ => None,
+            },
             refused: matches!(
                 link.loss_cause(),
                 Some(LossCause::Refused { .. } | LossCause::Unfit { .. })

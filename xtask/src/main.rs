@@ -33,11 +33,12 @@ type Result<T = ()> = std::result::Result<T, String>;
 
 const TARGET: &str = "thumbv7m-none-eabi";
 
-/// Flash and static-RAM budgets of each real-board image: 56 KB of flash, so
-/// that an image fits a 64 KB STM32F103C8 beside the 8 KB of settings pages
-/// (the developers' guide; where the bytes are: docs/firmware.md, "Memory
-/// and flash").
-const STM32F103_FLASH_BUDGET: u64 = 56 * 1024;
+/// Flash and static-RAM budgets of the real-board images without the drive
+/// link: the 128 KB parts (RB, CB) less the 8 KB of settings pages kept at
+/// 0x0800E000 and the last 8 KB (memory-stm32f103.x: 56 KB of code below
+/// the settings pages, 56 KB above; the linker holds each part to its
+/// region). Where the bytes are: docs/firmware.md, "Memory and flash".
+const STM32F103_FLASH_BUDGET: u64 = 112 * 1024;
 const STM32F103_RAM_BUDGET: u64 = 8 * 1024;
 
 fn main() -> ExitCode {
@@ -104,8 +105,8 @@ enum Board {
     Stm32f103,
     Stm32f103ProfileB,
     /// Profile A with the drum driver's link (feature `drive-link`), linked
-    /// for the 128 KB parts: it does not fit the C8's 56 KB yet
-    /// (docs/drive-link.md, "Images").
+    /// with its settings in the last 8 KB of the 128 KB parts
+    /// (memory-stm32f103-128k.x; docs/drive-link.md, "Images").
     Stm32f103DriveLink,
     Qemu,
 }
@@ -220,7 +221,60 @@ fn ensure_tools() -> Result {
     }
     ensure_twin_tools()?;
     screen::ensure_browser()?;
+    ensure_peer_tools()?;
     ensure_linker()
+}
+
+/// The pymodbus release the independent ZLAC8015D peer is written for
+/// (tests/peers/zlac8015d).
+const PYMODBUS: &str = "pymodbus[serial]==3.16.1";
+
+/// Whether python3 has pymodbus 3.16.1 and pyserial (the peer's serial
+/// server).
+fn have_pymodbus() -> bool {
+    Command::new("python3")
+        .args([
+            "-c",
+            "import sys, serial, pymodbus; sys.exit(pymodbus.__version__ != '3.16.1')",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// The drive link's conformance test (crates/supervisor/tests/conformance.rs)
+/// runs the master against an independent Modbus RTU slave on a pty pair:
+/// `socat` (Debian's package) and pymodbus (PyPI), installed here when
+/// missing.
+fn ensure_peer_tools() -> Result {
+    let socat = Command::new("socat")
+        .arg("-V")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok();
+    if !socat {
+        apt_install(&["socat"], "the drive link's conformance test")?;
+    }
+    if have_pymodbus() {
+        return Ok(());
+    }
+    let pip = |extra: &[&str]| {
+        Command::new("python3")
+            .args(["-m", "pip", "install", "--quiet"])
+            .args(extra)
+            .arg(PYMODBUS)
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    // Debian's own python3 refuses pip outside a venv (PEP 668) unless told.
+    if (pip(&[]) || pip(&["--break-system-packages"])) && have_pymodbus() {
+        return Ok(());
+    }
+    Err(format!(
+        "the drive link's conformance test needs `python3 -m pip install '{PYMODBUS}'`"
+    ))
 }
 
 /// Whether a file name is one that bindgen (clang-sys) loads as libclang.
@@ -793,6 +847,67 @@ fn check_forbidden_symbols(elf: &Path) -> Result {
     Ok(())
 }
 
+/// The settings pages of the images without the drive link
+/// (memory-stm32f103.x), which boards in the field already hold.
+const STM32F103_SETTINGS_PAGES: std::ops::Range<u64> = 0x0800_E000..0x0801_0000;
+
+/// The loaded bytes of an ELF (`PT_LOAD` with file bytes): load address
+/// and length, from `llvm-readobj -l` (rustup's llvm-tools).
+fn loaded_ranges(elf: &Path) -> Result<Vec<std::ops::Range<u64>>> {
+    let readobj = llvm_tool("llvm-readobj")?;
+    let out = Command::new(&readobj)
+        .args(["--elf-output-style=GNU", "-l"])
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("{}: {e}", readobj.display()))?;
+    if !out.status.success() {
+        return Err(format!("llvm-readobj failed on {}", elf.display()));
+    }
+    let hex = |w: &str| u64::from_str_radix(w.trim_start_matches("0x"), 16).ok();
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| {
+            // LOAD  Offset VirtAddr PhysAddr FileSiz MemSiz Flg Align
+            let w: Vec<&str> = l.split_whitespace().collect();
+            let (paddr, filesz) = match w.as_slice() {
+                ["LOAD", _, _, p, f, ..] => (hex(p)?, hex(f)?),
+                _ => return None,
+            };
+            (filesz > 0).then(|| paddr..paddr.saturating_add(filesz))
+        })
+        .collect())
+}
+
+/// The first loaded range that falls on `pages`: flashing the image would
+/// erase what they hold (probe-rs and cargo-flash erase every page a
+/// segment covers).
+fn on_pages(
+    loaded: &[std::ops::Range<u64>],
+    pages: &std::ops::Range<u64>,
+) -> Option<std::ops::Range<u64>> {
+    loaded
+        .iter()
+        .find(|r| r.start < pages.end && pages.start < r.end)
+        .cloned()
+}
+
+/// An image without the link must leave the settings pages unflashed.
+fn check_settings_pages_kept(elf: &Path) -> Result {
+    match on_pages(&loaded_ranges(elf)?, &STM32F103_SETTINGS_PAGES) {
+        Some(r) => Err(format!(
+            "{}: loaded bytes {:#010x}..{:#010x} fall on the settings pages \
+             {:#010x}..{:#010x}: flashing it would erase a board's settings \
+             (memory-stm32f103.x)",
+            elf.display(),
+            r.start,
+            r.end,
+            STM32F103_SETTINGS_PAGES.start,
+            STM32F103_SETTINGS_PAGES.end
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Section sizes of an ELF, from `llvm-size -A` (rustup's llvm-tools).
 fn sections(elf: &Path) -> Result<Vec<(String, u64)>> {
     let llvm_size = llvm_tool("llvm-size")?;
@@ -827,7 +942,9 @@ fn footprint(elf: &Path) -> Result<(u64, u64)> {
     let mut ram = 0;
     for (name, size) in sections(elf)? {
         match name.as_str() {
-            ".vector_table" | ".text" | ".rodata" | ".gnu.sgstubs" => flash += size,
+            // `.upper_text`: the code above the settings pages
+            // (memory-stm32f103.x).
+            ".vector_table" | ".text" | ".upper_text" | ".rodata" | ".gnu.sgstubs" => flash += size,
             ".data" => {
                 flash += size;
                 ram += size;
@@ -892,6 +1009,8 @@ fn size() -> Result {
     }
     check_forbidden_symbols(&Board::Stm32f103.elf())?;
     check_forbidden_symbols(&Board::Stm32f103ProfileB.elf())?;
+    check_settings_pages_kept(&Board::Stm32f103.elf())?;
+    check_settings_pages_kept(&Board::Stm32f103ProfileB.elf())?;
     check_forbidden_symbols(&Board::Stm32f103DriveLink.elf())
 }
 
@@ -917,7 +1036,24 @@ fn flash() -> Result {
 
 #[cfg(test)]
 mod tests {
-    use super::is_libclang;
+    use super::{is_libclang, on_pages, STM32F103_SETTINGS_PAGES};
+
+    /// Loaded bytes next to the settings pages pass; one byte on them, at
+    /// either end, is found.
+    #[test]
+    fn loaded_bytes_on_the_settings_pages_are_found() {
+        let pages = STM32F103_SETTINGS_PAGES;
+        let below = 0x0800_0000..0x0800_E000;
+        let above = 0x0801_0000..0x0801_1000;
+        assert_eq!(on_pages(&[below.clone(), above.clone()], &pages), None);
+        let first = 0x0800_C000..0x0800_E001;
+        assert_eq!(
+            on_pages(&[below.clone(), first.clone()], &pages),
+            Some(first)
+        );
+        let last = 0x0800_FFFF..0x0801_0004;
+        assert_eq!(on_pages(&[above, last.clone()], &pages), Some(last));
+    }
 
     #[test]
     fn libclang_is_the_library_bindgen_loads_not_libclang_cpp() {

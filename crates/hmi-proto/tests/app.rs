@@ -1366,7 +1366,7 @@ proptest! {
 }
 
 /// Page 10 (docs/hmi.md): from page 9's `blink`, the selector walks the
-/// nine link settings (label in `tlpar`, each step a command so that the
+/// link settings (label in `tlpar`, each step a command so that the
 /// supervisor sends the value back), `blval` reads `nlval` and commands the
 /// value for the selected one with the restart notice; a value beyond
 /// ±10⁸ is refused on the screen, the old value written back.
@@ -1382,7 +1382,8 @@ fn page_10_edits_the_drive_link_one_setting_at_a_time() {
     assert_eq!(screen.page(), 10);
     assert_eq!(screen.text("tlpar"), Some("Feedback 0enc 1drv 2both"));
     let mut seen = vec![LinkParameter::Feedback];
-    for _ in 0..9 {
+    let n = LinkParameter::ALL.len();
+    for _ in 0..n {
         screen.release("blpar").unwrap();
         let ev = pump(&mut hmi, &mut screen);
         let [Event::Command(Command::SelectLinkParameter(p))] = ev[..] else {
@@ -1391,9 +1392,9 @@ fn page_10_edits_the_drive_link_one_setting_at_a_time() {
         assert_eq!(screen.text("tlpar"), Some(p.label()));
         seen.push(p);
     }
-    // Nine steps: every parameter once, back to the first.
-    assert_eq!(seen[..9], LinkParameter::ALL);
-    assert_eq!(seen[9], LinkParameter::Feedback);
+    // One step each: every parameter once, back to the first.
+    assert_eq!(seen[..n], LinkParameter::ALL);
+    assert_eq!(seen[n], LinkParameter::Feedback);
     screen.set_value("nlval", 1).unwrap();
     screen.release("blval").unwrap();
     assert_eq!(

@@ -206,6 +206,20 @@ impl DriveLine {
         Some(n)
     }
 
+    /// Whether a reply is on the line at `now_us`, its frame not yet ended
+    /// by its silence (from its first byte: its end less its time on the
+    /// line and the 3.5-character silence).
+    pub fn receiving(&mut self, now_us: u64) -> bool {
+        let Some(f) = self.rx.peek() else {
+            return false;
+        };
+        let on_line = drive_link::timing::frame_time_us(self.baud, u32::from(f.len)).unwrap_or(0);
+        let silent = drive_link::timing::silent_interval_us(self.baud).unwrap_or(0);
+        let start = f.end_us.wrapping_sub(on_line).wrapping_sub(silent);
+        // Started when `start` is not after now (wrapping 32-bit µs).
+        (now_us as u32).wrapping_sub(start) < 1 << 31
+    }
+
     /// USART2's interrupt: never enabled on this board.
     pub fn on_interrupt(&mut self, _now_us: u64) {}
 }

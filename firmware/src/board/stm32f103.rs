@@ -207,6 +207,12 @@ impl DriveLine {
         Some(n)
     }
 
+    /// Whether bytes have arrived that no frame has been handed over with
+    /// yet (a frame on the line, not yet ended by its silence).
+    pub fn receiving(&mut self, _now_us: u64) -> bool {
+        self.rx_len > 0
+    }
+
     /// USART2's interrupt.
     pub fn on_interrupt(&mut self, now_us: u64) {
         let r = Self::regs();
@@ -875,8 +881,9 @@ const SETTINGS_OFFSET: u32 = 0xE000;
 /// memory-stm32f103-128k.x.
 #[cfg(feature = "drive-link")]
 const SETTINGS_OFFSET: u32 = 0x1_E000;
-/// The flash the HAL's writer may reach: the C8's 64 KB, or with the drive
-/// link the 128 KB parts'.
+/// The flash the HAL's writer may reach: the settings pages at 0x0800E000
+/// lie in the first 64 KB, those of the image with the drive link in the
+/// 128 KB parts' last 8 KB.
 #[cfg(not(feature = "drive-link"))]
 const FLASH_SIZE: FlashSize = FlashSize::Sz64K;
 /// See above.

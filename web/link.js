@@ -49,7 +49,10 @@ function closed(detail) {
   link.open = false;
   link.send = null;
   link.detail = detail;
-  if (!link.lostAt) link.lostAt = performance.now();
+  if (!link.lostAt) {
+    link.lostAt = performance.now();
+    link.lostWall = Date.now(); // the host's clock, for the tests
+  }
   // Touches held across the loss are forgotten (never sent later).
   for (const c of held.values()) c.el.classList.remove('down');
   held.clear();
@@ -209,4 +212,6 @@ window.transplanterScreen = {
   series: (d) => (series.get(d) || []).map((p) => p.v),
   landed: () => monitorValue.landed,
   recentSpacing: () => recentSpacing(performance.now()),
+  // When the link was last seen lost (ms since 1970; the page said so then).
+  lostAt: () => link.lostWall || null,
 };

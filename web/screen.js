@@ -76,6 +76,7 @@ const link = {
   since: performance.now(),
   detail: 'choose a link',
   lostAt: 0,
+  lostWall: 0,
   send: null,
 };
 

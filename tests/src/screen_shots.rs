@@ -36,23 +36,72 @@ pub fn settings() -> Settings {
     }
 }
 
-/// Live values of a run at Low 2, 7 cm, after `t` seconds.
+/// The screenshots' run: Speed-Adaptive at 7 cm in gear Low 2, the Hall
+/// sensor monitoring `monitored_kmh` (Low 2: 0.51 km/h, paper A Table 11),
+/// through the gear's k1 and k2 and eq. 7 with the k3 table
+/// (`kinematics`): the travel speed (km/h) and the drum target (r/min), and
+/// the firmware's *Too fast* text when eq. 7 asks more than the drum's
+/// 44.7 r/min.
+pub fn adaptive_run(monitored_kmh: f64) -> (f64, f64, Option<String>) {
+    use kinematics::consts::Gear as KGear;
+    use kinematics::drum::{DrumSettings, DrumTarget};
+    use kinematics::travel::{gear_speed_for, travel_speed, Calibration};
+    use kinematics::units::{Metres, MetresPerSecond};
+    let cal = Calibration::for_gear(KGear::Low2);
+    let Some(plan) = DrumSettings::new(Metres::lit("0.07"), 999).build().ok() else {
+        return (0.0, 0.0, None);
+    };
+    let travel = MetresPerSecond::from_f64(monitored_kmh / 3.6)
+        .and_then(|v| gear_speed_for(v).ok())
+        .and_then(|n| travel_speed(n, &cal).ok());
+    let Some(travel) = travel else {
+        return (0.0, 0.0, None);
+    };
+    let kmh = travel.travel_speed_kmh().map_or(0.0, |v| v.to_f64());
+    match plan.target(&travel, &cal) {
+        Ok(DrumTarget::Follow(c)) => (kmh, c.drum_speed.to_f64(), None),
+        Ok(DrumTarget::Saturated {
+            command,
+            max_travel_speed,
+            ..
+        }) => {
+            let mut text = String::new();
+            let alarm = supervisor::control::Alarm::TooFast {
+                max_kmh_x100: u16::try_from(max_travel_speed.to_milli() / 10).unwrap_or(u16::MAX),
+            };
+            let _ = alarm.write_text(&mut text);
+            (kmh, command.drum_speed.to_f64(), Some(text))
+        }
+        Err(_) => (kmh, 0.0, None),
+    }
+}
+
+/// The Hall sensor's speed `t` seconds into the screenshots' run (Low 2,
+/// ±3 %).
+fn monitored_kmh(t: f64) -> f64 {
+    0.51 * (1.0 + 0.03 * (t * 0.7).sin())
+}
+
+/// Live values of the screenshots' run (Low 2, 7 cm, two minutes after
+/// Start), `t` seconds on.
 pub fn status(t: f64) -> Status {
-    let travel = 1.52 + 0.04 * (t * 0.7).sin();
-    let plants = (t * 6.0) as u32;
+    let (travel, target, _) = adaptive_run(monitored_kmh(t));
+    let run_s = 120.0 + t;
+    let metres = 0.51 / 3.6 * run_s;
+    let plants = (metres / 0.07) as u32;
     Status {
-        travel_speed_kmh_x100: (travel * 100.0) as u16,
-        target_drum_rpm_x100: (travel * 808.0) as u16,
-        actual_drum_rpm_x100: (travel * 808.0 - 8.0 + 10.0 * (t * 1.9).sin()) as u16,
+        travel_speed_kmh_x100: (travel * 100.0).round() as u16,
+        target_drum_rpm_x100: (target * 100.0).round() as u16,
+        actual_drum_rpm_x100: ((target - 0.02 + 0.05 * (t * 1.9).sin()) * 100.0).round() as u16,
         plants,
-        distance_dm: (f64::from(plants) * 0.7) as u32,
+        distance_dm: (metres * 10.0) as u32,
         quality_of_feed_x10: 982,
         multiples_x10: 9,
         misses_x10: 9,
         precision_cv_x10: 41,
         within_10_pct_x10: 957,
-        plants_per_m_x100: 1428,
-        travel_speed_mps_x100: (travel / 3.6 * 100.0) as u16,
+        plants_per_m_x100: (f64::from(plants) / metres * 100.0).round() as u16,
+        travel_speed_mps_x100: (travel / 3.6 * 100.0).round() as u16,
         plant_motor_rpm_x100: (travel * 310.0) as u16,
         feed_motor_rpm_x100: (travel * 420.0) as u16,
         roller_turns: 12,
@@ -66,16 +115,24 @@ pub fn status(t: f64) -> Status {
     }
 }
 
-/// A message for the page's `tmsg`, if it has one worth showing.
-fn message(page: Page) -> Option<&'static str> {
+/// The firmware's message for the page's `tmsg` in the screenshots' run,
+/// if it writes one there: on the Speed-Adaptive page only the *Too fast*
+/// warning, which this run (0.51 km/h, 7 cm) does not raise.
+fn message(page: Page) -> Option<String> {
     match page {
-        Page::Boot => Some("Connecting..."),
-        Page::Adaptive => Some("Too fast for the spacing: slow down"),
-        Page::Settings => Some("Settings saved"),
-        Page::BeltParameters => Some("Spacing X must be 10.0-100.0 cm"),
-        Page::Drive => Some("Identifying drive: keep belt empty"),
+        Page::Adaptive => adaptive_run(monitored_kmh(0.0)).2,
+        Page::Settings => Some("Settings saved".into()),
+        Page::BeltParameters => Some("Spacing X must be 10.0-100.0 cm".into()),
+        Page::Drive => Some(supervisor::control::IDENTIFY_MESSAGE.into()),
         _ => None,
     }
+}
+
+/// The alarm page's text: the firmware's stall alarm.
+fn alarm_text() -> String {
+    let mut text = String::new();
+    let _ = supervisor::control::Alarm::DrumStall.write_text(&mut text);
+    text
 }
 
 /// The firmware's bytes that show `page` with its settings, the live
@@ -91,14 +148,13 @@ pub fn page_bytes(page: Page, t: f64) -> Vec<u8> {
     }
     out.extend(status_bytes(page, t));
     if let Some(m) = message(page) {
-        if let Ok(ins) = Instruction::set_text(ObjName::new_unchecked("tmsg"), m) {
+        if let Ok(ins) = Instruction::set_text(ObjName::new_unchecked("tmsg"), &m) {
             emit(&mut out, &ins);
         }
     }
     if page == Page::Alarm {
-        if let Ok(ins) =
-            Instruction::set_text(ObjName::new_unchecked("talarm"), "Drum motor stalled")
-        {
+        let text = alarm_text();
+        if let Ok(ins) = Instruction::set_text(ObjName::new_unchecked("talarm"), &text) {
             emit(&mut out, &ins);
         }
     }
@@ -172,4 +228,40 @@ pub fn take(dir: &Path) -> io::Result<Vec<PathBuf>> {
         }
     }
     Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The screenshots show what the firmware would: the Speed-Adaptive
+    /// page's *Too fast* warning only where eq. 7 asks more than the drum's
+    /// 44.7 r/min (the supervisor's rule), not in the run shown.
+    #[test]
+    fn the_screenshots_run_raises_too_fast_only_beyond_the_drums_top_speed() {
+        let (travel, target, alarm) = adaptive_run(0.51);
+        assert!((travel - 0.50).abs() < 0.02, "{travel}");
+        assert!(target > 3.0 && target < 44.7, "{target}");
+        assert_eq!(alarm, None);
+        assert_eq!(message(Page::Adaptive), None);
+        // Drum target proportional to the travel speed up to the top speed
+        // (k3 changes a little with the drum speed).
+        let (faster, more, alarm) = adaptive_run(0.7);
+        assert_eq!(alarm, None);
+        assert!(
+            (more / target / (faster / travel) - 1.0).abs() < 0.05,
+            "{travel} km/h {target} r/min, {faster} km/h {more} r/min"
+        );
+        // Beyond it: held at 44.7 r/min, and the firmware's text.
+        let (_, held, alarm) = adaptive_run(8.0);
+        assert!((held - 44.7).abs() < 0.01, "{held}");
+        let alarm = alarm.unwrap_or_default();
+        assert!(alarm.starts_with("Too fast: max "), "{alarm}");
+        let shown = status(0.0);
+        assert_eq!(
+            shown.target_drum_rpm_x100,
+            (target * 100.0).round() as u16,
+            "{shown:?}"
+        );
+    }
 }

@@ -164,6 +164,87 @@ fn page_problems(b: &mut Browser, page: Page, viewport: (u32, u32)) -> Vec<Strin
     problems
 }
 
+/// The widest value each number of `page` can show: five significant
+/// digits at its decimals (99999, 9999.9, 999.99: a pass of 10 km, 99 999
+/// plants), an input's range ends; written as the firmware writes values.
+fn widest_values(page: Page) -> Vec<u8> {
+    let mut out = Vec::new();
+    for c in COMPONENTS.iter().filter(|c| c.page == page) {
+        let values: Vec<i64> = match c.role {
+            hmi_proto::screen::Role::Input(f) => {
+                let (min, max) = f.range();
+                vec![i64::from(min), i64::from(max)]
+            }
+            hmi_proto::screen::Role::Status(_) => vec![99_999],
+            _ => continue,
+        };
+        if !matches!(c.kind(), Kind::Number | Kind::Xfloat(_)) {
+            continue;
+        }
+        for v in values {
+            out.extend_from_slice(format!("{}.val={v}", c.name()).as_bytes());
+            out.extend_from_slice(&[0xFF; 3]);
+        }
+    }
+    out
+}
+
+/// Texts on the shown page (and the top bar) that do not fit their box:
+/// each text's laid-out extent (a Range, so what `overflow: hidden` clips
+/// counts) against its element and its component, and each input's text
+/// against its field. The monitor's event list is a log clipped by design.
+const OVERFLOW_SCRIPT: &str = r#"
+(() => {
+  const bad = [];
+  const page = document.querySelector('section[data-page="' + transplanterScreen.shown() + '"]');
+  const inside = (t, b) => t.left >= b.left - 1 && t.right <= b.right + 1 &&
+    t.top >= b.top - 1 && t.bottom <= b.bottom + 1;
+  const name = (e) => (e.closest('[data-name]') || e).dataset.name || e.id || e.className;
+  for (const root of [page, document.getElementById('bar')]) {
+    for (const e of root.querySelectorAll('*')) {
+      if (!e.getClientRects().length || e.closest('.events')) continue;
+      const own = e.getBoundingClientRect();
+      const comp = (e.closest('[data-name]') || e).getBoundingClientRect();
+      if (e.tagName === 'INPUT') {
+        if (e.scrollWidth > e.clientWidth + 1) bad.push(name(e) + ': "' + e.value + '" ' + e.scrollWidth + ' px in ' + e.clientWidth);
+        continue;
+      }
+      for (const n of e.childNodes) {
+        if (n.nodeType !== 3 || !n.textContent.trim()) continue;
+        const r = document.createRange();
+        r.selectNodeContents(n);
+        const t = r.getBoundingClientRect();
+        const view = { left: 0, top: 0, right: innerWidth, bottom: innerHeight };
+        if (!inside(t, own) || !inside(t, comp) || !inside(t, view)) {
+          bad.push(name(e) + ': "' + n.textContent.trim() + '" ' + Math.round(t.width) + 'x' + Math.round(t.height) +
+            ' px in ' + Math.round(comp.width) + 'x' + Math.round(comp.height));
+        }
+      }
+    }
+  }
+  return bad;
+})()
+"#;
+
+/// The texts of `page` that overflow their box at this viewport.
+fn overflows(b: &mut Browser, page: Page, viewport: (u32, u32)) -> Vec<String> {
+    let found = b.eval(OVERFLOW_SCRIPT).unwrap();
+    found
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .map(|t| {
+                    format!(
+                        "page {} at {viewport:?}: {}",
+                        page.name(),
+                        t.as_str().unwrap_or("")
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
 /// Reply frames a Nextion sends for an instruction (NIS §7): results,
 /// `sendme`'s page, `get`'s data, `rest`'s start-up and ready.
 const ANSWERS: &[u8] = &[
@@ -225,7 +306,7 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
 
     // Every page, both machines, two tablet sizes.
     let mut problems = Vec::new();
-    for viewport in [(1024, 600), (1280, 800)] {
+    for viewport in [(1024, 600), (1280, 800), (800, 480)] {
         b.viewport(viewport.0, viewport.1).unwrap();
         for page in Page::ALL {
             assert!(server.inject(&page_bytes(page, 1.0)));
@@ -239,6 +320,27 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
                 page.id()
             );
             problems.extend(page_problems(&mut b, page, viewport));
+            // Every value and unit readable: the screenshots' run, then
+            // the widest values.
+            problems.extend(overflows(&mut b, page, viewport));
+            let widest = widest_values(page);
+            let before = b
+                .eval("transplanterScreen.stats().instructions")
+                .unwrap()
+                .as_u64()
+                .unwrap_or(0);
+            server.inject(&widest);
+            let count = qemu_tests::instructions(&widest).len();
+            assert!(b
+                .wait_for(
+                    &format!(
+                        "transplanterScreen.stats().instructions >= {}",
+                        before + count as u64
+                    ),
+                    Duration::from_secs(10)
+                )
+                .unwrap());
+            problems.extend(overflows(&mut b, page, viewport));
         }
         // The link buttons of the top bar are touch targets too.
         let mm_per_px = 177.8 / f64::from(viewport.0).hypot(f64::from(viewport.1));
@@ -258,10 +360,23 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
         }
     }
     assert!(problems.is_empty(), "{problems:#?}");
-    // The check fails when a component is missing (one taken out).
+    // The check fails when a component is missing (one taken out), and
+    // when a value does not fit its box (one more digit than it can show).
+    b.viewport(1280, 800).unwrap();
     server.inject(&page_bytes(Page::Adaptive, 1.0));
     b.wait_for("transplanterScreen.shown() === 3", Duration::from_secs(10))
         .unwrap();
+    assert!(overflows(&mut b, Page::Adaptive, (1280, 800)).is_empty());
+    b.eval(&format!(
+        "document.querySelector('{} .value').textContent = '12345.678'",
+        sel(3, "xtarget")
+    ))
+    .unwrap();
+    let found = overflows(&mut b, Page::Adaptive, (1280, 800));
+    assert!(
+        found.len() == 1 && found[0].contains("xtarget"),
+        "{found:?}"
+    );
     b.eval(&format!(
         "document.querySelector('{}').remove()",
         sel(3, "xcv")

@@ -873,3 +873,142 @@ fn the_qemu_board_is_driven_from_the_page() {
     // Still nothing sent but answers.
     assert_eq!(touches(&server).len(), 8);
 }
+
+/// The lowest WCAG 2 contrast ratio of the shown page's visible texts
+/// (and the top bar's) against the background they sit on, and where.
+const CONTRAST_SCRIPT: &str = r#"
+(() => {
+  const rgb = (s) => (s.match(/[0-9.]+/g) || []).map(Number);
+  const lum = ([r, g, b]) => {
+    const f = (c) => { c /= 255; return c <= 0.03928 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4; };
+    return 0.2126 * f(r) + 0.7152 * f(g) + 0.0722 * f(b);
+  };
+  const bg = (e) => {
+    for (let x = e; x; x = x.parentElement) {
+      const c = rgb(getComputedStyle(x).backgroundColor);
+      if (c.length === 3 || (c.length === 4 && c[3] > 0.5)) return c.slice(0, 3);
+    }
+    return [255, 255, 255];
+  };
+  let worst = { ratio: 99, what: '' };
+  const page = document.querySelector('section[data-page="' + transplanterScreen.shown() + '"]');
+  for (const root of [page, document.getElementById('bar')]) {
+    for (const e of [root, ...root.querySelectorAll('*')]) {
+      if (!e.getClientRects().length) continue;
+      if (![...e.childNodes].some((n) => n.nodeType === 3 && n.textContent.trim()) && e.tagName !== 'INPUT') continue;
+      const [a, b] = [lum(rgb(getComputedStyle(e).color).slice(0, 3)), lum(bg(e))];
+      const ratio = (Math.max(a, b) + 0.05) / (Math.min(a, b) + 0.05);
+      if (ratio < worst.ratio) worst = { ratio, what: (e.dataset.name || e.id || e.className) + ': ' + e.textContent.trim().slice(0, 30) };
+    }
+  }
+  return worst;
+})()
+"#;
+
+/// What users expect of a field tool: the page fetches nothing (works
+/// offline, also opened from a file), its texts are high-contrast, the link
+/// state is plain and a touch without the link sends nothing, and a motor
+/// start needs the operator's own press and release of Start.
+#[test]
+fn a_field_tool_offline_high_contrast_and_start_only_from_press_and_release() {
+    // Opened from a file: the script runs, nothing is fetched.
+    let file = std::env::temp_dir().join(format!("screen-web-{}.html", std::process::id()));
+    std::fs::write(&file, qemu_tests::screen_web::page_html().unwrap()).unwrap();
+    let mut b = Browser::launch(1280, 800).unwrap();
+    open(&mut b, &format!("file://{}", file.display()));
+    let fetched = b
+        .eval("performance.getEntriesByType('resource').map((e) => e.name)")
+        .unwrap();
+    assert_eq!(
+        fetched,
+        serde_json::json!([]),
+        "fetched from a file: {fetched}"
+    );
+    let _ = std::fs::remove_file(&file);
+
+    let server = ScreenServer::start(0, None).unwrap();
+    open(&mut b, &server.url());
+    wait_connected(&server);
+    let fetched = b
+        .eval("performance.getEntriesByType('resource').map((e) => e.name)")
+        .unwrap();
+    assert_eq!(fetched, serde_json::json!([]), "fetched: {fetched}");
+    let show = |b: &mut Browser| {
+        assert!(server.inject(&page_bytes(Page::Adaptive, 1.0)));
+        assert!(b
+            .wait_for(
+                "transplanterScreen.shown() === 3 && transplanterScreen.link() === 'ok'",
+                Duration::from_secs(10)
+            )
+            .unwrap());
+    };
+    show(&mut b);
+
+    // Contrast: every text at least 7:1 (WCAG's highest level), link OK.
+    let mut worst = f64::MAX;
+    for page in [
+        Page::Mode,
+        Page::Adaptive,
+        Page::Belt,
+        Page::Alarm,
+        Page::Link,
+    ] {
+        server.inject(&page_bytes(page, 1.0));
+        assert!(b
+            .wait_for(
+                &format!(
+                    "transplanterScreen.shown() === {} && transplanterScreen.link() === 'ok'",
+                    page.id()
+                ),
+                Duration::from_secs(10)
+            )
+            .unwrap());
+        let w = b.eval(CONTRAST_SCRIPT).unwrap();
+        let ratio = w["ratio"].as_f64().unwrap_or(0.0);
+        assert!(ratio >= 7.0, "page {}: {w}", page.name());
+        worst = worst.min(ratio);
+    }
+    eprintln!("screen_web: lowest text contrast {worst:.1}:1");
+
+    // Start pressed, the finger slides off and lifts: the press only (the
+    // firmware starts nothing without the release, docs/hmi.md §3).
+    show(&mut b);
+    let start = sel(3, "bstart");
+    b.press(&start).unwrap();
+    let (x, y) = b.centre(&sel(3, "bback")).unwrap();
+    b.release_at(x, y).unwrap();
+    // A script's clicks and events are not the operator's: nothing.
+    b.eval(&format!(
+        "(() => {{ const e = document.querySelector('{start}'); e.click(); \
+         e.dispatchEvent(new PointerEvent('pointerdown', {{bubbles: true, pointerId: 7}})); \
+         e.dispatchEvent(new PointerEvent('pointerup', {{bubbles: true, pointerId: 7}})); }})()"
+    ))
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(200));
+    let start_id = id_of(Page::Adaptive, "bstart");
+    assert_eq!(touches(&server), vec![(3, start_id, 1)]);
+
+    // The link lost: said plainly, the buttons refuse, nothing is sent.
+    server.set_accepting(false);
+    server.cut();
+    assert!(b
+        .wait_for(
+            "transplanterScreen.link() === 'lost' && document.getElementById('link-state').textContent === 'LINK LOST'",
+            Duration::from_secs(10)
+        )
+        .unwrap());
+    b.tap(&start).unwrap();
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(b
+        .eval("document.getElementById('notice').textContent")
+        .unwrap()
+        .as_str()
+        .unwrap_or("")
+        .contains("nothing was sent"));
+    server.set_accepting(true);
+    wait_connected(&server);
+    show(&mut b);
+    std::thread::sleep(Duration::from_millis(200));
+    assert_eq!(touches(&server), vec![(3, start_id, 1)]);
+    assert!(b.exceptions().is_empty(), "{:?}", b.exceptions());
+}

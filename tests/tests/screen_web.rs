@@ -757,6 +757,11 @@ fn the_qemu_board_is_driven_from_the_page() {
         during.iter().map(|s| s.drum_rpm).collect::<Vec<_>>()
     );
     assert!(!logs.iter().any(|l| l.contains("drum: Stopped")));
+    eprintln!(
+        "screen_web: drum while the screen was lost: {:.1} r/min mean over {} samples",
+        during.iter().map(|s| s.drum_rpm).sum::<f64>() / during.len() as f64,
+        during.len()
+    );
 
     // Back to the run page, and Stop.
     b.tap(&sel(1, "badapt")).unwrap();

@@ -615,8 +615,14 @@ mod tests {
         }
         assert!(html.contains("\"name\":\"nspacing\""));
         // Nothing fetched: no external script, style, font or image.
-        for needle in ["src=\"http", "href=\"http", "url(http", "@import", "<link "] {
+        for needle in ["src=\"http", "href=\"http", "url(http", "@import"] {
             assert!(!html.contains(needle), "{needle}");
+        }
+        // A link only to inline data (the empty icon that keeps the
+        // browser from asking for favicon.ico).
+        for tag in html.split("<link ").skip(1) {
+            let tag = tag.split('>').next().unwrap_or("");
+            assert!(tag.contains("href=\"data:"), "<link {tag}>");
         }
     }
 }

@@ -662,9 +662,28 @@ impl MtEstimator {
     /// ```
     #[must_use]
     pub fn newest_gap_pitches_q16(&self) -> u32 {
+        self.pitches_q16_of(self.tooth)
+    }
+
+    /// The gap after the newest edge (the one the gear is in now) in
+    /// pitches, Q16, as [`MtEstimator::newest_gap_pitches_q16`]: the ground
+    /// between the newest edge and the next one.
+    #[must_use]
+    pub fn next_gap_pitches_q16(&self) -> u32 {
+        let next = self
+            .tooth
+            .checked_add(1)
+            .filter(|&i| i < self.z)
+            .unwrap_or(0);
+        self.pitches_q16_of(next)
+    }
+
+    /// Gap `idx`'s learned share in pitches, Q16 (a revolution's gaps add
+    /// up to Z pitches).
+    fn pitches_q16_of(&self, idx: usize) -> u32 {
         // w · Z · 2¹⁶ ≤ 2¹⁷ · 32 · 2¹⁶ = 2³⁸.
         let z = u64::try_from(self.z).unwrap_or(0);
-        u64::from(self.weight(self.tooth))
+        u64::from(self.weight(idx))
             .wrapping_mul(z)
             .wrapping_mul(u64::from(ONE_Q16))
             .checked_div(u64::from(self.weight_sum))

@@ -697,8 +697,7 @@ impl Machine {
     pub fn clear_fault(&mut self, fault: Fault) {
         let high = self.fault_active(Fault::HallStuckHigh);
         self.faults &= !fault.bit();
-        if fault == Fault::HallStuckHigh && high && !self.hall_silent() && self.hall_line_low()
-        {
+        if fault == Fault::HallStuckHigh && high && !self.hall_silent() && self.hall_line_low() {
             // Released while a tooth is in front: the line falls now.
             self.faults |= PENDING_EDGE;
         }

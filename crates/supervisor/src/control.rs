@@ -359,6 +359,14 @@ pub const HALL_SILENCE_GAP_TOLERANCE_PCT: u8 = 5;
 /// controller holds, is what the screen and the log show.
 const REPORT_ALPHA: I16F16 = I16F16::lit("0.0196");
 
+/// Smoothing of the drum speed k3 is looked up at: `Ts / (Ts + τ)` with
+/// `τ` = 30 ms. One encoder count in 10 ms is 0.13 r/min; across a corner
+/// of the k3 table (20 r/min) that quantisation biased the mean k3 and moved
+/// the belt's phase by 2.2 mm per 300 m of ground (40 cm at High 2,
+/// noiseless). Short enough that the lookup follows a start (the reported
+/// speed's 0.5 s held k3 at its rest value while the drum ran up, 1.3 %).
+const K3_SPEED_ALPHA: I16F16 = I16F16::lit("0.25");
+
 /// The machine's operating logic (profile A).
 pub struct Supervisor {
     hw: Hardware,
@@ -395,6 +403,8 @@ pub struct Supervisor {
     encoder_back: u16,
     /// The reported (smoothed) drum speed, r/min.
     reported: I16F16,
+    /// The drum speed k3 is looked up at, r/min ([`K3_SPEED_ALPHA`]).
+    k3_speed: I16F16,
     /// The phase loop's correction, smoothed when the link delays the
     /// control (distance-locked placement, [`PHASE_SMOOTHING`]), r/min.
     phase_smoothed: I16F16,
@@ -407,16 +417,17 @@ pub struct Supervisor {
     /// The teeth's learned pitches summed, Q16 (wraps; differences only).
     pitches_q16: u32,
     last_tooth_at: Option<u32>,
-    /// Ground distance since Start (∫ V1 dt), µm.
+    /// Ground distance since Start (∫ V1 dt), µm, and its fraction (Q24).
     pub(crate) distance_um: u64,
+    distance_frac: u64,
     /// The chassis's deceleration limit at the Hall gear, for the silence
     /// rule.
     hall_silence: DecelerationBound,
     /// Drum encoder counts since Start, each weighted by the belt slip k3
-    /// (× 1000) at the drum speed measured when it was counted: Σ Δcounts ·
-    /// k3(n) · 1000. The plant count follows from it
-    /// ([`Supervisor::plants_since_start`]).
-    belt_counts_k3_milli: u64,
+    /// (U2F30, its full precision) at the drum speed measured when it was
+    /// counted: Σ Δcounts · k3(n) · 2³⁰. The plant count follows from it
+    /// ([`Supervisor::partitions_x1e6`]).
+    belt_counts_k3: u64,
     /// The drum speed the feed-forward alone should produce by now: the
     /// target through a model of the drum's response (see
     /// [`REFERENCE_ALPHA`]). The PID corrects the measurement towards it.
@@ -774,6 +785,17 @@ impl Monitor {
     }
 }
 
+/// A drum speed in r/min as the tables' `RevPerMin` (I16F16 → U12F20: 4
+/// more fractional bits, exact; negative as 0).
+fn fix_to_rpm(n: I16F16) -> RevPerMin {
+    RevPerMin::from_bits(
+        u32::try_from(n.to_bits().max(0))
+            .unwrap_or(0)
+            .min(u32::MAX >> 4)
+            << 4,
+    )
+}
+
 fn rpm_to_fix(n: RevPerMin) -> I16F16 {
     // U12F20 → I16F16: drop 4 fractional bits (rounding down, as `fixed`'s
     // conversions); below 4096 r/min it always fits (test
@@ -883,14 +905,16 @@ impl Supervisor {
             stall_back_us: 0,
             encoder_back: 0,
             reported: I16F16::ZERO,
+            k3_speed: I16F16::ZERO,
             phase_smoothed: I16F16::ZERO,
             edges: 0,
             teeth: 0,
             pitches_q16: 0,
             last_tooth_at: None,
             distance_um: 0,
+            distance_frac: 0,
             hall_silence,
-            belt_counts_k3_milli: 0,
+            belt_counts_k3: 0,
             reference: I16F16::ZERO,
             ref_history: [0; REF_HISTORY],
             ref_head: 0,
@@ -1068,7 +1092,8 @@ impl Supervisor {
             self.run = RunState::Running;
             self.stall_us = 0;
             self.distance_um = 0;
-            self.belt_counts_k3_milli = 0;
+            self.distance_frac = 0;
+            self.belt_counts_k3 = 0;
             self.phase.start(self.teeth, self.pitches_q16);
             self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
             self.start_planting();
@@ -1095,6 +1120,12 @@ impl Supervisor {
     /// ground distance at that moment.
     pub fn plants_left(&self) -> impl Iterator<Item = PlantEvent> + '_ {
         self.phase.events()
+    }
+
+    /// The belt moved since Start as the firmware measures it, µm (drum
+    /// encoder × belt per count × k3, docs/placement.md "Positions").
+    pub fn belt_distance_um(&self) -> u64 {
+        self.phase.belt_um()
     }
 
     /// The phase error after the last step, µm of ground (positive: the belt
@@ -1240,7 +1271,7 @@ impl Supervisor {
                 self.identified = IdentifyState::Running;
                 self.run = RunState::Identifying;
                 self.stall_us = 0;
-                self.belt_counts_k3_milli = 0;
+                self.belt_counts_k3 = 0;
                 Effect::Message(IDENTIFY_MESSAGE)
             }
             Command::AcceptDriveModel => match self.identify_state() {
@@ -1614,42 +1645,45 @@ impl Supervisor {
         self.snapshot.measured_gear_rpm_x1000 = m.gear_speed.to_milli();
         self.snapshot.predicted_gear_rpm_x1000 = gear_speed.to_milli();
         let travel = travel::travel_speed(gear_speed, &self.settings.calibration).ok();
+        // Shown to a person: rounded to m/h. The distance below integrates
+        // the speed itself.
         let travel_kmh_x1000 = travel
             .and_then(|t| t.travel_speed_kmh().ok())
             .map_or(0, |v| v.to_milli());
+        let travel_mps = travel.map_or(0, |t| t.travel_speed.to_bits());
 
-        // k3 at the drum speed these counts were turned at (this period's
-        // measurement, exact over the whole range: `milli`), not at the
-        // target: the belt slips at the speed it turns, and after a Stop
-        // the counts still coasting in keep the k3 of their own speed.
-        let k3_x1000 = self
-            .settings
-            .calibration
-            .k3_at(RevPerMin::from_ratio(milli(measured), 1000).unwrap_or(RevPerMin::ZERO))
-            .to_milli();
+        // k3 at the drum speed these counts were turned at (measured, not
+        // the target: the belt slips at the speed it turns, and after a Stop
+        // the counts still coasting in keep the k3 of their own speed),
+        // smoothed over a few periods ([`K3_SPEED_ALPHA`]), at the
+        // coefficient's full precision.
+        self.k3_speed = self.k3_speed.saturating_add(
+            measured
+                .saturating_sub(self.k3_speed)
+                .saturating_mul(K3_SPEED_ALPHA),
+        );
+        let k3 = self.settings.calibration.k3_at(fix_to_rpm(self.k3_speed));
         // Positions for the phase loop: the ground while running, the belt
         // always (a coasting drum still moves partitions).
         if self.run == RunState::Running {
-            let k1k2 = travel
-                .map(|t| u64::from(t.k1.to_milli()).saturating_mul(u64::from(t.k2.to_milli())));
+            let k1k2 = travel.map(|t| crate::phase::k1k2_q30(t.k1, t.k2));
             // The ground moves on between edges at the M/T speed (the last
             // tooth gap's), not at the predictor's: the slope between two
             // single-gap estimates is mostly the gear's ±2 % tooth errors,
             // which the feed-forward can average but a position cannot
             // (docs/placement.md, "Positions").
-            let raw_mh = travel::travel_speed(m.gear_speed, &self.settings.calibration)
-                .ok()
-                .and_then(|t| t.travel_speed_kmh().ok())
-                .map_or(0, |v| v.to_milli());
+            let raw = travel::travel_speed(m.gear_speed, &self.settings.calibration)
+                .map_or(0, |t| t.travel_speed.to_bits());
             self.phase.advance_ground(
                 self.teeth,
                 self.pitches_q16,
+                self.estimator.next_gap_pitches_q16(),
                 m.since_edge_ticks,
-                raw_mh,
+                raw,
                 k1k2,
             );
         }
-        self.phase.advance_belt(delta, k3_x1000);
+        self.phase.advance_belt(delta, k3);
 
         let mut too_fast = None;
         let target = match self.settings.mode {
@@ -1796,9 +1830,9 @@ impl Supervisor {
             self.monitor = Monitor::default();
         }
 
-        self.belt_counts_k3_milli = self
-            .belt_counts_k3_milli
-            .saturating_add(u64::from(delta).saturating_mul(u64::from(k3_x1000)));
+        self.belt_counts_k3 = self
+            .belt_counts_k3
+            .saturating_add(u64::from(delta).saturating_mul(u64::from(k3.to_bits())));
         self.drum_counts_total = self.drum_counts_total.saturating_add(u64::from(delta));
         self.snapshot.travel_speed_kmh_x1000 = travel_kmh_x1000;
         self.snapshot.target_drum_rpm_x1000 = if self.run == RunState::Running {
@@ -1817,10 +1851,13 @@ impl Supervisor {
         let partitions_x1e6 = self.partitions_x1e6();
         self.snapshot.plants = u32::try_from(partitions_x1e6 / 1_000_000).unwrap_or(u32::MAX);
         if self.run == RunState::Running {
-            // ∫ V1 dt: (m/h)·µs / 3600 = µm.
-            self.distance_um = self.distance_um.saturating_add(
-                u64::from(travel_kmh_x1000).saturating_mul(u64::from(elapsed_us)) / 3600,
-            );
+            // ∫ V1 dt: m/s (U8F24) · µs = µm · 2²⁴, the fraction carried
+            // (< 2⁵⁰ a step: 256 m/s for 4 periods).
+            let acc = u64::from(travel_mps)
+                .saturating_mul(u64::from(elapsed_us))
+                .saturating_add(self.distance_frac);
+            self.distance_um = self.distance_um.saturating_add(acc >> 24);
+            self.distance_frac = acc & 0xFF_FFFF;
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
         self.count_plants(
@@ -2241,19 +2278,21 @@ impl Supervisor {
     pub(crate) fn partitions_x1e6(&self) -> u64 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
-        // Σ Δcounts·k3·1000 / counts per turn = turns · k3 · 1000.
-        self.belt_counts_k3_milli
+        // Σ Δcounts·k3 (Q30) / counts per turn = turns · k3 in Q30.
+        self.belt_counts_k3
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .map_or(u64::MAX, |turns_k3_x1000| {
-                turns_k3_x1000.saturating_mul(PARTITIONS_PER_TURN_X1E6) / 1000
+            .and_then(|turns_k3_q30| {
+                kinematics::mul_shr(turns_k3_q30, PARTITIONS_PER_TURN_X1E6, 30)
             })
+            .unwrap_or(u64::MAX)
     }
 
     /// The status as the screen shows it.
     #[inline(never)]
     pub fn screen_status(&self) -> screen::Status {
         let s = self.snapshot;
-        let x100 = |v: u32| u16::try_from(v / 10).unwrap_or(u16::MAX);
+        // Thousandths to hundredths for a person: rounded.
+        let x100 = |v: u32| u16::try_from(v.saturating_add(5) / 10).unwrap_or(u16::MAX);
         let (measured_distance_cm, calibration_result_x1000) = match self.calibration_run {
             CalibrationRun::Measured {
                 edges, drum_counts, ..

@@ -84,31 +84,56 @@ pub const MAX_TEETH: usize = 32;
 /// Edge stamps kept: a revolution and a half of the largest gear and a few
 /// (tooth learning reaches a revolution and half a revolution back).
 const RING: usize = MAX_TEETH + MAX_TEETH / 2 + 4;
-/// Tooth learning's gate on a change of acceleration: the second difference
-/// of the rolling revolution times a quarter revolution apart within 1/400
-/// of a revolution. A centred revolution's share is biased by about a sixth
-/// of the second difference half a revolution apart (four times this one):
-/// at most 0.17 %.
-const CURVATURE_GATE: u64 = 400;
-/// Tooth learning's gate on the acceleration: the rolling revolutions a
-/// quarter revolution before and after the centred one within 1/40 (2.5 %)
-/// of it. A centred revolution cancels a steady acceleration but not a step
-/// of speed at the learnt gap, which the second difference cannot see (the
-/// three revolutions stay in line across it): a chassis' answer to a step
-/// (the hills profile; tests/estimator.rs, a 10 % rise through 0.5 s) mostly
-/// exceeds this, the default terrain's wandering speed mostly does not
-/// (chosen on the machine model: docs/kinematics.md).
-const SLOPE_GATE: u64 = 40;
-/// A tooth-learning sample whose revolutions a quarter revolution apart agree
-/// within 1/1000 (0.1 %) is taken at a steady speed and counts in full (the
-/// first one sets the share, as a steady revolution did before 2026-11-23:
-/// learnt within a revolution, bench §2); any other is weighed against the
-/// nominal share.
-const STEADY_GATE: u64 = 1000;
-/// A tooth's share is the running mean of its samples (one not taken at a
-/// steady speed weighed against the nominal share), up to this many
-/// samples; then an IIR of 1/16.
-const SHARE_SAMPLES: u8 = 14;
+/// Tooth learning: the gaps on either side of a learnt gap that give its
+/// reference (module docs, "Tooth-pitch compensation").
+const LEARN_HALF: usize = 6;
+/// The reference's weights for the gaps 1 … 6 away on each side, over
+/// [`LEARN_DIVISOR`]: the value at the centre of a least-squares parabola
+/// through the twelve neighbours' per-pitch times (the centre left out),
+/// `(Σx⁴ − Σx²·x²) / (n·Σx⁴ − (Σx²)²)` with x = ±1 … ±6: 4550 − 182·x².
+const LEARN_WEIGHTS: [i64; LEARN_HALF] = [4368, 3822, 2912, 1638, 0, -2002];
+/// The sum of the weights over both sides (n·Σx⁴ − (Σx²)² = 21 476).
+const LEARN_DIVISOR: u64 = 21_476;
+/// Tooth learning's gate: the neighbours' per-pitch times within 10 % of
+/// the reference (max − min). A stop, a restart or a speed step inside the
+/// thirteen gaps leaves no usable parabola.
+const SPREAD_GATE: u64 = 10;
+/// After this many samples a tooth's share moves by at most
+/// [`SHARE_CLIP_Q16`] a sample (before the running mean's 1/n): a sample
+/// taken while the speed changes faster than a parabola follows (a
+/// chassis's 0.5 s answer to a throttle step) is biased by up to 1 %, which
+/// a running mean would keep as tooth error; the teeth's true shares do not
+/// move.
+const SHARE_CLIP_FROM: u8 = 3;
+/// The largest step of a learnt share per sample, Q16 (0.25 %).
+const SHARE_CLIP_Q16: i32 = 164;
+/// A tooth's share is the running mean of its samples up to this many, then
+/// an IIR of the same weight (1/16).
+const SHARE_SAMPLES: u8 = 16;
+/// Samples from which a tooth's share counts as learnt: before, its gap is
+/// given 5 % of slack before the edge counts as late.
+const LEARNT_SAMPLES: u8 = 3;
+/// A gap whose speed differs from the steady run's by more than 1/25 (4 %)
+/// ends the run: unlearnt teeth make at most ±4 % a gap (the machine
+/// model's ±2 % of a pitch per tooth), so the speed changed.
+const STEADY_BREAK: u64 = 25;
+/// The longest steady run, gaps: its mean lags a slowly changing speed by
+/// half of it (a ±10 % change through a 2.5 s chassis: 0.7 % a gap at
+/// Low 2), so a whole revolution lagged by 3 %.
+const STEADY_RUN_MAX: u32 = 8;
+/// The learning's mean deviation above which the single gaps read noisy
+/// ([`MtEstimator::is_noisy`]): 0.75 %, Q16.
+pub const NOISY_LIMIT_Q16: u32 = 328;
+/// The learning's mean deviation at power-up (and after lost edges): 2 %.
+const NOISY_START_Q16: u32 = 1311;
+/// Gaps in a row within [`STEADY_BREAK`] of the run before the run is used:
+/// a tractor pulling away from rest settles its speed in a few gaps, and a
+/// run averaging the last of its rise would lag it.
+const STEADY_SETTLE: u8 = 3;
+/// The suspect-edge rule ([`MtEstimator::push_edge`]) holds at working
+/// speeds only: gaps up to 0.6 s, half the slowest gear's speed (Low 1,
+/// 0.32 km/h at the gear: 0.28 s a gap).
+const SUSPECT_MAX_GAP_US: u32 = 600_000;
 /// Q16 unity for the learned tooth shares.
 const ONE_Q16: u32 = 1 << 16;
 
@@ -374,6 +399,10 @@ impl EstimatorSettings {
             glitches: 0,
             lost: false,
             from_rest: false,
+            pending: None,
+            steady: 0,
+            calm: 0,
+            rough: NOISY_START_Q16,
         })
     }
 }
@@ -511,6 +540,13 @@ pub struct TravelMeasurement {
     pub since_edge_ticks: u32,
     /// Glitches dropped since start (wrapping).
     pub glitches: u32,
+    /// The single gaps read noisy ([`MtEstimator::is_noisy`]): their tooth
+    /// shares are not learnt (yet), and the window may be a steady run.
+    pub noisy: bool,
+    /// The window is a steady run of noisy gaps reaching back beyond the
+    /// previous window (see `MtEstimator::steady_window`): its speed does not
+    /// change, so no slope between it and the previous one means anything.
+    pub steady_run: bool,
 }
 
 /// Verdict on one pushed edge.
@@ -523,6 +559,9 @@ pub enum EdgeVerdict {
     Restart,
     /// Dropped as a glitch.
     Glitch,
+    /// Held until the next edge: the gap it closes is shorter than half the
+    /// last one (see [`MtEstimator::push_edge`]).
+    Suspect,
 }
 
 /// M/T speed estimator on 32-bit edge timestamps (wrapping arithmetic).
@@ -538,10 +577,11 @@ pub enum EdgeVerdict {
 /// let m = est.update(Ticks(1_000 + 5 * 240_000 + 50_000));
 /// assert_eq!(m.state, MotionState::Measured);
 /// assert!((m.gear_speed.to_f64() - 10.0).abs() < 1e-4);
-/// // 1.2 s after the last edge (5 gaps' worth) the speed is at most 1/25 rev over 1.2 s = 2 r/min.
+/// // 1.2 s after the last edge (5 gaps' worth) the speed is at most one gap
+/// // over 1.2 s; a tooth not learnt yet gets 5 % more: 1.05/25 rev = 2.1 r/min.
 /// let m = est.update(Ticks(1_000 + 5 * 240_000 + 1_200_000));
 /// assert_eq!(m.state, MotionState::Decaying);
-/// assert!((m.gear_speed.to_f64() - 2.0).abs() < 1e-4);
+/// assert!((m.gear_speed.to_f64() - 2.1).abs() < 1e-4);
 /// # Ok::<(), kinematics::speed::EstimatorConfigError>(())
 /// ```
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -585,6 +625,15 @@ pub struct MtEstimator {
     glitches: u32,
     /// Edges were lost before the next one (see [`MtEstimator::edges_lost`]).
     lost: bool,
+    /// A suspect edge waiting for the next one ([`MtEstimator::push_edge`]).
+    pending: Option<u32>,
+    /// Gaps in the current steady run ([`MtEstimator::steady_window`]), and
+    /// the gaps in a row that kept to it.
+    steady: u32,
+    calm: u8,
+    /// The running mean of the learning's deviations, Q16
+    /// ([`MtEstimator::is_noisy`]).
+    rough: u32,
 }
 
 #[cfg(feature = "defmt")]
@@ -850,12 +899,30 @@ impl MtEstimator {
     }
 
     /// Records one Hall edge (call from the capture interrupt). O(1), no division.
+    ///
+    /// An edge that closes a gap shorter than half the glitch reference (the
+    /// speed more than doubled within one tooth) is held as
+    /// [`EdgeVerdict::Suspect`] until the next edge: if the gap after it is
+    /// no longer than 1¼ times its own, the speed really rose and both are
+    /// taken (the count of accepted edges, [`MtEstimator::accepted_edges`],
+    /// grows by two); otherwise it was a spurious edge — one noise pulse,
+    /// or the line of a sensor that sticks low falling part-way through a
+    /// gap — and is dropped as a glitch. Without a next edge it is never
+    /// taken: a sensor stuck after one spurious edge does not read as a
+    /// sprint.
     pub fn push_edge(&mut self, t: Ticks) -> EdgeVerdict {
         let t = t.0;
-        let mut verdict = EdgeVerdict::Accepted;
+        if let Some(p) = self.pending.take() {
+            let g1 = p.wrapping_sub(self.newest());
+            let g2 = t.wrapping_sub(p);
+            if !self.lost && g2 <= g1.saturating_add(g1 / 4) {
+                let _ = self.take(p);
+            } else {
+                self.glitches = self.glitches.wrapping_add(1);
+            }
+        }
         if self.has_last {
-            let last = self.stamps.get(self.head).copied().unwrap_or(0);
-            let dt = t.wrapping_sub(last);
+            let dt = t.wrapping_sub(self.newest());
             let expected_min = if self.glitch_ref == 0 {
                 if self.from_rest {
                     self.cfg.from_rest_min_gap_ticks
@@ -869,6 +936,66 @@ impl MtEstimator {
                 self.glitches = self.glitches.wrapping_add(1);
                 return EdgeVerdict::Glitch;
             }
+            // (At a steady speed only: the last two gaps within a quarter
+            // of each other. A start from rest shortens every gap by more
+            // than half at first, and a pull-away after a slow-down follows
+            // gaps that grew: waiting for the next edge there would make
+            // the drum late.)
+            // Nor from a crawl (gaps longer than [`SUSPECT_MAX_GAP_US`]):
+            // a tractor pulling away doubles its speed within a tooth.
+            let [g0, g1, _] = self.gaps;
+            let steady = g1 != 0
+                && g0.abs_diff(g1) <= g1 / 4
+                && u64::from(g0).saturating_mul(1_000_000)
+                    <= u64::from(SUSPECT_MAX_GAP_US).saturating_mul(u64::from(self.cfg.timer_hz));
+            if !self.lost && steady && dt < self.glitch_ref >> 1 {
+                self.pending = Some(t);
+                return EdgeVerdict::Suspect;
+            }
+        }
+        self.take(t)
+    }
+
+    /// Whether the single gaps read noisy: the teeth's shares are not learnt
+    /// well yet. The measure is the learning's own: the running mean (1/8 a
+    /// sample) of how far each sample lies from the share it updates, above
+    /// [`NOISY_LIMIT_Q16`]. It starts at [`NOISY_START_Q16`] (nothing is
+    /// known of the gear at power-up). Unlearnt teeth (±2 % of a pitch) put
+    /// it at 1.5–2 %; learnt ones below 0.5 % on the default terrain. While
+    /// it holds, the window may be a steady run and the supervisor smooths
+    /// the phase loop's correction.
+    #[must_use]
+    pub fn is_noisy(&self) -> bool {
+        self.rough != 0
+    }
+
+    /// Edges accepted since start (wrapping): a confirmed suspect edge
+    /// counts when it is confirmed, together with the edge that confirms it.
+    #[must_use]
+    pub const fn accepted_edges(&self) -> u32 {
+        self.edges_total
+    }
+
+    /// The gap that ended `back` accepted edges before the newest one in
+    /// pitches, Q16 (`back` = 0: [`MtEstimator::newest_gap_pitches_q16`]).
+    #[must_use]
+    pub fn gap_pitches_q16(&self, back: usize) -> u32 {
+        let z = self.z.max(1);
+        let idx = self
+            .tooth
+            .wrapping_add(z.saturating_mul(2))
+            .wrapping_sub(back.checked_rem(z).unwrap_or(0))
+            .checked_rem(z)
+            .unwrap_or(0);
+        self.pitches_q16_of(idx)
+    }
+
+    /// Accepts edge `t` (the glitch rules passed): a new gap, or a restart
+    /// after a stop.
+    fn take(&mut self, t: u32) -> EdgeVerdict {
+        let mut verdict = EdgeVerdict::Accepted;
+        if self.has_last {
+            let dt = t.wrapping_sub(self.newest());
             if dt > self.cfg.stop_timeout_ticks {
                 self.restart();
                 verdict = EdgeVerdict::Restart;
@@ -933,9 +1060,14 @@ impl MtEstimator {
         self.weight_sum = u32::try_from(self.z).unwrap_or(0).saturating_mul(ONE_Q16);
         self.samples = [0; MAX_TEETH];
         self.learned_upto = self.edges_total;
+        self.steady = 0;
+        self.rough = NOISY_START_Q16;
     }
 
     fn restart(&mut self) {
+        self.pending = None;
+        self.steady = 0;
+        self.calm = 0;
         self.from_rest = true;
         self.valid_run = 0;
         self.last_gap = 0;
@@ -968,6 +1100,49 @@ impl MtEstimator {
         sum
     }
 
+    /// The window while the newest gap's tooth is not learnt: the `new`
+    /// gaps since the last window, or, at a steady speed, the steady run
+    /// they extend, up to a revolution (a whole revolution has no tooth
+    /// error at all; k gaps carry at most ±4 %/k of it). A gap whose speed
+    /// is more than [`STEADY_BREAK`] off the run's is a change of speed:
+    /// the run starts again there. Returns the gap count and the start
+    /// stamp.
+    fn steady_window(&mut self, new: u32, single: u32) -> (u32, u32) {
+        let newest = self.newest();
+        let z = u32::try_from(self.z).unwrap_or(1);
+        let long = self
+            .steady
+            .saturating_add(new)
+            .min(z)
+            .min(STEADY_RUN_MAX)
+            .min(self.valid_run.saturating_sub(1))
+            .min(u32::try_from(RING).unwrap_or(1).saturating_sub(1));
+        if long <= new {
+            self.steady = new;
+            return (new, self.ref_stamp);
+        }
+        let start = self
+            .stamps
+            .get(ring_prev(self.head, usize::try_from(long).unwrap_or(0)))
+            .copied()
+            .unwrap_or(self.ref_stamp);
+        let run = self.rpm_bits(self.window_weight(long), newest.wrapping_sub(start));
+        let broke = u64::from(single.abs_diff(run)).saturating_mul(STEADY_BREAK) > u64::from(run);
+        let calm_before = self.calm;
+        self.calm = if broke {
+            0
+        } else {
+            self.calm.saturating_add(1)
+        };
+        if broke || calm_before < STEADY_SETTLE {
+            self.steady = if broke { new } else { long };
+            (new, self.ref_stamp)
+        } else {
+            self.steady = long;
+            (long, start)
+        }
+    }
+
     /// r/min (U12F20 bits, saturating) for an angle `w` (Q16 shares) over `ticks`.
     fn rpm_bits(&self, w: u64, ticks: u32) -> u32 {
         // S < 2^22 and T < 2^32: the product is exact.
@@ -983,108 +1158,126 @@ impl MtEstimator {
             .unwrap_or(u32::MAX)
     }
 
+    /// Learns the share of the gap [`LEARN_HALF`] gaps behind each fresh
+    /// edge (module docs, "Tooth-pitch compensation").
     fn learn(&mut self) {
-        let z = self.z;
-        let half = z / 2;
-        // Each new edge lets one gap be learnt: the gap p = half + q edges
-        // before it (offsets count back from the newest edge; q a quarter
-        // revolution), at the centre of the revolution R(e), e = p − half,
-        // whose z gaps run from p − half to p + half. A revolution's time is
-        // free of tooth errors, and centred on the gap it cancels a steady
-        // acceleration (the gaps before the centre lengthen as much as those
-        // after shorten). Two gates keep out most of what it cannot cancel
-        // (module docs): a change of acceleration (the second difference of
-        // R(e + q), R(e), R(e − q): CURVATURE_GATE) and a strong acceleration
-        // (R(e + q) against R(e − q): SLOPE_GATE).
         let fresh = self.edges_total.wrapping_sub(self.learned_upto);
         self.learned_upto = self.edges_total;
-        let tol = ONE_Q16 / 25; // ±4 %
-        let q = half / 2;
-        let mut learnt = false;
+        let z = self.z;
         for b in 0..usize::try_from(fresh.min(4)).unwrap_or(0) {
-            let p = b.saturating_add(half).saturating_add(q);
-            // R(e + q) reaches back to e + q + z = b + 2q + z.
-            let reach = b.saturating_add(z).saturating_add(q.saturating_mul(2));
+            // The centre gap ends `b + LEARN_HALF` edges back; its farthest
+            // neighbour starts `b + 2·LEARN_HALF + 1` back.
+            let reach = b.saturating_add(2 * LEARN_HALF + 1);
             if reach >= RING || u32::try_from(reach).map_or(true, |r| r >= self.valid_run) {
                 break;
             }
-            let stamp = |back: usize| {
-                self.stamps
-                    .get(ring_prev(self.head, back))
-                    .copied()
-                    .unwrap_or(0)
-            };
-            let rev = |end: usize| stamp(end).wrapping_sub(stamp(end.saturating_add(z)));
-            let gap = |end: usize| stamp(end).wrapping_sub(stamp(end.saturating_add(1)));
-            let second = |a: u32, c: u32, n: u32| {
-                i64::from(a)
-                    .wrapping_add(i64::from(n))
-                    .wrapping_sub(i64::from(c).wrapping_mul(2))
-                    .unsigned_abs()
-            };
-            let e = p.saturating_sub(half);
-            let (r_before, r_centre, r_after) =
-                (rev(e.saturating_add(q)), rev(e), rev(e.saturating_sub(q)));
-            let g = gap(p);
-            let slope = u64::from(r_before.abs_diff(r_after));
-            if r_centre == 0
-                || second(r_before, r_centre, r_after).saturating_mul(CURVATURE_GATE)
-                    > u64::from(r_centre)
-                || slope.saturating_mul(SLOPE_GATE) > u64::from(r_centre)
-            {
-                continue;
-            }
-            // gap · z · 2¹⁶ / R: gap < R < 2³², z ≤ 32: < 2⁵³.
-            let w_new = u64::from(g)
-                .wrapping_mul(u64::try_from(z).unwrap_or(0))
-                .wrapping_mul(u64::from(ONE_Q16))
-                .checked_div(u64::from(r_centre))
-                .and_then(|w| u32::try_from(w).ok())
-                .unwrap_or(u32::MAX);
-            if w_new.abs_diff(ONE_Q16) > tol {
-                continue;
-            }
-            // The gap `p` edges back has tooth index `tooth − p` (mod z).
-            let tooth = self
-                .tooth
-                .wrapping_add(z.saturating_mul(2))
-                .wrapping_sub(p.checked_rem(z).unwrap_or(0))
-                .checked_rem(z)
-                .unwrap_or(0);
-            // A running mean over SHARE_SAMPLES, then an IIR of the same
-            // weight (1/16): the wandering speed's residual biases average
-            // out. A sample taken at a steady speed (the revolutions a
-            // quarter revolution apart within STEADY_GATE) counts in full;
-            // any other as if the nominal share were a sample before it, so
-            // that no single early sample from a changing speed sets a
-            // share.
-            let n = self.samples.get(tooth).copied().unwrap_or(0);
-            let steady = slope.saturating_mul(STEADY_GATE) <= u64::from(r_centre);
-            let k = u32::from(n).saturating_add(if steady { 1 } else { 2 });
-            let w = self.weight(tooth);
-            let w = if w_new >= w {
-                w.saturating_add(w_new.saturating_sub(w).checked_div(k).unwrap_or(0))
-            } else {
-                w.saturating_sub(w.saturating_sub(w_new).checked_div(k).unwrap_or(0))
-            };
-            if let Some(slot) = self.weights.get_mut(tooth) {
-                // Between the old share and `w_new`, both within ±4 %.
-                *slot = weight_to_offset(w);
-            }
-            if let Some(c) = self.samples.get_mut(tooth) {
-                *c = n.saturating_add(1).min(SHARE_SAMPLES);
-            }
-            learnt = true;
+            self.learn_gap(b.saturating_add(LEARN_HALF), z);
         }
-        if !learnt {
+    }
+
+    /// One sample for the gap ending `c` edges back: its time against the
+    /// parabola through its neighbours' per-pitch times.
+    fn learn_gap(&mut self, c: usize, z: usize) {
+        let stamp = |back: usize| {
+            self.stamps
+                .get(ring_prev(self.head, back))
+                .copied()
+                .unwrap_or(0)
+        };
+        let gap = |back: usize| stamp(back).wrapping_sub(stamp(back.saturating_add(1)));
+        let tooth_of = |back: usize| {
+            self.tooth
+                .wrapping_add(z.saturating_mul(2))
+                .wrapping_sub(back.checked_rem(z).unwrap_or(0))
+                .checked_rem(z)
+                .unwrap_or(0)
+        };
+        // A gap's time per pitch: gap / share, the share 1 + d (Q16 offset
+        // d within ±4 %) as 1 − d + d² (error d³ < 7·10⁻⁵): no division.
+        let per_pitch = |back: usize| {
+            let d = i64::from(self.weights.get(tooth_of(back)).copied().unwrap_or(0));
+            let inv = i64::from(ONE_Q16)
+                .wrapping_sub(d)
+                .wrapping_add(d.wrapping_mul(d) >> 16);
+            // gap < 2³² µs, inv < 2¹⁷: the product < 2⁴⁹.
+            i64::from(gap(back)).wrapping_mul(inv) >> 16
+        };
+        let (mut sum, mut lo, mut hi) = (0i64, i64::MAX, 0i64);
+        for (j, &w) in (1..=LEARN_HALF).zip(LEARN_WEIGHTS.iter()) {
+            for back in [c.wrapping_sub(j), c.wrapping_add(j)] {
+                let u = per_pitch(back);
+                sum = sum.wrapping_add(w.wrapping_mul(u));
+                lo = lo.min(u);
+                hi = hi.max(u);
+            }
+        }
+        // sum = reference · LEARN_DIVISOR (< 2⁶³: 12 · 2¹³ · 2³³).
+        let Ok(reference) = u64::try_from(sum) else {
+            return;
+        };
+        let spread = u64::try_from(hi.wrapping_sub(lo)).unwrap_or(u64::MAX);
+        if reference == 0
+            || spread
+                .saturating_mul(SPREAD_GATE)
+                .saturating_mul(LEARN_DIVISOR)
+                > reference
+        {
             return;
         }
-        self.weight_sum = self
-            .weights
-            .get(..z)
-            .unwrap_or(&[])
-            .iter()
-            .fold(0u32, |a, &d| a.saturating_add(weight_from_offset(d)));
+        // The sample: gap / reference, Q16 (< 2³³ · 2¹⁶ · 2¹⁵).
+        let Some(sample) = u64::from(gap(c))
+            .wrapping_mul(u64::from(ONE_Q16))
+            .wrapping_mul(LEARN_DIVISOR)
+            .checked_div(reference)
+            .and_then(|v| i32::try_from(v).ok())
+        else {
+            return;
+        };
+        let tol = i32::try_from(ONE_Q16 / 25).unwrap_or(0); // ±4 %
+        let one = i32::try_from(ONE_Q16).unwrap_or(0);
+        if sample.abs_diff(one) > tol.unsigned_abs() {
+            return;
+        }
+        let tooth = tooth_of(c);
+        let n = self.samples.get(tooth).copied().unwrap_or(0);
+        let w = i32::try_from(self.weight(tooth)).unwrap_or(one);
+        let mut step = sample.wrapping_sub(w);
+        if self.rough != 0 {
+            let dev = step.unsigned_abs();
+            self.rough = if dev >= self.rough {
+                self.rough.saturating_add(dev.wrapping_sub(self.rough) / 8)
+            } else {
+                self.rough.saturating_sub(self.rough.wrapping_sub(dev) / 8)
+            };
+            if self.rough <= NOISY_LIMIT_Q16 {
+                // Learnt: noisy no more (until the table is dropped).
+                self.rough = 0;
+            }
+        }
+        if n >= SHARE_CLIP_FROM {
+            step = step.clamp(-SHARE_CLIP_Q16, SHARE_CLIP_Q16);
+        }
+        let k = i32::from(n.saturating_add(1).min(SHARE_SAMPLES));
+        let w = w.wrapping_add(step.checked_div(k).unwrap_or(0));
+        if let Some(slot) = self.weights.get_mut(tooth) {
+            *slot = weight_to_offset(u32::try_from(w).unwrap_or(ONE_Q16));
+        }
+        if let Some(cnt) = self.samples.get_mut(tooth) {
+            *cnt = n.saturating_add(1).min(SHARE_SAMPLES);
+        }
+        // The shares' mean back to 1 (the reference cannot see a common
+        // scale, so it would wander); then their sum.
+        let teeth = self.weights.get_mut(..z).unwrap_or(&mut []);
+        let total: i32 = teeth.iter().map(|&d| i32::from(d)).sum();
+        let mean = total
+            .checked_div(i32::try_from(z).unwrap_or(1))
+            .unwrap_or(0);
+        let mut sum_w = 0u32;
+        for d in teeth.iter_mut() {
+            *d = i16::try_from(i32::from(*d).wrapping_sub(mean)).unwrap_or(0);
+            sum_w = sum_w.saturating_add(weight_from_offset(*d));
+        }
+        self.weight_sum = sum_w;
     }
 
     /// Computes the speed at `now` (call periodically from the control task).
@@ -1103,6 +1296,8 @@ impl MtEstimator {
             window_ticks: 0,
             since_edge_ticks,
             glitches: self.glitches,
+            noisy: false,
+            steady_run: false,
         };
         if !self.has_last {
             return out;
@@ -1113,9 +1308,20 @@ impl MtEstimator {
                 self.learn();
             }
             // Window start: the previous window's last edge, or after a
-            // restart the oldest edge still in the ring.
+            // restart the oldest edge still in the ring. While the single
+            // gaps read noisy (their teeth not learnt yet), at a steady speed
+            // the window reaches back over the steady run
+            // ([`MtEstimator::steady_window`]).
             let (m, start) = if self.ref_valid && new < self.valid_run {
-                (new, self.ref_stamp)
+                let single =
+                    self.rpm_bits(self.window_weight(new), newest.wrapping_sub(self.ref_stamp));
+                out.noisy = self.is_noisy();
+                if self.cfg.pitch_compensation && out.noisy {
+                    self.steady_window(new, single)
+                } else {
+                    self.steady = 0;
+                    (new, self.ref_stamp)
+                }
             } else {
                 let back = self
                     .valid_run
@@ -1126,6 +1332,7 @@ impl MtEstimator {
                     .get(ring_prev(self.head, usize::try_from(back).unwrap_or(0)))
                     .copied()
                     .unwrap_or(newest);
+                self.steady = back;
                 (back, start)
             };
             self.ref_stamp = newest;
@@ -1145,6 +1352,7 @@ impl MtEstimator {
                 rpm
             };
             out.state = MotionState::Measured;
+            out.steady_run = m > new;
             out.edges = m;
             out.window_ticks = window;
             out.gear_speed = RevPerMin::from_fixed(U12F20::from_bits(self.held));
@@ -1167,7 +1375,15 @@ impl MtEstimator {
             .checked_add(1)
             .filter(|&t| t < self.z)
             .unwrap_or(0);
+        // A tooth not learnt yet may be up to 4 % of a pitch long (and the
+        // capture jitter): its gap gets 5 % more before it counts as late,
+        // so that a long tooth does not read as a slowing machine.
         let w_next = u64::from(self.weight(next));
+        let w_next = if self.samples.get(next).copied().unwrap_or(0) < LEARNT_SAMPLES {
+            w_next.saturating_add(w_next / 20)
+        } else {
+            w_next
+        };
         let cap = self.rpm_bits(w_next, since_edge_ticks);
         if cap < self.held {
             out.state = MotionState::Decaying;

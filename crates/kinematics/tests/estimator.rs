@@ -227,10 +227,13 @@ fn decays_then_stops() {
         est.update(Ticks(last + 200_000)).state,
         MotionState::Holding
     );
-    // 480 ms without an edge: at most 1/25 rev in 0.48 s = 5 r/min.
+    // 480 ms without an edge: at most one gap in 0.48 s; the next tooth is
+    // not learnt (the edges came without updates), so its gap is allowed
+    // 5 % more (an unlearnt tooth may be 4 % long): 1.05/25 rev in 0.48 s
+    // = 5.25 r/min.
     let m = est.update(Ticks(last + 480_000));
     assert_eq!(m.state, MotionState::Decaying);
-    assert!((m.gear_speed.to_f64() - 5.0).abs() < 1e-3);
+    assert!((m.gear_speed.to_f64() - 5.25).abs() < 1e-3);
     // Monotone decay to the timeout, then 0.
     let mut prev = m.gear_speed;
     for dt in (580_000..1_500_000).step_by(100_000) {

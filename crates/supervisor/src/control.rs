@@ -408,6 +408,8 @@ pub struct Supervisor {
     /// The phase loop's correction, smoothed when the link delays the
     /// control (distance-locked placement, [`PHASE_SMOOTHING`]), r/min.
     phase_smoothed: I16F16,
+    /// The smoothing's factor in force ([`PHASE_SMOOTHING`] … 1).
+    phase_alpha: I16F16,
     /// Hall edges since boot.
     edges: u32,
     /// Hall edges counted for the ground distance since boot (the accepted
@@ -480,6 +482,11 @@ struct Predictor {
     slope: (i64, i64),
     /// Mean tooth period of the last window, ticks.
     period: u32,
+    /// The last window's gaps read noisy
+    /// ([`kinematics::speed::TravelMeasurement::noisy`]), and it was a
+    /// steady run (`steady_run`).
+    noisy: bool,
+    steady_run: bool,
 }
 
 impl Predictor {
@@ -494,19 +501,27 @@ impl Predictor {
                     .wrapping_sub(m.window_ticks / 2);
                 if let Some((v0, t0)) = self.last {
                     let dt = i64::from(center.wrapping_sub(t0));
-                    self.slope = if dt > 0 {
+                    // A change beyond what unlearnt teeth make (each gap
+                    // ±4 %: two differ by at most 8 %; a start from rest
+                    // changes by tens of %) is the speed's.
+                    let dv = v.saturating_sub(v0);
+                    let real = dv.unsigned_abs() > v0.unsigned_abs() / 25;
+                    // The slope only between two windows whose teeth are
+                    // learnt, or for a real change: otherwise it is the
+                    // tooth errors', which the extrapolation multiplied.
+                    let clean = !m.noisy && !self.noisy && !m.steady_run && !self.steady_run;
+                    self.slope = if dt > 0 && (clean || real) {
                         (v.saturating_sub(v0), dt)
                     } else {
                         (0, 1)
                     };
                 }
+                self.noisy = m.noisy;
+                self.steady_run = m.steady_run;
                 self.last = Some((v, center));
                 self.period = m.window_ticks.checked_div(m.edges).unwrap_or(0);
             }
-            MotionState::Measured | MotionState::Holding => {}
-            // Overdue edge: the estimator's own bound (one gap over the
-            // elapsed time) is better than any extrapolation.
-            MotionState::Decaying => return m.gear_speed,
+            MotionState::Measured | MotionState::Holding | MotionState::Decaying => {}
             MotionState::Stopped | MotionState::Starting => {
                 *self = Self::default();
                 return m.gear_speed;
@@ -528,7 +543,15 @@ impl Predictor {
             .max(bound.saturating_neg())
             .min(bound);
         let bits = v.saturating_add(step).clamp(0, i64::from(u32::MAX));
-        RevPerMin::from_bits(u32::try_from(bits).unwrap_or(0))
+        let predicted = RevPerMin::from_bits(u32::try_from(bits).unwrap_or(0));
+        if m.state == MotionState::Decaying {
+            // Overdue edge: the estimator's bound (one gap over the elapsed
+            // time) caps the estimate; it is no estimate of its own (above
+            // a smoothed value it would raise it).
+            predicted.min(m.gear_speed)
+        } else {
+            predicted
+        }
     }
 }
 
@@ -674,6 +697,11 @@ pub fn schedule_scale(model: &DriveModel, period_us: u32) -> I16F16 {
 /// 100 ms is the slowest link's delay; against the phase loop's 0.5 s it
 /// costs at most atan(0.2) ≈ 11° of phase margin.
 const PHASE_SMOOTHING: I16F16 = I16F16::lit("0.0952");
+/// How fast the phase correction's smoothing fades out when it is no longer
+/// needed: its factor rises by this much a period, from [`PHASE_SMOOTHING`]
+/// to 1 in 0.5 s, so that the correction does not jump to its unsmoothed
+/// value.
+const PHASE_FADE: I16F16 = I16F16::lit("0.02");
 
 /// The conservative mode after an instability: no proportional or
 /// derivative action, integral only with `Ki` = [`FALLBACK_KI`] per period,
@@ -907,6 +935,7 @@ impl Supervisor {
             reported: I16F16::ZERO,
             k3_speed: I16F16::ZERO,
             phase_smoothed: I16F16::ZERO,
+            phase_alpha: I16F16::ONE,
             edges: 0,
             teeth: 0,
             pitches_q16: 0,
@@ -1016,27 +1045,26 @@ impl Supervisor {
 
     /// Takes one Hall edge (1 MHz capture ticks, extended to 32 bits).
     pub fn hall_edge(&mut self, t: Ticks) {
+        let before = self.estimator.accepted_edges();
         let verdict = self.estimator.push_edge(t);
-        let accepted = matches!(
-            verdict,
-            kinematics::speed::EdgeVerdict::Accepted | kinematics::speed::EdgeVerdict::Restart
-        );
-        if accepted {
-            self.edges = self.edges.wrapping_add(1);
-        }
-        // The ground distance counts the teeth, also one the estimator
-        // drops for its ¼-period rule when it is a plausible tooth
-        // ([`DISTANCE_EDGE_MIN_GAP_US`]).
-        let gap = self.last_tooth_at.map_or(u32::MAX, |l| t.0.wrapping_sub(l));
-        if accepted || gap >= DISTANCE_EDGE_MIN_GAP_US {
+        // One edge, or two: a suspect edge confirmed by this one
+        // ([`MtEstimator::push_edge`]); none for a glitch or a suspect.
+        let accepted = self.estimator.accepted_edges().wrapping_sub(before);
+        self.edges = self.edges.wrapping_add(accepted);
+        for back in (0..accepted).rev() {
             self.teeth = self.teeth.wrapping_add(1);
-            // A tooth the estimator dropped has no learned pitch: nominal.
-            let pitch = if accepted {
-                self.estimator.newest_gap_pitches_q16()
-            } else {
-                1 << 16
-            };
-            self.pitches_q16 = self.pitches_q16.wrapping_add(pitch);
+            self.pitches_q16 = self
+                .pitches_q16
+                .wrapping_add(self.estimator.gap_pitches_q16(back as usize));
+            self.last_tooth_at = Some(t.0);
+        }
+        // The ground distance also counts an edge the estimator drops for
+        // its ¼-period rule when it is a plausible tooth
+        // ([`DISTANCE_EDGE_MIN_GAP_US`]), at a nominal pitch.
+        let gap = self.last_tooth_at.map_or(u32::MAX, |l| t.0.wrapping_sub(l));
+        if verdict == kinematics::speed::EdgeVerdict::Glitch && gap >= DISTANCE_EDGE_MIN_GAP_US {
+            self.teeth = self.teeth.wrapping_add(1);
+            self.pitches_q16 = self.pitches_q16.wrapping_add(1 << 16);
             self.last_tooth_at = Some(t.0);
         }
     }
@@ -1718,15 +1746,26 @@ impl Supervisor {
                             && self.run == RunState::Running
                         {
                             let c = self.phase.correction(n);
-                            if self.link_in_force.delays_control() {
-                                self.phase_smoothed = self.phase_smoothed.saturating_add(
-                                    c.saturating_sub(self.phase_smoothed)
-                                        .saturating_mul(PHASE_SMOOTHING),
-                                );
-                                self.phase_smoothed
+                            // Smoothed through the link, and while the Hall
+                            // gaps read noisy (teeth not learnt yet): an
+                            // unlearnt edge is up to ±2 % of a pitch off its
+                            // place, and the ground's step there moved the
+                            // drum by up to 3 % in one period (not before a
+                            // pass's first plant: the drum catches up with
+                            // it at up to +100 %, late if smoothed). Leaving
+                            // it, the smoothing fades out over 0.5 s.
+                            self.phase_alpha = if self.link_in_force.delays_control()
+                                || (self.estimator.is_noisy() && self.phase.pass_started())
+                            {
+                                PHASE_SMOOTHING
                             } else {
-                                c
-                            }
+                                self.phase_alpha.saturating_add(PHASE_FADE).min(I16F16::ONE)
+                            };
+                            self.phase_smoothed = self.phase_smoothed.saturating_add(
+                                c.saturating_sub(self.phase_smoothed)
+                                    .saturating_mul(self.phase_alpha),
+                            );
+                            self.phase_smoothed
                         } else {
                             self.phase.update_error();
                             self.phase_smoothed = I16F16::ZERO;

@@ -291,6 +291,12 @@ impl Phase {
             / 50_000_000
     }
 
+    /// A partition left since the last realignment (a Start, a lowering, a
+    /// rest): the pass's first plant is down.
+    pub fn pass_started(&self) -> bool {
+        self.pass_started
+    }
+
     /// Partitions that left since Start.
     pub fn partitions_left(&self) -> u32 {
         self.left

@@ -559,9 +559,13 @@ pub enum EdgeVerdict {
     Restart,
     /// Dropped as a glitch.
     Glitch,
-    /// Held until the next edge: the gap it closes is shorter than half the
-    /// last one (see [`MtEstimator::push_edge`]).
+    /// Held until the next edge: at a steady speed, the gap it closes is
+    /// shorter than 7/8 of the last one (see [`MtEstimator::push_edge`]).
     Suspect,
+    /// Dropped for the ¼-period rule while the speed was changing (a
+    /// tractor pulling away from a crawl): it may be a real tooth, which
+    /// the ground distance can count.
+    Early,
 }
 
 /// M/T speed estimator on 32-bit edge timestamps (wrapping arithmetic).
@@ -932,23 +936,29 @@ impl MtEstimator {
             } else {
                 self.glitch_ref >> self.cfg.glitch_shift
             };
-            if dt < self.cfg.min_edge_gap_ticks || dt < expected_min {
-                self.glitches = self.glitches.wrapping_add(1);
-                return EdgeVerdict::Glitch;
-            }
-            // (At a steady speed only: the last two gaps within a quarter
-            // of each other. A start from rest shortens every gap by more
-            // than half at first, and a pull-away after a slow-down follows
-            // gaps that grew: waiting for the next edge there would make
-            // the drum late.)
-            // Nor from a crawl (gaps longer than [`SUSPECT_MAX_GAP_US`]):
-            // a tractor pulling away doubles its speed within a tooth.
+            // At a steady working speed: the last two gaps within a quarter
+            // of each other, and not from a crawl (gaps longer than
+            // [`SUSPECT_MAX_GAP_US`]: a tractor pulling away doubles its
+            // speed within a tooth). A start from rest shortens every gap by
+            // more than half at first, and a pull-away after a slow-down
+            // follows gaps that grew.
             let [g0, g1, _] = self.gaps;
             let steady = g1 != 0
                 && g0.abs_diff(g1) <= g1 / 4
                 && u64::from(g0).saturating_mul(1_000_000)
                     <= u64::from(SUSPECT_MAX_GAP_US).saturating_mul(u64::from(self.cfg.timer_hz));
-            if !self.lost && steady && dt < self.glitch_ref >> 1 {
+            if dt < self.cfg.min_edge_gap_ticks || dt < expected_min {
+                self.glitches = self.glitches.wrapping_add(1);
+                // Under a changing speed a real tooth may come this early
+                // (the ground distance may count it); at a steady speed it is
+                // noise, or the line of a sensor sticking low.
+                return if steady || self.glitch_ref == 0 || dt < self.cfg.min_edge_gap_ticks {
+                    EdgeVerdict::Glitch
+                } else {
+                    EdgeVerdict::Early
+                };
+            }
+            if !self.lost && steady && dt < self.glitch_ref - (self.glitch_ref >> 2) {
                 self.pending = Some(t);
                 return EdgeVerdict::Suspect;
             }

@@ -105,6 +105,13 @@ pub enum Alarm {
     /// The next Hall edge is later than any stop of the chassis allows
     /// (module docs) while the drum was running. Latched.
     HallLost,
+    /// No Hall edge for [`NO_PULSES_US`] while the drum runs in
+    /// Speed-Adaptive mode with the unit down: the tractor has stopped, or
+    /// the Hall sensor (or its wire) is dead and the machine plants
+    /// nothing while it moves. One sensor cannot tell them apart below
+    /// High 3 (module docs), so this is a warning, not a stop: it clears
+    /// with the next edges.
+    NoTravelPulses,
     /// Travel speed too high for the spacing; the drum is held at `n_max`.
     /// Clears by itself. Carries the allowed maximum, km/h × 100.
     TooFast {
@@ -156,6 +163,7 @@ impl Alarm {
             Self::DrumStall => w.write_str("Drum stalled or encoder lost"),
             Self::DrumBackwards => w.write_str("Drum turns backwards: check direction"),
             Self::HallLost => w.write_str("Hall speed signal lost"),
+            Self::NoTravelPulses => w.write_str(NO_PULSES_TEXT),
             Self::DrumUnstable => w.write_str(DRUM_UNSTABLE_TEXT),
             Self::IdentifyFailed(e) => w.write_str(e.text()),
             Self::DriverFault(f) => {
@@ -211,6 +219,10 @@ pub const NO_DRIVE_LINK: &str = "Drive link not in this image";
 
 /// The message shown when the drive identification starts.
 pub const IDENTIFY_MESSAGE: &str = "Identifying drive: keep belt empty";
+
+/// The warning text of [`Alarm::NoTravelPulses`] (the screen's 40
+/// characters).
+pub const NO_PULSES_TEXT: &str = "No travel pulses: check Hall, or Stop";
 
 /// The warning text of [`Alarm::DrumUnstable`].
 pub const DRUM_UNSTABLE_TEXT: &str = "Drum unstable: safe mode, identify";
@@ -349,6 +361,16 @@ pub const HALL_SILENCE_DECEL_MM_S2: u32 = 10_500;
 /// hard glitch limit (500 µs) and below the shortest real gap (9 ms at
 /// 10 km/h).
 pub const DISTANCE_EDGE_MIN_GAP_US: u32 = 5_000;
+/// No Hall edge for this long (µs), while the drum runs in Speed-Adaptive
+/// mode with the unit down, raises [`Alarm::NoTravelPulses`]: 2.5 s, nine
+/// edge periods of the slowest gear (Low 1, 0.32 km/h at the gear: 283 ms
+/// an edge; 300 ms on the terrain's −5 %), so that no working speed leaves
+/// such a silence, and short enough that the warning is up within 3 s of a
+/// sensor's death (the last edge came before it). A 2 s rest of a
+/// stop-and-go is shorter (at most 2.4 s between edges at Low 1 with a
+/// 0.5 s chassis); a longer one shows the warning, which clears with the
+/// first edges after it.
+pub const NO_PULSES_US: u32 = 2_500_000;
 /// Hall silence: the tolerance on a gap's length, % — pitch errors of
 /// teeth whose share is not learned yet (±2 % of a pitch per tooth, so
 /// ±4 % per gap) and the capture jitter.
@@ -425,6 +447,9 @@ pub struct Supervisor {
     /// The chassis's deceleration limit at the Hall gear, for the silence
     /// rule.
     hall_silence: DecelerationBound,
+    /// When the Hall silence began to count for [`Alarm::NoTravelPulses`]
+    /// (Start, a lowering, Speed-Adaptive chosen), Hall timer ticks.
+    quiet_from: u32,
     /// Drum encoder counts since Start, each weighted by the belt slip k3
     /// (U2F30, its full precision) at the drum speed measured when it was
     /// counted: Σ Δcounts · k3(n) · 2³⁰. The plant count follows from it
@@ -943,6 +968,7 @@ impl Supervisor {
             distance_um: 0,
             distance_frac: 0,
             hall_silence,
+            quiet_from: 0,
             belt_counts_k3: 0,
             reference: I16F16::ZERO,
             ref_history: [0; REF_HISTORY],
@@ -1062,7 +1088,7 @@ impl Supervisor {
         // its ¼-period rule when it is a plausible tooth
         // ([`DISTANCE_EDGE_MIN_GAP_US`]), at a nominal pitch.
         let gap = self.last_tooth_at.map_or(u32::MAX, |l| t.0.wrapping_sub(l));
-        if verdict == kinematics::speed::EdgeVerdict::Glitch && gap >= DISTANCE_EDGE_MIN_GAP_US {
+        if verdict == kinematics::speed::EdgeVerdict::Early && gap >= DISTANCE_EDGE_MIN_GAP_US {
             self.teeth = self.teeth.wrapping_add(1);
             self.pitches_q16 = self.pitches_q16.wrapping_add(1 << 16);
             self.last_tooth_at = Some(t.0);
@@ -1771,7 +1797,22 @@ impl Supervisor {
                             self.phase_smoothed = I16F16::ZERO;
                             I16F16::ZERO
                         };
-                        n.saturating_add(correction).max(I16F16::ZERO).min(cap)
+                        // The next edge is long overdue (four gaps: the tractor
+                        // has come to rest, or the sensor died) and the next
+                        // plant's place lies beyond that edge: the drum waits
+                        // at rest for it, so that no plant leaves for a place
+                        // the ground may never reach (on the decaying speed
+                        // the belt crept on and dropped plants anywhere).
+                        if m.state == MotionState::Decaying
+                            && m.since_edge_ticks / 4 > self.predictor.period
+                            && self.settings.placement == Placement::DistanceLocked
+                            && self.phase.partitions_left() > 0
+                            && self.phase.next_place_beyond_reach()
+                        {
+                            I16F16::ZERO
+                        } else {
+                            n.saturating_add(correction).max(I16F16::ZERO).min(cap)
+                        }
                     }
                     _ => I16F16::ZERO,
                 }
@@ -1782,10 +1823,31 @@ impl Supervisor {
         // lifted unit plants nothing); latched alarms and the instability
         // warning stay.
         let too_fast = too_fast.filter(|_| self.unit_down());
-        match (self.alarm, too_fast) {
+        // No travel pulses: the Hall silent for NO_PULSES_US since the last
+        // edge, or since the watch began (Start, a lowering,
+        // Speed-Adaptive chosen), with the drum running in Speed-Adaptive
+        // and the unit down. Before it (and otherwise) the watch restarts.
+        let watching = self.run == RunState::Running
+            && self.settings.mode == Mode::SpeedAdaptive
+            && self.unit_down();
+        if !watching {
+            self.quiet_from = now.0;
+        }
+        let since_edge = if self.edges == 0 {
+            u32::MAX
+        } else {
+            m.since_edge_ticks
+        };
+        let quiet = since_edge.min(now.0.wrapping_sub(self.quiet_from));
+        let warning = if watching && quiet > NO_PULSES_US {
+            Some(Alarm::NoTravelPulses)
+        } else {
+            too_fast
+        };
+        match (self.alarm, warning) {
             (Some(a), _) if a.is_latched() || a == Alarm::DrumUnstable => {}
             (_, Some(w)) if self.run == RunState::Running => self.alarm = Some(w),
-            (Some(Alarm::TooFast { .. }), _) => self.alarm = None,
+            (Some(Alarm::TooFast { .. } | Alarm::NoTravelPulses), _) => self.alarm = None,
             _ => {}
         }
         // The work switch up: the target ramps to rest (crate::planting).

@@ -157,6 +157,8 @@ pub struct Phase {
     /// Ground at the last edge (Q8 nm), and now (extrapolated, nm).
     ground_edges_q8: u64,
     ground_nm: u64,
+    /// The next edge's place: as far as the ground can be known, nm.
+    reach_nm: u64,
     /// The ground at the end of the last [`Phase::advance_belt`] (the start
     /// of this step), nm: a partition's ground is interpolated in the step.
     step_ground_nm: u64,
@@ -195,6 +197,7 @@ impl Phase {
             edge_q8: EDGE_NM_Q8,
             ground_edges_q8: 0,
             ground_nm: 0,
+            reach_nm: 0,
             step_ground_nm: 0,
             belt_nm: 0,
             belt_rem: 0,
@@ -237,6 +240,7 @@ impl Phase {
             edge_q8: EDGE_NM_Q8,
             ground_edges_q8: 0,
             ground_nm: 0,
+            reach_nm: 0,
             step_ground_nm: 0,
             belt_nm: 0,
             belt_rem: 0,
@@ -295,6 +299,12 @@ impl Phase {
     /// rest): the pass's first plant is down.
     pub fn pass_started(&self) -> bool {
         self.pass_started
+    }
+
+    /// The next partition's place lies beyond the next Hall edge's: the
+    /// ground cannot be known there before that edge comes.
+    pub fn next_place_beyond_reach(&self) -> bool {
+        self.armed && self.ref_ground_nm > self.reach_nm
     }
 
     /// Partitions that left since Start.
@@ -388,6 +398,7 @@ impl Phase {
             kinematics::mul_shr(u64::from(next_pitch_q16), self.edge_q8, 16).unwrap_or(u64::MAX);
         let edges_nm = self.ground_edges_q8 >> 8;
         let cap = edges_nm.saturating_add(next_q8 >> 8);
+        self.reach_nm = cap;
         let g = edges_nm.saturating_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
     }

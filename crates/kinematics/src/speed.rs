@@ -990,14 +990,7 @@ impl MtEstimator {
     /// pitches, Q16 (`back` = 0: [`MtEstimator::newest_gap_pitches_q16`]).
     #[must_use]
     pub fn gap_pitches_q16(&self, back: usize) -> u32 {
-        let z = self.z.max(1);
-        let idx = self
-            .tooth
-            .wrapping_add(z.saturating_mul(2))
-            .wrapping_sub(back.checked_rem(z).unwrap_or(0))
-            .checked_rem(z)
-            .unwrap_or(0);
-        self.pitches_q16_of(idx)
+        self.pitches_q16_of(self.tooth_back(back, self.z.max(1)))
     }
 
     /// Accepts edge `t` (the glitch rules passed): a new gap, or a restart
@@ -1153,6 +1146,11 @@ impl MtEstimator {
         }
     }
 
+    /// 60·f·2²⁰ (< 2⁵⁸): r/min in U12F20 per share over ticks.
+    fn rpm_scale(&self) -> u64 {
+        u64::from(self.cfg.timer_hz).wrapping_mul(60) << 20
+    }
+
     /// r/min (U12F20 bits, saturating) for an angle `w` (Q16 shares) over `ticks`.
     fn rpm_bits(&self, w: u64, ticks: u32) -> u32 {
         // S < 2^22 and T < 2^32: the product is exact.
@@ -1161,9 +1159,8 @@ impl MtEstimator {
             return u32::MAX;
         }
         // n = 60·f·(w/S)/T r/min; ·2^20 for U12F20; the weights carry z·2^16 per rev in S.
-        // 60·f·2^20 < 2^58; w·60·f·2^20 is formed exactly in 128 bits.
-        let scale = (u64::from(self.cfg.timer_hz).wrapping_mul(60)) << 20;
-        fx::mul_div(w, scale, den)
+        // w·60·f·2^20 is formed exactly in 128 bits.
+        fx::mul_div(w, self.rpm_scale(), den)
             .and_then(|q| u32::try_from(q).ok())
             .unwrap_or(u32::MAX)
     }
@@ -1188,45 +1185,31 @@ impl MtEstimator {
     /// One sample for the gap ending `c` edges back: its time against the
     /// parabola through its neighbours' per-pitch times.
     fn learn_gap(&mut self, c: usize, z: usize) {
-        let stamp = |back: usize| {
-            self.stamps
-                .get(ring_prev(self.head, back))
-                .copied()
-                .unwrap_or(0)
-        };
-        let gap = |back: usize| stamp(back).wrapping_sub(stamp(back.saturating_add(1)));
-        let tooth_of = |back: usize| {
-            self.tooth
-                .wrapping_add(z.saturating_mul(2))
-                .wrapping_sub(back.checked_rem(z).unwrap_or(0))
-                .checked_rem(z)
-                .unwrap_or(0)
-        };
-        // A gap's time per pitch: gap / share, the share 1 + d (Q16 offset
-        // d within ±4 %) as 1 − d + d² (error d³ < 7·10⁻⁵): no division.
-        let per_pitch = |back: usize| {
-            let d = i64::from(self.weights.get(tooth_of(back)).copied().unwrap_or(0));
-            let inv = i64::from(ONE_Q16)
-                .wrapping_sub(d)
-                .wrapping_add(d.wrapping_mul(d) >> 16);
-            // gap < 2³² µs, inv < 2¹⁷: the product < 2⁴⁹.
-            i64::from(gap(back)).wrapping_mul(inv) >> 16
-        };
         let (mut sum, mut lo, mut hi) = (0i64, i64::MAX, 0i64);
-        for (j, &w) in (1..=LEARN_HALF).zip(LEARN_WEIGHTS.iter()) {
-            for back in [c.wrapping_sub(j), c.wrapping_add(j)] {
-                let u = per_pitch(back);
-                sum = sum.wrapping_add(w.wrapping_mul(u));
-                lo = lo.min(u);
-                hi = hi.max(u);
-            }
+        for back in c.saturating_sub(LEARN_HALF)..=c.saturating_add(LEARN_HALF) {
+            let Some(&w) = LEARN_WEIGHTS.get(back.abs_diff(c).wrapping_sub(1)) else {
+                continue; // the centre itself
+            };
+            let u = self.per_pitch(back, z);
+            sum = sum.wrapping_add(w.wrapping_mul(u));
+            lo = lo.min(u);
+            hi = hi.max(u);
         }
         // sum = reference · LEARN_DIVISOR (< 2⁶³: 12 · 2¹³ · 2³³).
         let Ok(reference) = u64::try_from(sum) else {
             return;
         };
         let spread = u64::try_from(hi.wrapping_sub(lo)).unwrap_or(u64::MAX);
-        if reference == 0
+        // The sample: gap / reference, Q16 (< 2³³ · 2¹⁶ · 2¹⁵).
+        let sample = u64::from(self.gap_back(c))
+            .wrapping_mul(u64::from(ONE_Q16))
+            .wrapping_mul(LEARN_DIVISOR)
+            .checked_div(reference)
+            .and_then(|v| i32::try_from(v).ok())
+            .unwrap_or(0);
+        let one = i32::try_from(ONE_Q16).unwrap_or(0);
+        // ±4 % at most; the neighbours within SPREAD_GATE.
+        if sample.abs_diff(one) > ONE_Q16 / 25
             || spread
                 .saturating_mul(SPREAD_GATE)
                 .saturating_mul(LEARN_DIVISOR)
@@ -1234,46 +1217,31 @@ impl MtEstimator {
         {
             return;
         }
-        // The sample: gap / reference, Q16 (< 2³³ · 2¹⁶ · 2¹⁵).
-        let Some(sample) = u64::from(gap(c))
-            .wrapping_mul(u64::from(ONE_Q16))
-            .wrapping_mul(LEARN_DIVISOR)
-            .checked_div(reference)
-            .and_then(|v| i32::try_from(v).ok())
-        else {
-            return;
-        };
-        let tol = i32::try_from(ONE_Q16 / 25).unwrap_or(0); // ±4 %
-        let one = i32::try_from(ONE_Q16).unwrap_or(0);
-        if sample.abs_diff(one) > tol.unsigned_abs() {
-            return;
-        }
-        let tooth = tooth_of(c);
+        let tooth = self.tooth_back(c, z);
         let n = self.samples.get(tooth).copied().unwrap_or(0);
         let w = i32::try_from(self.weight(tooth)).unwrap_or(one);
         let mut step = sample.wrapping_sub(w);
         if self.rough != 0 {
-            let dev = step.unsigned_abs();
-            self.rough = if dev >= self.rough {
-                self.rough.saturating_add(dev.wrapping_sub(self.rough) / 8)
+            // The learning's mean deviation (1/8 a sample); learnt once it
+            // is below the limit: noisy no more (until the table is dropped).
+            let rough = i32::try_from(self.rough).unwrap_or(i32::MAX);
+            let r = rough.wrapping_add(step.abs().wrapping_sub(rough) / 8);
+            self.rough = if r <= i32::try_from(NOISY_LIMIT_Q16).unwrap_or(0) {
+                0
             } else {
-                self.rough.saturating_sub(self.rough.wrapping_sub(dev) / 8)
+                r.unsigned_abs()
             };
-            if self.rough <= NOISY_LIMIT_Q16 {
-                // Learnt: noisy no more (until the table is dropped).
-                self.rough = 0;
-            }
         }
         if n >= SHARE_CLIP_FROM {
             step = step.clamp(-SHARE_CLIP_Q16, SHARE_CLIP_Q16);
         }
-        let k = i32::from(n.saturating_add(1).min(SHARE_SAMPLES));
-        let w = w.wrapping_add(step.checked_div(k).unwrap_or(0));
+        let n = n.saturating_add(1).min(SHARE_SAMPLES);
+        let w = w.wrapping_add(step.checked_div(i32::from(n)).unwrap_or(0));
         if let Some(slot) = self.weights.get_mut(tooth) {
-            *slot = weight_to_offset(u32::try_from(w).unwrap_or(ONE_Q16));
+            *slot = weight_to_offset(w.unsigned_abs());
         }
         if let Some(cnt) = self.samples.get_mut(tooth) {
-            *cnt = n.saturating_add(1).min(SHARE_SAMPLES);
+            *cnt = n;
         }
         // The shares' mean back to 1 (the reference cannot see a common
         // scale, so it would wander); then their sum.
@@ -1288,6 +1256,40 @@ impl MtEstimator {
             sum_w = sum_w.saturating_add(weight_from_offset(*d));
         }
         self.weight_sum = sum_w;
+    }
+
+    /// The gap that ended `back` accepted edges before the newest one, ticks.
+    fn gap_back(&self, back: usize) -> u32 {
+        let i = ring_prev(self.head, back);
+        let before = i.checked_sub(1).unwrap_or(RING - 1);
+        let stamp = |j: usize| self.stamps.get(j).copied().unwrap_or(0);
+        stamp(i).wrapping_sub(stamp(before))
+    }
+
+    /// The tooth index of the gap that ended `back` edges before the newest.
+    fn tooth_back(&self, back: usize, z: usize) -> usize {
+        self.tooth
+            .wrapping_add(z.saturating_mul(2))
+            .wrapping_sub(back.checked_rem(z).unwrap_or(0))
+            .checked_rem(z)
+            .unwrap_or(0)
+    }
+
+    /// That gap's time per nominal pitch: gap / share, the share 1 + d (Q16
+    /// offset d within ±4 %) as 1 − d + d² (error d³ < 7·10⁻⁵): no division.
+    #[inline(never)]
+    fn per_pitch(&self, back: usize, z: usize) -> i64 {
+        let d = i64::from(
+            self.weights
+                .get(self.tooth_back(back, z))
+                .copied()
+                .unwrap_or(0),
+        );
+        let inv = i64::from(ONE_Q16)
+            .wrapping_sub(d)
+            .wrapping_add(d.wrapping_mul(d) >> 16);
+        // gap < 2³² µs, inv < 2¹⁷: the product < 2⁴⁹.
+        i64::from(self.gap_back(back)).wrapping_mul(inv) >> 16
     }
 
     /// Computes the speed at `now` (call periodically from the control task).
@@ -1394,9 +1396,13 @@ impl MtEstimator {
         } else {
             w_next
         };
-        let cap = self.rpm_bits(w_next, since_edge_ticks);
-        if cap < self.held {
+        // cap < held ⇔ ⌊w·scale / (S·since)⌋ < held ⇔ w·scale < held·S·since:
+        // the products compared, the division only once it decays (most
+        // control periods hold: 300 instructions a period saved).
+        let den = u64::from(self.weight_sum).saturating_mul(u64::from(since_edge_ticks));
+        if fx::mul_lt(w_next, self.rpm_scale(), u64::from(self.held), den) {
             out.state = MotionState::Decaying;
+            let cap = self.rpm_bits(w_next, since_edge_ticks);
             out.gear_speed = RevPerMin::from_fixed(U12F20::from_bits(cap));
         } else {
             out.state = MotionState::Holding;

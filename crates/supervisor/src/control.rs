@@ -2379,13 +2379,17 @@ impl Supervisor {
     pub(crate) fn partitions_x1e6(&self) -> u64 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
-        // Σ Δcounts·k3 (Q30) / counts per turn = turns · k3 in Q30.
+        // Σ Δcounts·k3 (Q30) / counts per turn = turns · k3 in Q30; in Q22
+        // (2⁻²² of a turn: 4 ppm of a partition) × 4 398 230 fits u64 up to
+        // 2²⁰ turns (230 km of belt).
         self.belt_counts_k3
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .and_then(|turns_k3_q30| {
-                kinematics::mul_shr(turns_k3_q30, PARTITIONS_PER_TURN_X1E6, 30)
+            .map_or(u64::MAX, |turns_k3_q30| {
+                (turns_k3_q30 >> 8)
+                    .min(1 << 42)
+                    .wrapping_mul(PARTITIONS_PER_TURN_X1E6)
+                    >> 22
             })
-            .unwrap_or(u64::MAX)
     }
 
     /// The status as the screen shows it.

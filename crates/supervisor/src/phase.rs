@@ -351,7 +351,9 @@ impl Phase {
         if let Some(k) = k1k2_q30 {
             // Q8 nm × Q30 → Q8 nm; k1·k2 ≤ 1.44 (tables hold 0.8 … 1.2):
             // fits, and saturates rather than wraps beyond.
-            self.edge_q8 = kinematics::mul_shr(EDGE_NM_Q8, k, 30).unwrap_or(u64::MAX >> 24);
+            // k1·k2 < 1.44 (tables hold 0.8 … 1.2; clamped to 2 here): the
+            // product < 1.3·10¹⁹ < 2⁶⁴.
+            self.edge_q8 = EDGE_NM_Q8.wrapping_mul(k.min(2 << 30)) >> 30;
         }
         let new = edges.wrapping_sub(self.edges_seen);
         self.edges_seen = edges;
@@ -384,7 +386,7 @@ impl Phase {
         // Q16 pitches × Q8 nm per pitch, cut to Q8 once per step.
         self.ground_edges_q8 = self
             .ground_edges_q8
-            .saturating_add(kinematics::mul_shr(new_q16, self.edge_q8, 16).unwrap_or(u64::MAX));
+            .saturating_add(new_q16.min(1 << 28).wrapping_mul(self.edge_q8) >> 16);
         // From the newest edge (exact) with the time since it: m/s (U8F24)
         // · µs = nm / 1000. The speed clamped to 16 m/s (58 km/h, beyond the
         // Hall switch's 1 kHz) and the time to 16.7 s (beyond any edge at a
@@ -394,8 +396,8 @@ impl Phase {
             .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
             >> 24;
         // Never past the next edge's place: the gap's own learned pitch.
-        let next_q8 =
-            kinematics::mul_shr(u64::from(next_pitch_q16), self.edge_q8, 16).unwrap_or(u64::MAX);
+        // A pitch < 2¹⁸ (Q16, ±4 % of 1) × edge_q8 < 2³⁵: < 2⁵³.
+        let next_q8 = u64::from(next_pitch_q16.min(1 << 18)).wrapping_mul(self.edge_q8) >> 16;
         let edges_nm = self.ground_edges_q8 >> 8;
         let cap = edges_nm.saturating_add(next_q8 >> 8);
         self.reach_nm = cap;
@@ -407,15 +409,17 @@ impl Phase {
     /// `k3` (its full U2F30 precision); records the partitions that left.
     #[inline(never)]
     pub fn advance_belt(&mut self, counts: u16, k3: kinematics::units::Coefficient) {
-        // counts · k3 (Q30) < 2⁴⁸, × the Q16 belt per count (< 2⁴³), cut
-        // once to Q16 nm (< 2⁶¹: 65 535 counts of 4.7 mm), remainder kept.
-        let acc = kinematics::mul_shr(
-            u64::from(counts).wrapping_mul(u64::from(k3.to_bits())),
-            self.belt_q16_per_count,
-            30,
-        )
-        .unwrap_or(u64::MAX >> 1)
-        .wrapping_add(self.belt_rem);
+        // The belt per count at this k3, Q16 nm: the Q16 belt per count
+        // (< 2³² for ≥ 3356 counts a turn; the board's 47 200 give 2²⁸·²)
+        // × k3 (clamped to 2 in Q30) < 2⁶³; then × counts (< 2¹⁶): < 2⁴⁷.
+        let per_count = self
+            .belt_q16_per_count
+            .min(u64::from(u32::MAX))
+            .wrapping_mul(u64::from(k3.to_bits().min(2 << 30)))
+            >> 30;
+        let acc = per_count
+            .wrapping_mul(u64::from(counts))
+            .wrapping_add(self.belt_rem);
         let belt_before = self.belt_nm;
         self.belt_nm = self.belt_nm.saturating_add(acc >> 16);
         self.belt_rem = acc & 0xFFFF;

@@ -51,8 +51,8 @@
 //! assert_eq!(i.plants_per_m_x100, 1000); // 5 plants in 0.5 m
 //! ```
 
-/// A lift shorter than this much ground (µm) is a gap in the row, not a
-/// headland: 3 m. A stone, a ditch or a correction of the operator's is
+/// A lowering less than this much ground (µm) after the last plant before
+/// the lift closes a gap in the row, not a headland: 3 m. A stone, a ditch or a correction of the operator's is
 /// crossed within a metre or two; a tracked transplanter's turn at the row's
 /// end covers more (half a turn around the next ridge, and the track moves
 /// while it pivots). The spacing across such a gap, from the last plant
@@ -255,11 +255,11 @@ pub struct Quality {
     pass_from_um: u64,
     /// The last plant of this pass, ground distance µm, or [`NONE`].
     last_plant_um: u64,
-    /// Where the last pass ended (ground µm), and its last plant: the gap
-    /// to the next pass's first plant may be a hole in the row
-    /// ([`ROW_GAP_MAX_UP_UM`]); [`NONE`] when there is none to count.
-    lifted_at_um: u64,
-    gap_from_um: u64,
+    /// The last plant before the last lift (ground µm + 1; 0: none to
+    /// count): the gap to the next pass's first plant may be a hole in the
+    /// row ([`ROW_GAP_MAX_UP_UM`]). (Not [`NONE`]: such words in a row made
+    /// the supervisor's initialisation a `memset` call, 184 B of flash.)
+    gap_from: u64,
 }
 
 impl Quality {
@@ -271,8 +271,7 @@ impl Quality {
             pass: Tally::ZERO,
             pass_from_um: NONE,
             last_plant_um: NONE,
-            lifted_at_um: NONE,
-            gap_from_um: NONE,
+            gap_from: 0,
         }
     }
 
@@ -290,12 +289,6 @@ impl Quality {
         }
         self.pass = Tally::default();
         self.pass_from_um = at_um.min(NONE - 1);
-        // Lowered within the row: the gap from the last plant before the
-        // lift to this pass's first may be a miss.
-        if at_um.saturating_sub(self.lifted_at_um) >= ROW_GAP_MAX_UP_UM || self.lifted_at_um == NONE
-        {
-            self.gap_from_um = NONE;
-        }
         self.last_plant_um = NONE;
     }
 
@@ -309,8 +302,7 @@ impl Quality {
         let d = at_um.saturating_sub(from);
         self.pass.distance_um = d;
         self.total.distance_um = self.total.distance_um.saturating_add(d);
-        self.lifted_at_um = at_um.min(NONE - 1);
-        self.gap_from_um = self.last_plant_um;
+        self.gap_from = self.last_plant_um.wrapping_add(1); // NONE → 0
         true
     }
 
@@ -331,15 +323,19 @@ impl Quality {
             let s = at_um.saturating_sub(last);
             self.pass.add_spacing(s, self.x_um);
             self.total.add_spacing(s, self.x_um);
-        } else if self.gap_from_um != NONE {
-            // The pass's first plant after a gap in the row: a miss since
-            // Start if the hole is more than 1.5 X ([`ROW_GAP_MAX_UP_UM`]).
-            let s = at_um.saturating_sub(self.gap_from_um);
-            if s > u64::from(self.x_um).wrapping_mul(3) / 2 {
+        } else if self.gap_from != 0 {
+            // The pass's first plant after a gap in the row (lowered within
+            // [`ROW_GAP_MAX_UP_UM`] of the last plant before the lift): a
+            // miss since Start if the hole is more than 1.5 X.
+            let from = self.gap_from.wrapping_sub(1);
+            let s = at_um.saturating_sub(from);
+            if self.pass_from_um.saturating_sub(from) < ROW_GAP_MAX_UP_UM
+                && s > u64::from(self.x_um).wrapping_mul(3) / 2
+            {
                 self.total.add_spacing(s, self.x_um);
             }
         }
-        self.gap_from_um = NONE;
+        self.gap_from = 0;
         self.last_plant_um = at_um.min(NONE - 1);
     }
 
@@ -407,22 +403,22 @@ mod tests {
         let mut spacings = Vec::new();
         let mut plants = 0;
         let mut distance = 0.0;
-        // The pass before: where it ended and its last plant.
-        let mut before: Option<(f64, Option<f64>)> = None;
+        // The last plant of the pass before.
+        let mut before: Option<f64> = None;
         for (from, plants_at, to) in passes {
             plants += plants_at.len();
             distance += to - from;
-            // A lift of less than 3 m of ground is a gap in the row: the
-            // spacing across it counts when it is a miss.
-            if let (Some((lifted, Some(last))), Some(first)) = (before, plants_at.first()) {
-                if from - lifted < 3e6 && (first - last) / x > 1.5 {
+            // Lowered within 3 m of the last plant before the lift: a gap in
+            // the row, the spacing across it counts when it is a miss.
+            if let (Some(last), Some(first)) = (before, plants_at.first()) {
+                if from - last < 3e6 && (first - last) / x > 1.5 {
                     spacings.push(first - last);
                 }
             }
             for w in plants_at.windows(2) {
                 spacings.push(w[1] - w[0]);
             }
-            before = Some((*to, plants_at.last().copied()));
+            before = plants_at.last().copied();
         }
         let n = spacings.len();
         let share = |f: &dyn Fn(f64) -> bool| {
@@ -567,22 +563,26 @@ mod tests {
         q.plant(70_000);
         q.plant(140_000);
         q.end_pass(150_000);
-        q.plant(200_000); // lifted: ignored
-                          // Lowered 850 mm later (within the row: under 3 m): the hole from
-                          // the plant at 140 mm to the next at 1070 mm (13.3 X) is a miss.
+        // Lifted: ignored.
+        q.plant(200_000);
+        // Lowered 860 mm after the last plant (within the row: under 3 m):
+        // the hole from the plant at 140 mm to the next at 1070 mm (13.3 X)
+        // is a miss.
         q.begin_pass(1_000_000);
         q.plant(1_070_000);
         q.plant(1_140_000);
         q.end_pass(1_200_000);
         let i = q.since_start(1_200_000);
         assert_eq!((i.plants, i.spacings), (4, 3));
-        assert_eq!(i.misses_x10, 333); // 1 of 3
-                                       // Distance with the unit down: 150 mm + 200 mm.
+        // 1 of 3.
+        assert_eq!(i.misses_x10, 333);
+        // Distance with the unit down: 150 mm + 200 mm.
         assert_eq!(i.distance_mm, 350);
         // The pass's own figures: its own spacing only.
         let p = q.pass_at(1_200_000);
         assert_eq!((p.plants, p.spacings, p.distance_mm), (2, 1, 200));
-        // A lift over 3 m (a headland) is no hole in the row; nor is a gap
+        // Lowered over 3 m after the last plant (a headland): no hole in the
+        // row; nor is a gap
         // of at most 1.5 X (the first plant is placed by its own setting).
         q.begin_pass(4_300_000);
         q.plant(4_400_000);

@@ -541,12 +541,11 @@ pub struct TravelMeasurement {
     /// Glitches dropped since start (wrapping).
     pub glitches: u32,
     /// The single gaps read noisy ([`MtEstimator::is_noisy`]): their tooth
-    /// shares are not learnt (yet), and the window may be a steady run.
+    /// shares are not learnt (yet), and the window may be a steady run of
+    /// them reaching back beyond the previous window (see
+    /// `MtEstimator::steady_window`), whose speed does not change: no slope
+    /// between two such windows means anything.
     pub noisy: bool,
-    /// The window is a steady run of noisy gaps reaching back beyond the
-    /// previous window (see `MtEstimator::steady_window`): its speed does not
-    /// change, so no slope between it and the previous one means anything.
-    pub steady_run: bool,
 }
 
 /// Verdict on one pushed edge.
@@ -1267,6 +1266,7 @@ impl MtEstimator {
     }
 
     /// The tooth index of the gap that ended `back` edges before the newest.
+    #[inline(never)]
     fn tooth_back(&self, back: usize, z: usize) -> usize {
         self.tooth
             .wrapping_add(z.saturating_mul(2))
@@ -1277,7 +1277,6 @@ impl MtEstimator {
 
     /// That gap's time per nominal pitch: gap / share, the share 1 + d (Q16
     /// offset d within ±4 %) as 1 − d + d² (error d³ < 7·10⁻⁵): no division.
-    #[inline(never)]
     fn per_pitch(&self, back: usize, z: usize) -> i64 {
         let d = i64::from(
             self.weights
@@ -1309,7 +1308,6 @@ impl MtEstimator {
             since_edge_ticks,
             glitches: self.glitches,
             noisy: false,
-            steady_run: false,
         };
         if !self.has_last {
             return out;
@@ -1364,7 +1362,6 @@ impl MtEstimator {
                 rpm
             };
             out.state = MotionState::Measured;
-            out.steady_run = m > new;
             out.edges = m;
             out.window_ticks = window;
             out.gear_speed = RevPerMin::from_fixed(U12F20::from_bits(self.held));

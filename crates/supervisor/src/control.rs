@@ -508,10 +508,8 @@ struct Predictor {
     /// Mean tooth period of the last window, ticks.
     period: u32,
     /// The last window's gaps read noisy
-    /// ([`kinematics::speed::TravelMeasurement::noisy`]), and it was a
-    /// steady run (`steady_run`).
+    /// ([`kinematics::speed::TravelMeasurement::noisy`]).
     noisy: bool,
-    steady_run: bool,
 }
 
 impl Predictor {
@@ -529,12 +527,12 @@ impl Predictor {
                     // A change beyond what unlearnt teeth make (each gap
                     // ±4 %: two differ by at most 8 %; a start from rest
                     // changes by tens of %) is the speed's.
-                    let dv = v.saturating_sub(v0);
-                    let real = dv.unsigned_abs() > v0.unsigned_abs() / 25;
+                    let b0 = u32::try_from(v0).unwrap_or(0);
+                    let real = m.gear_speed.to_bits().abs_diff(b0) > b0 / 25;
                     // The slope only between two windows whose teeth are
                     // learnt, or for a real change: otherwise it is the
                     // tooth errors', which the extrapolation multiplied.
-                    let clean = !m.noisy && !self.noisy && !m.steady_run && !self.steady_run;
+                    let clean = !m.noisy && !self.noisy;
                     self.slope = if dt > 0 && (clean || real) {
                         (v.saturating_sub(v0), dt)
                     } else {
@@ -542,7 +540,6 @@ impl Predictor {
                     };
                 }
                 self.noisy = m.noisy;
-                self.steady_run = m.steady_run;
                 self.last = Some((v, center));
                 self.period = m.window_ticks.checked_div(m.edges).unwrap_or(0);
             }

@@ -349,9 +349,7 @@ impl Phase {
         k1k2_q30: Option<u64>,
     ) {
         if let Some(k) = k1k2_q30 {
-            // Q8 nm × Q30 → Q8 nm; k1·k2 ≤ 1.44 (tables hold 0.8 … 1.2):
-            // fits, and saturates rather than wraps beyond.
-            // k1·k2 < 1.44 (tables hold 0.8 … 1.2; clamped to 2 here): the
+            // Q8 nm × Q30 → Q8 nm; k1·k2 < 1.44 (tables hold 0.8 … 1.2; clamped to 2 here): the
             // product < 1.3·10¹⁹ < 2⁶⁴.
             self.edge_q8 = EDGE_NM_Q8.wrapping_mul(k.min(2 << 30)) >> 30;
         }
@@ -429,9 +427,10 @@ impl Phase {
         let (g0, g1) = (self.step_ground_nm.min(self.ground_nm), self.ground_nm);
         self.step_ground_nm = g1;
         for _ in 0..MAX_EVENTS {
+            // (2³² partitions of 50 mm < 2⁵⁸ nm.)
             let boundary = u64::from(self.left)
-                .saturating_add(1)
-                .saturating_mul(PARTITION_NM);
+                .wrapping_add(1)
+                .wrapping_mul(PARTITION_NM);
             if self.belt_nm < boundary {
                 break;
             }
@@ -443,7 +442,7 @@ impl Phase {
                 .saturating_add(
                     g1.saturating_sub(g0)
                         .min(1 << 26)
-                        .saturating_mul(boundary.saturating_sub(belt_before).min(1 << 32))
+                        .wrapping_mul(boundary.saturating_sub(belt_before).min(1 << 32))
                         .checked_div(self.belt_nm.saturating_sub(belt_before))
                         .unwrap_or(0),
                 )

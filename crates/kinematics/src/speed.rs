@@ -91,7 +91,7 @@ const LEARN_HALF: usize = 6;
 /// [`LEARN_DIVISOR`]: the value at the centre of a least-squares parabola
 /// through the twelve neighbours' per-pitch times (the centre left out),
 /// `(Σx⁴ − Σx²·x²) / (n·Σx⁴ − (Σx²)²)` with x = ±1 … ±6: 4550 − 182·x².
-const LEARN_WEIGHTS: [i64; LEARN_HALF] = [4368, 3822, 2912, 1638, 0, -2002];
+const LEARN_WEIGHTS: [i16; LEARN_HALF] = [4368, 3822, 2912, 1638, 0, -2002];
 /// The sum of the weights over both sides (n·Σx⁴ − (Σx²)² = 21 476).
 const LEARN_DIVISOR: u64 = 21_476;
 /// Tooth learning's gate: the neighbours' per-pitch times within 10 % of
@@ -1184,21 +1184,22 @@ impl MtEstimator {
     /// One sample for the gap ending `c` edges back: its time against the
     /// parabola through its neighbours' per-pitch times.
     fn learn_gap(&mut self, c: usize, z: usize) {
-        let (mut sum, mut lo, mut hi) = (0i64, i64::MAX, 0i64);
+        let (mut sum, mut lo, mut hi) = (0i64, i32::MAX, 0i32);
         for back in c.saturating_sub(LEARN_HALF)..=c.saturating_add(LEARN_HALF) {
             let Some(&w) = LEARN_WEIGHTS.get(back.abs_diff(c).wrapping_sub(1)) else {
                 continue; // the centre itself
             };
             let u = self.per_pitch(back, z);
-            sum = sum.wrapping_add(w.wrapping_mul(u));
+            sum = sum.wrapping_add(i64::from(w).wrapping_mul(i64::from(u)));
             lo = lo.min(u);
             hi = hi.max(u);
         }
-        // sum = reference · LEARN_DIVISOR (< 2⁶³: 12 · 2¹³ · 2³³).
+        // sum = reference · LEARN_DIVISOR (< 2⁴⁷: 12 · 2¹³ · 2³¹).
         let Ok(reference) = u64::try_from(sum) else {
             return;
         };
-        let spread = u64::try_from(hi.wrapping_sub(lo)).unwrap_or(u64::MAX);
+        // (< 2³¹: × SPREAD_GATE × LEARN_DIVISOR < 2⁴⁹.)
+        let spread = u64::from(hi.wrapping_sub(lo).unsigned_abs());
         // The sample: gap / reference, Q16 (< 2³³ · 2¹⁶ · 2¹⁵).
         let sample = u64::from(self.gap_back(c))
             .wrapping_mul(u64::from(ONE_Q16))
@@ -1209,10 +1210,7 @@ impl MtEstimator {
         let one = i32::try_from(ONE_Q16).unwrap_or(0);
         // ±4 % at most; the neighbours within SPREAD_GATE.
         if sample.abs_diff(one) > ONE_Q16 / 25
-            || spread
-                .saturating_mul(SPREAD_GATE)
-                .saturating_mul(LEARN_DIVISOR)
-                > reference
+            || spread.wrapping_mul(SPREAD_GATE * LEARN_DIVISOR) > reference
         {
             return;
         }
@@ -1277,18 +1275,23 @@ impl MtEstimator {
 
     /// That gap's time per nominal pitch: gap / share, the share 1 + d (Q16
     /// offset d within ±4 %) as 1 − d + d² (error d³ < 7·10⁻⁵): no division.
-    fn per_pitch(&self, back: usize, z: usize) -> i64 {
-        let d = i64::from(
+    fn per_pitch(&self, back: usize, z: usize) -> i32 {
+        let d = i32::from(
             self.weights
                 .get(self.tooth_back(back, z))
                 .copied()
                 .unwrap_or(0),
         );
-        let inv = i64::from(ONE_Q16)
+        // |d| < 2¹⁵: 0 < inv < 2¹⁸.
+        let inv = i32::try_from(ONE_Q16)
+            .unwrap_or(0)
             .wrapping_sub(d)
-            .wrapping_add(d.wrapping_mul(d) >> 16);
-        // gap < 2³² µs, inv < 2¹⁷: the product < 2⁴⁹.
-        i64::from(self.gap_back(back)).wrapping_mul(inv) >> 16
+            .wrapping_add(d.wrapping_mul(d) >> 16)
+            .unsigned_abs();
+        // gap < 2³² ticks, inv < 2¹⁸: the product < 2⁵⁰; a real gap (below
+        // the stop timeout, < 2³¹) gives < 2³¹ after the shift.
+        let t = u64::from(self.gap_back(back)).wrapping_mul(u64::from(inv)) >> 16;
+        i32::try_from(t).unwrap_or(i32::MAX)
     }
 
     /// Computes the speed at `now` (call periodically from the control task).

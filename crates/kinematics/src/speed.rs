@@ -133,7 +133,7 @@ const STEADY_SETTLE: u8 = 3;
 /// The suspect-edge rule ([`MtEstimator::push_edge`]) holds at working
 /// speeds only: gaps up to 0.6 s, half the slowest gear's speed (Low 1,
 /// 0.32 km/h at the gear: 0.28 s a gap).
-const SUSPECT_MAX_GAP_US: u32 = 600_000;
+const SUSPECT_MAX_GAP_MS: u32 = 600;
 /// Q16 unity for the learned tooth shares.
 const ONE_Q16: u32 = 1 << 16;
 
@@ -937,15 +937,15 @@ impl MtEstimator {
             };
             // At a steady working speed: the last two gaps within a quarter
             // of each other, and not from a crawl (gaps longer than
-            // [`SUSPECT_MAX_GAP_US`]: a tractor pulling away doubles its
+            // [`SUSPECT_MAX_GAP_MS`]: a tractor pulling away doubles its
             // speed within a tooth). A start from rest shortens every gap by
             // more than half at first, and a pull-away after a slow-down
             // follows gaps that grew.
             let [g0, g1, _] = self.gaps;
             let steady = g1 != 0
                 && g0.abs_diff(g1) <= g1 / 4
-                && u64::from(g0).saturating_mul(1_000_000)
-                    <= u64::from(SUSPECT_MAX_GAP_US).saturating_mul(u64::from(self.cfg.timer_hz));
+                && u64::from(g0).wrapping_mul(1000)
+                    <= u64::from(self.cfg.timer_hz).wrapping_mul(u64::from(SUSPECT_MAX_GAP_MS));
             if dt < self.cfg.min_edge_gap_ticks || dt < expected_min {
                 self.glitches = self.glitches.wrapping_add(1);
                 // Under a changing speed a real tooth may come this early

@@ -1930,7 +1930,7 @@ impl Supervisor {
 
         self.belt_counts_k3 = self
             .belt_counts_k3
-            .saturating_add(u64::from(delta).saturating_mul(u64::from(k3.to_bits())));
+            .saturating_add(u64::from(delta).wrapping_mul(u64::from(k3.to_bits())));
         self.drum_counts_total = self.drum_counts_total.saturating_add(u64::from(delta));
         self.snapshot.travel_speed_kmh_x1000 = travel_kmh_x1000;
         self.snapshot.target_drum_rpm_x1000 = if self.run == RunState::Running {
@@ -1952,7 +1952,7 @@ impl Supervisor {
             // ∫ V1 dt: m/s (U8F24) · µs = µm · 2²⁴, the fraction carried
             // (< 2⁵⁰ a step: 256 m/s for 4 periods).
             let acc = u64::from(travel_mps)
-                .saturating_mul(u64::from(elapsed_us))
+                .wrapping_mul(u64::from(elapsed_us))
                 .saturating_add(self.distance_frac);
             self.distance_um = self.distance_um.saturating_add(acc >> 24);
             self.distance_frac = acc & 0xFF_FFFF;

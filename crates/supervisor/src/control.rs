@@ -1949,12 +1949,12 @@ impl Supervisor {
         let partitions_x1e6 = self.partitions_x1e6();
         self.snapshot.plants = u32::try_from(partitions_x1e6 / 1_000_000).unwrap_or(u32::MAX);
         if self.run == RunState::Running {
-            // ∫ V1 dt: m/s (U8F24) · µs = µm · 2²⁴, the fraction carried
-            // (< 2⁵⁰ a step: 256 m/s for 4 periods).
+            // ∫ V1 dt: m/s (U8F24) · µs = µm · 2²⁴, the fraction (< 2²⁴)
+            // carried: < 2⁶⁴. µm since Start wrap after 1.8·10¹³ m.
             let acc = u64::from(travel_mps)
                 .wrapping_mul(u64::from(elapsed_us))
-                .saturating_add(self.distance_frac);
-            self.distance_um = self.distance_um.saturating_add(acc >> 24);
+                .wrapping_add(self.distance_frac);
+            self.distance_um = self.distance_um.wrapping_add(acc >> 24);
             self.distance_frac = acc & 0xFF_FFFF;
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
@@ -2373,6 +2373,7 @@ impl Supervisor {
     /// Belt partitions passed since Start × 10⁶ (the plant count is its
     /// integer part): Σ drum turns · k3(n) · π·(D2+2H2) / Lclap, each turn
     /// with the belt slip k3 at the drum speed it was turned at.
+    #[inline(never)]
     pub(crate) fn partitions_x1e6(&self) -> u64 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;

@@ -54,8 +54,9 @@
 //! a whole edge of lag in less than a spacing (at 7 cm and Low 2 beyond
 //! `n_max`).
 //!
-//! All arithmetic is integer (nm, u64/i64, saturating); the ground distance
-//! in nm wraps after 1.8·10¹⁰ m, 380 000 working days of 12 h at 4 km/h.
+//! All arithmetic is integer (nm, u64/i64); the positions in nm wrap after
+//! 1.8·10¹⁰ m, 380 000 working days of 12 h at 4 km/h (so they add without
+//! saturating), and each product is bounded where it is formed.
 
 use fuzzy_pid::I16F16;
 
@@ -368,7 +369,11 @@ impl Phase {
                 // partition's place is where the matched belt puts it), so
                 // a rolling Start neither stalls nor sprints the drum.
                 let to_boundary = self.ref_belt_nm.saturating_sub(self.belt_nm);
-                self.ref_ground_nm = to_boundary.saturating_mul(self.x_nm) / PARTITION_NM;
+                // (≤ a partition × X ≤ 500 mm: < 2⁵⁵.)
+                self.ref_ground_nm = to_boundary
+                    .min(PARTITION_NM)
+                    .wrapping_mul(self.x_nm.min(1 << 29))
+                    / PARTITION_NM;
             }
         }
         if !self.armed {
@@ -384,7 +389,7 @@ impl Phase {
         // Q16 pitches × Q8 nm per pitch, cut to Q8 once per step.
         self.ground_edges_q8 = self
             .ground_edges_q8
-            .saturating_add(new_q16.min(1 << 28).wrapping_mul(self.edge_q8) >> 16);
+            .wrapping_add(new_q16.min(1 << 28).wrapping_mul(self.edge_q8) >> 16);
         // From the newest edge (exact) with the time since it: m/s (U8F24)
         // · µs = nm / 1000. The speed clamped to 16 m/s (58 km/h, beyond the
         // Hall switch's 1 kHz) and the time to 16.7 s (beyond any edge at a
@@ -397,9 +402,9 @@ impl Phase {
         // A pitch < 2¹⁸ (Q16, ±4 % of 1) × edge_q8 < 2³⁵: < 2⁵³.
         let next_q8 = u64::from(next_pitch_q16.min(1 << 18)).wrapping_mul(self.edge_q8) >> 16;
         let edges_nm = self.ground_edges_q8 >> 8;
-        let cap = edges_nm.saturating_add(next_q8 >> 8);
+        let cap = edges_nm.wrapping_add(next_q8 >> 8);
         self.reach_nm = cap;
-        let g = edges_nm.saturating_add(extra).min(cap);
+        let g = edges_nm.wrapping_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
     }
 
@@ -419,7 +424,7 @@ impl Phase {
             .wrapping_mul(u64::from(counts))
             .wrapping_add(self.belt_rem);
         let belt_before = self.belt_nm;
-        self.belt_nm = self.belt_nm.saturating_add(acc >> 16);
+        self.belt_nm = self.belt_nm.wrapping_add(acc >> 16);
         self.belt_rem = acc & 0xFFFF;
         // The step's ground, for interpolating when each partition left
         // (at the step's end it is up to 10 ms late: 1.4 mm at Low 2, which
@@ -439,7 +444,7 @@ impl Phase {
             // ground < 2²⁶ nm (67 m/s) and the belt < 2³² nm, so the
             // product < 2⁵⁸.
             let g = g0
-                .saturating_add(
+                .wrapping_add(
                     g1.saturating_sub(g0)
                         .min(1 << 26)
                         .wrapping_mul(boundary.saturating_sub(belt_before).min(1 << 32))
@@ -453,8 +458,8 @@ impl Phase {
                 self.n_events = self.n_events.saturating_add(1);
             }
             if self.belt_nm >= self.ref_belt_nm {
-                self.ref_belt_nm = self.ref_belt_nm.saturating_add(PARTITION_NM);
-                self.ref_ground_nm = self.ref_ground_nm.saturating_add(self.x_nm);
+                self.ref_belt_nm = self.ref_belt_nm.wrapping_add(PARTITION_NM);
+                self.ref_ground_nm = self.ref_ground_nm.wrapping_add(self.x_nm);
                 self.pass_started = true;
             }
         }

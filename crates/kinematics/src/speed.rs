@@ -378,6 +378,7 @@ impl EstimatorSettings {
             cfg: self,
             z: usize::from(self.teeth),
             stamps: [0; RING],
+            last: 0,
             head: 0,
             tooth: 0,
             has_last: false,
@@ -593,6 +594,8 @@ pub struct MtEstimator {
     z: usize,
     /// Ring of the last accepted edge stamps; `head` is the newest.
     stamps: [u32; RING],
+    /// The newest stamp (`stamps[head]`).
+    last: u32,
     head: usize,
     /// Tooth index (0 … z−1) of the gap that ended at the newest edge.
     tooth: usize,
@@ -821,24 +824,29 @@ impl MtEstimator {
         else {
             return false;
         };
-        // r = τ/T, Q16 (τ < 2^32, so τ·2^16 < 2^48).
+        // r = τ/T, Q16 (τ < 2^32, so τ·2^16 < 2^48), taken to at most 2^38
+        // (2^22 gaps: overdue either way, see below). The terms are below
+        // 2^18 (e, s′ < 2^17 as Q16 gaps of at most 1.05 nominal; a ≤
+        // e²/2s′ since the discriminant is not negative), so no product
+        // below reaches 2^64.
         let Some(r) = (u64::from(since_edge_ticks) << 16).checked_div(t) else {
             return false;
         };
+        let r = r.min(1 << 38);
+        let (e, a) = (e.min(1 << 18), a.min(1 << 18));
         // Past the moment the machine can be at rest (a·τ ≥ v_e, i.e.
         // a·T²·r ≥ v_e·T·2^16): it has covered v_e²/2a ≥ s′ (there is a
         // deadline), so the edge is overdue.
-        let e_q32 = e.saturating_mul(1 << 16);
-        let a_r = a.saturating_mul(r);
-        if a_r >= e_q32 {
+        let a_r = a.wrapping_mul(r);
+        if a_r >= e << 16 {
             return true;
         }
         // Least distance covered, Q32 gaps: (v_e·T)·r − (a·T²)·r²/2, with
-        // a·T²·r < v_e·T·2^16 < 2^33 here, so every product fits.
+        // a·T²·r < v_e·T·2^16 < 2^34 here.
         let covered = e
-            .saturating_mul(r)
-            .saturating_sub(((a_r >> 16).saturating_mul(r)) >> 1);
-        covered > s_next.saturating_mul(1 << 16)
+            .wrapping_mul(r)
+            .saturating_sub(((a_r >> 16).wrapping_mul(r)) >> 1);
+        covered > s_next.min(1 << 18) << 16
     }
 
     /// The terms of the silence rule (module docs), when the silence can
@@ -1022,6 +1030,7 @@ impl MtEstimator {
         if let Some(s) = self.stamps.get_mut(self.head) {
             *s = t;
         }
+        self.last = t;
         if self.has_last {
             self.tooth = self
                 .tooth
@@ -1081,7 +1090,7 @@ impl MtEstimator {
     }
 
     fn newest(&self) -> u32 {
-        self.stamps.get(self.head).copied().unwrap_or(0)
+        self.last
     }
 
     /// Sum of the weights of the `m` gaps ending at the newest edge (Q16).

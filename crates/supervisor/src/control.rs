@@ -552,20 +552,27 @@ impl Predictor {
         let Some((v, center)) = self.last else {
             return m.gear_speed;
         };
-        let age =
-            i64::from(now.0.wrapping_sub(center)).min(i64::from(self.period).saturating_mul(2));
+        // v and v0 are U12F20 bits (< 2³²): |dv| < 2³²; the age at most
+        // two periods, each below 2³¹ ticks: |dv·age| < 2⁶⁴ … kept below
+        // 2⁶³ by taking the age to at most 2³⁰ ticks (18 min).
+        let age = now
+            .0
+            .wrapping_sub(center)
+            .min(self.period.saturating_mul(2))
+            .min(1 << 30);
         let (dv, dt) = self.slope;
         // `max`/`min` rather than `clamp`: the bounds are not constant, and
         // `clamp` would carry a (never taken) panic with formatted values.
-        let bound = v.checked_div(10).unwrap_or(0).max(0);
+        let bound = v / 10;
         let step = dv
-            .saturating_mul(age)
+            .wrapping_mul(i64::from(age))
             .checked_div(dt)
             .unwrap_or(0)
-            .max(bound.saturating_neg())
+            .max(bound.wrapping_neg())
             .min(bound);
-        let bits = v.saturating_add(step).clamp(0, i64::from(u32::MAX));
-        let predicted = RevPerMin::from_bits(u32::try_from(bits).unwrap_or(0));
+        // 0.9 v … 1.1 v.
+        let bits = v.wrapping_add(step);
+        let predicted = RevPerMin::from_bits(u32::try_from(bits).unwrap_or(u32::MAX));
         if m.state == MotionState::Decaying {
             // Overdue edge: the estimator's bound (one gap over the elapsed
             // time) caps the estimate; it is no estimate of its own (above

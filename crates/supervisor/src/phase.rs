@@ -269,6 +269,7 @@ impl Phase {
     }
 
     /// Ground distance since Start, µm.
+    #[inline(never)]
     pub fn ground_um(&self) -> u64 {
         self.ground_nm / 1000
     }

@@ -1118,8 +1118,9 @@ impl MtEstimator {
     /// is more than [`STEADY_BREAK`] off the run's is a change of speed:
     /// the run starts again there. Returns the gap count and the start
     /// stamp.
-    fn steady_window(&mut self, new: u32, single: u32) -> (u32, u32) {
+    fn steady_window(&mut self, new: u32) -> (u32, u32) {
         let newest = self.newest();
+        let single = self.rpm_bits(self.window_weight(new), newest.wrapping_sub(self.ref_stamp));
         let z = u32::try_from(self.z).unwrap_or(1);
         let long = self
             .steady
@@ -1335,11 +1336,9 @@ impl MtEstimator {
             // the window reaches back over the steady run
             // ([`MtEstimator::steady_window`]).
             let (m, start) = if self.ref_valid && new < self.valid_run {
-                let single =
-                    self.rpm_bits(self.window_weight(new), newest.wrapping_sub(self.ref_stamp));
                 out.noisy = self.is_noisy();
                 if self.cfg.pitch_compensation && out.noisy {
-                    self.steady_window(new, single)
+                    self.steady_window(new)
                 } else {
                     self.steady = 0;
                     (new, self.ref_stamp)

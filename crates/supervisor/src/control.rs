@@ -1081,20 +1081,25 @@ impl Supervisor {
         // ([`MtEstimator::push_edge`]); none for a glitch or a suspect.
         let accepted = self.estimator.accepted_edges().wrapping_sub(before);
         self.edges = self.edges.wrapping_add(accepted);
-        for back in (0..accepted).rev() {
-            self.teeth = self.teeth.wrapping_add(1);
-            self.pitches_q16 = self
-                .pitches_q16
-                .wrapping_add(self.estimator.gap_pitches_q16(back as usize));
-            self.last_tooth_at = Some(t.0);
+        let mut teeth = accepted;
+        let mut pitches = 0u32;
+        for back in 0..accepted {
+            pitches = pitches.wrapping_add(self.estimator.gap_pitches_q16(back as usize));
         }
         // The ground distance also counts an edge the estimator drops for
         // its ¼-period rule when it is a plausible tooth
         // ([`DISTANCE_EDGE_MIN_GAP_US`]), at a nominal pitch.
         let gap = self.last_tooth_at.map_or(u32::MAX, |l| t.0.wrapping_sub(l));
-        if verdict == kinematics::speed::EdgeVerdict::Early && gap >= DISTANCE_EDGE_MIN_GAP_US {
-            self.teeth = self.teeth.wrapping_add(1);
-            self.pitches_q16 = self.pitches_q16.wrapping_add(1 << 16);
+        if accepted == 0
+            && verdict == kinematics::speed::EdgeVerdict::Early
+            && gap >= DISTANCE_EDGE_MIN_GAP_US
+        {
+            teeth = 1;
+            pitches = 1 << 16;
+        }
+        if teeth > 0 {
+            self.teeth = self.teeth.wrapping_add(teeth);
+            self.pitches_q16 = self.pitches_q16.wrapping_add(pitches);
             self.last_tooth_at = Some(t.0);
         }
     }

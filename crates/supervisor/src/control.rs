@@ -815,9 +815,7 @@ impl Monitor {
             return false;
         }
         let dev = expected.saturating_sub(measured);
-        self.error = self
-            .error
-            .saturating_add(dev.saturating_sub(self.error).saturating_mul(MONITOR_ALPHA));
+        self.error = smooth(self.error, dev, MONITOR_ALPHA);
         if !saturated && self.error.saturating_abs() > target.saturating_mul(MONITOR_BAND) {
             self.beyond_us = self.beyond_us.saturating_add(elapsed_us);
         } else {
@@ -840,6 +838,13 @@ impl Monitor {
         }
         self.beyond_us > MONITOR_TIME_US || self.swinging >= MONITOR_WINDOWS
     }
+}
+
+/// One step of a first-order filter: `acc + (x − acc)·alpha`, saturating
+/// (one copy for the control step's five filters).
+#[inline(never)]
+fn smooth(acc: I16F16, x: I16F16, alpha: I16F16) -> I16F16 {
+    acc.saturating_add(x.saturating_sub(acc).saturating_mul(alpha))
 }
 
 /// A drum speed in r/min as the tables' `RevPerMin` (I16F16 → U12F20: 4
@@ -1696,11 +1701,7 @@ impl Supervisor {
         let delta = self.feedback_counts(encoder_delta, elapsed_us);
         self.link.bus = false;
         let measured = self.drum_speed_of(delta, elapsed_us);
-        self.reported = self.reported.saturating_add(
-            measured
-                .saturating_sub(self.reported)
-                .saturating_mul(REPORT_ALPHA),
-        );
+        self.reported = smooth(self.reported, measured, REPORT_ALPHA);
 
         // Travel speed (eq. 1–3) and the drum target (eq. 7).
         let m = self.estimator.update(now);
@@ -1720,11 +1721,7 @@ impl Supervisor {
         // the counts still coasting in keep the k3 of their own speed),
         // smoothed over a few periods ([`K3_SPEED_ALPHA`]), at the
         // coefficient's full precision.
-        self.k3_speed = self.k3_speed.saturating_add(
-            measured
-                .saturating_sub(self.k3_speed)
-                .saturating_mul(K3_SPEED_ALPHA),
-        );
+        self.k3_speed = smooth(self.k3_speed, measured, K3_SPEED_ALPHA);
         let k3 = self.settings.calibration.k3_at(fix_to_rpm(self.k3_speed));
         // Positions for the phase loop: the ground while running, the belt
         // always (a coasting drum still moves partitions).
@@ -1796,10 +1793,7 @@ impl Supervisor {
                             } else {
                                 self.phase_alpha.saturating_add(PHASE_FADE).min(I16F16::ONE)
                             };
-                            self.phase_smoothed = self.phase_smoothed.saturating_add(
-                                c.saturating_sub(self.phase_smoothed)
-                                    .saturating_mul(self.phase_alpha),
-                            );
+                            self.phase_smoothed = smooth(self.phase_smoothed, c, self.phase_alpha);
                             self.phase_smoothed
                         } else {
                             self.phase.update_error();
@@ -1911,11 +1905,7 @@ impl Supervisor {
                             .unwrap_or(0),
                     )
                     .map_or(target, |&v| I16F16::from_bits(i32::from(v) << 8));
-                self.reference = self.reference.saturating_add(
-                    delayed
-                        .saturating_sub(self.reference)
-                        .saturating_mul(self.law.ref_alpha),
-                );
+                self.reference = smooth(self.reference, delayed, self.law.ref_alpha);
                 self.push_reference_input(target);
                 let saturated = self.snapshot.ccr == 0
                     || u32::from(self.snapshot.ccr) > u32::from(self.hw.pwm_arr);

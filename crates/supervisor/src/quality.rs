@@ -336,7 +336,8 @@ impl Quality {
             }
         }
         self.gap_from = 0;
-        self.last_plant_um = at_um.min(NONE - 1);
+        // (A position is never [`NONE`].)
+        self.last_plant_um = at_um;
     }
 
     /// The pass in progress up to `now_um` (or the last one ended).

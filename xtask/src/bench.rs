@@ -6,8 +6,10 @@ use std::process::Command;
 mod belt;
 mod drum;
 mod field;
+mod legacy;
 mod link;
 mod placement;
+mod row;
 mod speed;
 pub(crate) mod svg;
 mod tables;
@@ -146,7 +148,7 @@ fn twin_section(doc: &mut String) -> Result {
     Ok(())
 }
 
-/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`, `link`) alone, printed
+/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`, `link`, `row`) alone, printed
 /// and written to target/bench-NAME.md (its plots to target/img/);
 /// docs/PERFORMANCE.md and docs/img/ are left as they are.
 fn only(name: &str) -> Result {
@@ -162,9 +164,12 @@ fn only(name: &str) -> Result {
         "link" => {
             link::section(&mut doc)?;
         }
+        "row" => {
+            row::section(&mut doc)?;
+        }
         other => {
             return Err(format!(
-                "bench --only: unknown section `{other}` (known: tables, placement, link)"
+                "bench --only: unknown section `{other}` (known: tables, placement, link, row)"
             ))
         }
     }
@@ -187,7 +192,7 @@ pub fn run(args: &[String]) -> Result {
         [flag, name] if flag == "--only" => return only(name),
         _ => {
             return Err(format!(
-                "bench: unexpected arguments {args:?} (usage: bench [--only tables|placement|link])"
+                "bench: unexpected arguments {args:?} (usage: bench [--only tables|placement|link|row])"
             ))
         }
     }
@@ -309,6 +314,9 @@ pub fn run(args: &[String]) -> Result {
     eprintln!("xtask: bench 10 drive link");
     let secs = link::section(&mut doc)?;
     eprintln!("xtask: bench 10 took {secs:.1} s");
+    eprintln!("xtask: bench 11 a row's checks");
+    let secs = row::section(&mut doc)?;
+    eprintln!("xtask: bench 11 took {secs:.0} s");
     let path = root().join("docs").join("PERFORMANCE.md");
     write_file(&path, &doc)?;
     eprintln!(

@@ -965,7 +965,7 @@ impl MtEstimator {
                     EdgeVerdict::Early
                 };
             }
-            if !self.lost && steady && dt < self.glitch_ref - (self.glitch_ref >> 2) {
+            if !self.lost && steady && dt < self.glitch_ref.wrapping_sub(self.glitch_ref >> 2) {
                 self.pending = Some(t);
                 return EdgeVerdict::Suspect;
             }

@@ -267,7 +267,7 @@ mod tests {
         fn sweep(frac: u32, f: impl Fn(u32) -> u32) {
             for i in 0..=u32::from(u16::MAX) {
                 let bits = i.wrapping_mul(65_537).wrapping_add(i >> 3);
-                let want = (f64::from(bits) * 1000.0 / 2f64.powi(frac as i32) + 0.5).floor();
+                let want = (f64::from(bits) * 1000.0 / 2f64.powi(frac.cast_signed()) + 0.5).floor();
                 assert_eq!(
                     f64::from(f(bits)),
                     want.min(f64::from(u32::MAX)),

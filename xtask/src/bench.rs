@@ -300,7 +300,7 @@ pub fn run(args: &[String]) -> Result {
          size costs nothing and the inference is a fraction of a millisecond.\n\n",
     );
     doc.push_str(&reading);
-    doc.push_str("## 6. Flash and RAM\n\n`cargo xtask size` (release, `opt-level = \"z\"` with the control arithmetic at `\"s\"`, fat LTO):\n\n| board | flash | static RAM (data + bss) |\n|---|---|---|\n");
+    doc.push_str("## 6. Flash and RAM\n\n`cargo xtask size` (release, `opt-level = \"z\"` with the fuzzy PID at `\"s\"`, fat LTO):\n\n| board | flash | static RAM (data + bss) |\n|---|---|---|\n");
     for board in Board::ALL {
         let (flash, ram) = footprint(&board.build()?)?;
         doc.push_str(&format!("| {} | {flash} B | {ram} B |\n", board.name()));

@@ -25,23 +25,24 @@
 //!
 //! *Tooth-pitch compensation*: a gear with ±1 % pitch errors makes single
 //! gaps ±1 % (and more) wrong, which at low speed (one gap per window) is the
-//! dominant error. The estimator learns each gap's share of a revolution
-//! against the revolution centred on it (`share = gap·Z / T_rev`: exact at a
-//! steady speed and under a steady acceleration, which the centring cancels),
-//! as a running mean of each tooth's samples (one not taken at a steady
-//! speed weighed against the nominal share) and after 15 an IIR of 1/16,
-//! with a ±4 % plausibility guard, and weighs every gap by its learned
-//! share. A sample is taken only when the speed around it is smooth enough
-//! for the centring to hold: the rolling revolution times a quarter
-//! revolution before and after the centred one in line with it within 1/400
-//! of a revolution (a share biased by at most 0.17 %) and within 2.5 % of
-//! each other. So the shares are learnt on terrain whose speed wanders (±3 %
-//! over 8 s: to 0.1 % RMS in 400 s, tests/estimator.rs), which the earlier
-//! rule (learn only while the revolution time held within 0.2 %) never did on
-//! the machine model's default terrain; a chassis' answer to a speed step is
-//! mostly kept out. Until a tooth has a sample its gap counts as 1/Z. It
+//! dominant error. The estimator learns each gap's share from the first
+//! thirteen gaps on: the gap six edges back against the parabola through
+//! its twelve neighbours' times per pitch (a least-squares fit, the centre
+//! left out: a steady acceleration and a steady change of it cancel), when
+//! those neighbours lie within 10 % of each other (no stop, restart or
+//! speed step inside the window) and the sample within ±4 % of a pitch. A
+//! tooth's share is the running mean of its samples, after 16 an IIR of
+//! 1/16, each step clipped to 0.25 % once the tooth has three samples (one
+//! bump of the terrain cannot undo what the others taught); the shares'
+//! mean is kept at 1 (the reference cannot see a common scale). Until a
+//! tooth has a sample its gap counts as 1/Z. While the learning's mean
+//! deviation is above 0.5 % of a pitch ([`MtEstimator::is_noisy`]: the first
+//! revolutions after power-up), the window is a steady run of up to eight
+//! gaps: the gaps since the last window and those before them, as long as
+//! none is more than 4 % off the run's speed (a change of speed starts the
+//! run again, and a run is used once three gaps in a row agreed). It
 //! assumes no real edge is lost (a lost edge shifts the tooth index; the
-//! table is then dropped and re-learnt). [`MtEstimator::newest_gap_pitches_q16`]
+//! table is then dropped and re-learnt). [`MtEstimator::gap_pitches_q16`]
 //! gives the same shares to the ground distance.
 //!
 //! *Zero speed*: when no edge came for longer than the next gap should take,
@@ -54,7 +55,16 @@
 //! of the last period (default ¼) is dropped and counted. That reference
 //! period grows by at most 2× an edge, so the gap that spans a pause shorter
 //! than `stop_timeout` (stop-and-go) does not turn the next full-speed edges
-//! into glitches (each dropped real edge is a tooth of distance lost).
+//! into glitches (each dropped real edge is a tooth of distance lost). At a
+//! steady working speed an edge that closes a gap shorter than ¾ of the
+//! reference is held until the next edge confirms it
+//! ([`MtEstimator::push_edge`]): one noise pulse, or a sensor whose line
+//! sticks low part-way through a gap, raises no speed.
+//!
+//! *Zero speed, a tooth not learnt*: the decay's gap gets 5 % more while
+//! its tooth has fewer than three samples (an unlearnt tooth may be up to
+//! 4 % long, plus the capture jitter), so that a long tooth does not read as
+//! a slowing machine.
 //!
 //! # Hall silence: a stop or a lost signal?
 //!
@@ -559,8 +569,9 @@ pub enum EdgeVerdict {
     Restart,
     /// Dropped as a glitch.
     Glitch,
-    /// Held until the next edge: at a steady speed, the gap it closes is
-    /// shorter than 7/8 of the last one (see [`MtEstimator::push_edge`]).
+    /// Held until the next edge: at a steady working speed, the gap it
+    /// closes is shorter than ¾ of the glitch reference (see
+    /// [`MtEstimator::push_edge`]).
     Suspect,
     /// Dropped for the ¼-period rule while the speed was changing (a
     /// tractor pulling away from a crawl): it may be a real tooth, which
@@ -911,8 +922,10 @@ impl MtEstimator {
 
     /// Records one Hall edge (call from the capture interrupt). O(1), no division.
     ///
-    /// An edge that closes a gap shorter than half the glitch reference (the
-    /// speed more than doubled within one tooth) is held as
+    /// At a steady working speed (the last two gaps within a quarter of each
+    /// other, none longer than 0.6 s), an edge that closes a gap shorter
+    /// than ¾ of the glitch reference (a third faster within one tooth,
+    /// beyond the ±4 % of unlearnt teeth and any chassis) is held as
     /// [`EdgeVerdict::Suspect`] until the next edge: if the gap after it is
     /// no longer than 1¼ times its own, the speed really rose and both are
     /// taken (the count of accepted edges, [`MtEstimator::accepted_edges`],
@@ -920,7 +933,9 @@ impl MtEstimator {
     /// or the line of a sensor that sticks low falling part-way through a
     /// gap — and is dropped as a glitch. Without a next edge it is never
     /// taken: a sensor stuck after one spurious edge does not read as a
-    /// sprint.
+    /// sprint. An edge inside the ¼-period glitch rule is dropped
+    /// ([`EdgeVerdict::Glitch`]) at a steady speed, and reported as
+    /// [`EdgeVerdict::Early`] while the speed changes.
     pub fn push_edge(&mut self, t: Ticks) -> EdgeVerdict {
         let t = t.0;
         if let Some(p) = self.pending.take() {
@@ -976,7 +991,7 @@ impl MtEstimator {
     /// Whether the single gaps read noisy: the teeth's shares are not learnt
     /// well yet. The measure is the learning's own: the running mean (1/8 a
     /// sample) of how far each sample lies from the share it updates, above
-    /// [`NOISY_LIMIT_Q16`]. It starts at [`NOISY_START_Q16`] (nothing is
+    /// [`NOISY_LIMIT_Q16`]. It starts at 2 % (`NOISY_START_Q16`: nothing is
     /// known of the gear at power-up). Unlearnt teeth (±2 % of a pitch) put
     /// it at 1.5–2 %; learnt ones below 0.5 % on the default terrain. While
     /// it holds, the window may be a steady run and the supervisor smooths

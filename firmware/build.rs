@@ -6,8 +6,9 @@ fn main() -> Result<(), String> {
     let qemu = env::var_os("CARGO_FEATURE_BOARD_QEMU").is_some();
     let stm32 = env::var_os("CARGO_FEATURE_BOARD_STM32F103").is_some();
     let memory = match (stm32, qemu) {
-        // The drum driver's link does not fit the C8's 56 KB yet: its image
-        // is linked for the 128 KB parts (docs/drive-link.md, "Images").
+        // The image with the drum driver's link keeps its settings in the
+        // last 8 KB of the 128 KB parts; the others keep theirs at
+        // 0x0800E000 with code on both sides (docs/drive-link.md, "Images").
         (true, false) if env::var_os("CARGO_FEATURE_DRIVE_LINK").is_some() => {
             "memory-stm32f103-128k.x"
         }

@@ -2,7 +2,7 @@
 //! travel speed.
 //!
 //! An RTIC 2 application. The hardware lives behind [`board`]: the real
-//! STM32F103RB (default) or the QEMU `stm32vldiscovery` board with a simulated
+//! STM32F103RB (default) or the QEMU board (`netduino2`) with a simulated
 //! machine (`--no-default-features --features board-qemu`). The operating
 //! logic is the host-tested `supervisor` crate; this file wires it to
 //! interrupts, timers and the screen.
@@ -12,12 +12,12 @@
 //! | task | priority | release | budget |
 //! |---|---|---|---|
 //! | [`app::stop_input`] | 5 | each edge of the stop input (PB10, EXTI10) | 1 µs |
-//! | [`app::usart1_rx`] | 4 | each touchscreen byte (≤ 11.5 kHz) | 2 µs |
+//! | [`app::usart1`] | 4 | each touchscreen byte in or out (≤ 11.5 kHz each way) | 2 µs |
 //! | [`app::hall_capture`] | 3 | each Hall edge (≤ 1 kHz) and TIM2 overflow | 2 µs |
 //! | `app::usart2` | 3 | each RS-485 byte in or out (≤ 11.5 kHz), TC (feature `drive-link`) | 2 µs |
 //! | `app::drive_link` | 3 | every 1 ms while a driver profile is set (feature `drive-link`) | 20 µs |
 //! | [`app::control`] | 2 | every 10 ms | 1 ms |
-//! | [`app::hmi`] | 1 | each touchscreen byte, at least every 20 ms | 3 ms |
+//! | [`app::hmi`] | 1 | touchscreen bytes, the transmit ring at half, at least every 20 ms | 1 ms |
 //! | [`app::status`] | 1 | every 200 ms (5 Hz) | 2 ms |
 //! | [`app::settings`] | 1 | each Save (drum stopped) | 50 ms (a flash page erase) |
 //! | `idle` | 0 | — | sleeps in `wfi` |
@@ -30,6 +30,7 @@ compile_error!("enable at least one machine: feature `profile-a` or `profile-b`"
 mod board;
 mod div64;
 mod edge_queue;
+mod screen_line;
 mod stats;
 
 use rtic_monotonics::systick::prelude::*;
@@ -58,25 +59,27 @@ const STATUS_PERIOD_MS: u32 = 200;
 const STATUS_LOG_EVERY: u32 = 5;
 /// The HMI task ticks the screen link at least this often.
 const HMI_TICK_MS: u32 = 20;
-/// Bytes queued between the USART interrupt and the HMI task (the QEMU
-/// board's lock-step delivers at most 32 per control period, and its 8 KB of
-/// RAM need every byte for the stack).
-const RX_QUEUE: usize = if cfg!(feature = "board-qemu") { 32 } else { 64 };
+/// Bytes queued between the USART interrupt and the HMI task.
+const RX_QUEUE: usize = 64;
+/// The ring of bytes from the HMI task to the USART interrupt's transmitter
+/// (it holds one less): all the screen link can have queued
+/// (`TX_CAPACITY`), so one move of the HMI task empties the link's queue.
+const TX_RING: usize = hmi_proto::hmi::TX_CAPACITY + 1;
 /// Hall edges queued between the capture interrupt and the control task
 /// (the QEMU board's edges come with the sensor sample, not this queue).
-const EDGE_QUEUE: usize = if cfg!(feature = "board-qemu") { 2 } else { 16 };
+const EDGE_QUEUE: usize = 16;
 
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [CAN_RX1, CAN_SCE, ADC1_2])]
 mod app {
     use super::{
-        board, mono_now, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE, HMI_TICK_MS,
-        RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS,
+        board, mono_now, screen_line, stats, uptime_ms, Mono, CONTROL_PERIOD_MS, EDGE_QUEUE,
+        HMI_TICK_MS, RX_QUEUE, STATUS_LOG_EVERY, STATUS_PERIOD_MS, TX_RING,
     };
     use crate::edge_queue::DropMark;
     #[cfg(all(feature = "profile-a", feature = "drive-link"))]
     use ::drive_link::link::ControlAction;
     #[cfg(feature = "drive-link")]
-    use ::drive_link::link::{Event as LinkEvent, Link, LinkConfig, LossCause};
+    use ::drive_link::link::{Event as LinkEvent, Link, LossCause, SetupFault};
     use core::mem::MaybeUninit;
     use heapless::spsc::{Consumer, Producer, Queue};
     use hmi_proto::hmi::{Event, Hmi};
@@ -89,6 +92,7 @@ mod app {
         channel::{Receiver, Sender},
         make_channel,
     };
+    use screen_line::LineItem;
     #[cfg(feature = "profile-a")]
     use supervisor::control::{Alarm, RunState, Supervisor};
     #[cfg(feature = "profile-a")]
@@ -98,7 +102,7 @@ mod app {
         machine::Machine,
         settings::{Profile, Settings},
         stop_input::{StopChange, StopLatch},
-        store::{Loaded, SettingsStore},
+        store::{LoadStatus, SettingsStore},
     };
     #[cfg(feature = "profile-b")]
     use supervisor::{
@@ -137,7 +141,7 @@ mod app {
 
     // The large objects live in `static`s owned by `init` and are shared by
     // reference: returning them by value from `init` would need their size
-    // twice over on the QEMU board's 8 KB of RAM.
+    // twice over on the stack.
     #[shared]
     struct Shared {
         /// The operating logic (profile A or B): control (2), hmi (1), status (1).
@@ -180,8 +184,10 @@ mod app {
     struct Local {
         hmi_rx: board::HmiRx,
         hmi_tx: board::HmiTx,
-        bytes_in: Sender<'static, u8, RX_QUEUE>,
-        bytes_out: Receiver<'static, u8, RX_QUEUE>,
+        bytes_in: Sender<'static, LineItem, RX_QUEUE>,
+        bytes_out: Receiver<'static, LineItem, RX_QUEUE>,
+        tx_in: Producer<'static, u8>,
+        tx_out: Consumer<'static, u8>,
         edges_in: Producer<'static, board::HallEdge>,
         edges_out: Consumer<'static, board::HallEdge>,
         saves_in: Sender<'static, (), 1>,
@@ -202,11 +208,13 @@ mod app {
         edge_queue: Queue<board::HallEdge, EDGE_QUEUE> = Queue::new(),
         machine_slot: MaybeUninit<Machine> = MaybeUninit::uninit(),
         hmi_slot: MaybeUninit<Hmi> = MaybeUninit::uninit(),
+        tx_ring: Queue<u8, TX_RING> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let board = board::init(cx.device);
         Mono::start(cx.core.SYST, board.sysclk_hz);
-        let (bytes_in, bytes_out) = make_channel!(u8, RX_QUEUE);
+        let (bytes_in, bytes_out) = make_channel!(LineItem, RX_QUEUE);
+        let (tx_in, tx_out) = cx.local.tx_ring.split();
         let (saves_in, saves_out) = make_channel!((), 1);
         let (edges_in, edges_out) = cx.local.edge_queue.split();
         defmt::info!(
@@ -230,8 +238,7 @@ mod app {
                 Actuators::Steppers(board::Steppers::new(drum, board.feed_step))
             }
         };
-        // The deepest part of the run on the 8 KB QEMU board: checked by the
-        // QEMU tests.
+        // The boot is the deepest part of a run: checked by the QEMU tests.
         #[cfg(feature = "board-qemu")]
         board::log_stack();
         // Spawning at init cannot fail: each task is spawned once.
@@ -260,6 +267,8 @@ mod app {
                 hmi_tx: board.hmi_tx,
                 bytes_in,
                 bytes_out,
+                tx_in,
+                tx_out,
                 edges_in,
                 edges_out,
                 saves_in,
@@ -277,15 +286,14 @@ mod app {
     }
 
     // Init helpers, each in its own stack frame: inlined into `init`, their
-    // temporaries would all be live at once (3.4 KB of stack on a board with
-    // 8 KB of RAM).
+    // temporaries would all be live at once (3.4 KB of stack).
 
     /// Settings: the newest valid record, or the defaults, said out loud;
     /// then the machine built from them. Two frames of their own: the
     /// loaded record (≈ 0.3 KB) never sits in `init`'s frame, under which
     /// RTIC runs the first tasks (it enables the interrupts inside it; the
-    /// first control step builds the fuzzy controller on top: the QEMU
-    /// board's deepest moment), and the load's deep decode path carries
+    /// first control step builds the fuzzy controller on top: the deepest
+    /// moment of a boot), and the load's deep decode path carries
     /// one record, not two.
     #[inline(never)]
     fn load_settings(
@@ -293,13 +301,27 @@ mod app {
         slot: &'static mut MaybeUninit<Machine>,
     ) -> (Option<Store>, &'static mut Machine, Option<&'static str>) {
         let mut store = flash.and_then(|flash| SettingsStore::new(flash, 0).ok());
-        let loaded = store.as_mut().map(|s| s.load());
-        let notice = match &loaded {
-            Some(Loaded::Saved { sequence, .. }) => {
+        let mut notice = None;
+        // The record returned straight into the call's argument: no copy
+        // of it in this frame.
+        let (machine, machine_notice) = build_machine(slot, load_record(&mut store, &mut notice));
+        (store, machine, machine_notice.or(notice))
+    }
+
+    /// The saved settings (the defaults without a valid record or a
+    /// store) and the screen's notice, loaded in place into the value
+    /// returned: the machine is built from that one record (a second copy
+    /// of it, 352 B, sat under the supervisor built on the stack, on the
+    /// QEMU board's boot path).
+    #[inline(never)]
+    fn load_record(store: &mut Option<Store>, notice: &mut Option<&'static str>) -> Settings {
+        let mut settings = Settings::default();
+        *notice = match store.as_mut().map(|s| s.load_into(&mut settings)) {
+            Some(LoadStatus::Saved { sequence }) => {
                 defmt::info!("settings: loaded record {=u32}", sequence);
                 None
             }
-            Some(Loaded::Defaults { reason, .. }) => {
+            Some(LoadStatus::Defaults { reason }) => {
                 defmt::warn!("settings: defaults in use ({})", reason);
                 Some(reason.message())
             }
@@ -308,21 +330,7 @@ mod app {
                 Some("No settings store: defaults")
             }
         };
-        let (machine, machine_notice) = build_loaded(slot, loaded);
-        (store, machine, machine_notice.or(notice))
-    }
-
-    /// [`build_machine`] from what the store loaded (the defaults without a
-    /// store), in its own frame (see [`load_settings`]).
-    #[inline(never)]
-    fn build_loaded(
-        slot: &'static mut MaybeUninit<Machine>,
-        loaded: Option<Loaded>,
-    ) -> (&'static mut Machine, Option<&'static str>) {
-        build_machine(
-            slot,
-            loaded.map_or_else(Settings::default, Loaded::into_settings),
-        )
+        settings
     }
 
     /// Whether this image carries the machine of `profile` (the real board
@@ -388,7 +396,7 @@ mod app {
     /// loads, so this is a last line of defence); the defaults are valid by
     /// construction, a failure with them is a build-time bug, caught on the
     /// first boot of any board. In its own stack frame: the defaults'
-    /// temporaries must not add to `build_machine`'s on the QEMU board.
+    /// temporaries must not add to `build_machine`'s.
     #[inline(never)]
     #[allow(clippy::field_reassign_with_default)] // see `defaults` below
     fn build_defaults(
@@ -430,7 +438,7 @@ mod app {
     }
 
     /// Profile A, in its own stack frame (the two profiles' temporaries
-    /// must not add up on the QEMU board's 8 KB).
+    /// must not add up).
     #[cfg(feature = "profile-a")]
     #[inline(never)]
     fn build_drum_belt(
@@ -465,9 +473,9 @@ mod app {
         machine: &Machine,
     ) -> &'static mut DriveState {
         #[allow(unreachable_patterns)]
-        let profile: Option<::drive_link::profile::DriverProfile> = match machine {
+        let link = match machine {
             #[cfg(feature = "profile-a")]
-            Machine::DrumBelt(sup) => sup.settings().drive_link.build().ok().flatten(),
+            Machine::DrumBelt(sup) => sup.settings().drive_link.config().ok().flatten(),
             _ => None,
         };
         // The empty state first, then the link built in its place (built
@@ -476,12 +484,14 @@ mod app {
             link: None,
             enabled: None,
         });
-        if let Some((p, config)) = profile.and_then(|p| Some((p, LinkConfig::for_baud(p.baud)?))) {
+        if let Some((p, config)) = link {
             defmt::info!(
-                "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us",
+                "drive link: slave {=u8} at {=u32} baud, reply timeout {=u32} us, retry gap {=u32} us, driver offline time {=u16} ms",
                 p.slave,
                 p.baud,
-                config.reply_timeout_us
+                config.reply_timeout_us,
+                config.retry_gap_us,
+                config.offline_time_ms
             );
             state.link = Some(Link::new(p, config));
         }
@@ -533,21 +543,31 @@ mod app {
         });
     }
 
-    /// Touchscreen bytes: drains USART1 into the queue of [`hmi`].
+    /// The touchscreen's USART1: each byte in goes to the queue of [`hmi`]
+    /// with its arrival time; bytes out go from the transmit ring while the
+    /// data register is empty (TXE).
     ///
-    /// - Priority 4 (highest): the F103's USART has no FIFO, so a byte must
-    ///   be read within one character time (87 µs at 115200 baud).
-    /// - Released by USART1 RXNE, at most 11.5 k times a second.
-    /// - Budget: 2 µs per byte.
-    #[task(binds = USART1, priority = 4, local = [hmi_rx, bytes_in])]
-    fn usart1_rx(cx: usart1_rx::Context) {
+    /// - Priority 4 (highest but the stop input): the F103's USART has no
+    ///   FIFO, so a byte must be read within one character time (87 µs at
+    ///   115200 baud).
+    /// - Released by RXNE and TXE (and pended by [`hmi`] to start sending),
+    ///   at most 11.5 k times a second each way.
+    /// - Budget: 2 µs.
+    #[task(binds = USART1, priority = 4, local = [hmi_rx, hmi_tx, bytes_in, tx_out])]
+    fn usart1(cx: usart1::Context) {
+        let now = uptime_ms();
         // A few bytes at most are pending; the bound keeps an error storm
         // from holding the CPU.
         for _ in 0..4 {
             match cx.local.hmi_rx.read() {
                 Ok(byte) => {
                     stats::HMI_RX_BYTES.inc();
-                    if cx.local.bytes_in.try_send(byte).is_err() {
+                    if cx
+                        .local
+                        .bytes_in
+                        .try_send(LineItem::new(byte, now))
+                        .is_err()
+                    {
                         stats::HMI_RX_DROPPED.inc();
                     }
                 }
@@ -555,6 +575,7 @@ mod app {
                 Err(nb::Error::Other(_)) => stats::HMI_RX_ERRORS.inc(),
             }
         }
+        cx.local.hmi_tx.send(cx.local.tx_out);
     }
 
     /// USART2, the RS-485 line to the drum driver: the next byte out (TXE),
@@ -604,6 +625,9 @@ mod app {
                 }
                 if let Some(n) = line.receive(now, &mut buf) {
                     event = link.received(now, buf.get(..n).unwrap_or(&[]));
+                }
+                if line.receiving(now) {
+                    link.line_busy(now);
                 }
                 event = event.or(link.tick(now));
                 if let Some(n) = link.next_frame(now, &mut buf) {
@@ -660,6 +684,15 @@ mod app {
             Some(LossCause::Corrupt) => defmt::warn!(
                 "drive link: lost: corrupt replies after the retries (noise, termination, baud)"
             ),
+            Some(LossCause::Setup(SetupFault::MaxSpeed { driver, needed })) => defmt::warn!(
+                "drive link: refused: the driver's maximum speed register holds {=u16}; the drum's top speed needs {=u32} through the gearbox: raise it (ZLAC8015D 0x2008, at most 1000 r/min) or use a smaller ratio",
+                driver,
+                needed
+            ),
+            Some(LossCause::Setup(SetupFault::Resolution(value))) => defmt::warn!(
+                "drive link: refused: the driver's speed resolution register holds {=u16}; set 1 to 10 (ZLAC8015D 0x2022: 1 = 1 r/min, 10 = 0.1 r/min)",
+                value
+            ),
             _ => defmt::warn!(
                 "drive link: lost: no reply after the retries (wiring, power, slave id, baud)"
             ),
@@ -678,6 +711,10 @@ mod app {
                 age_us: u32::try_from(now_us.saturating_sub(s.sampled_at_us)).unwrap_or(u32::MAX),
             }),
             lost: link.is_lost(),
+            setup: match link.loss_cause() {
+                Some(LossCause::Setup(f)) => Some(f.into()),
+                _ => None,
+            },
             refused: matches!(
                 link.loss_cause(),
                 Some(LossCause::Refused { .. } | LossCause::Unfit { .. })
@@ -794,7 +831,7 @@ mod app {
             #[cfg(feature = "profile-a")]
             let work_down = work.is_down();
             // In a block: the step's values are not kept across the await
-            // below (the task's future is a static on the QEMU board's 8 KB).
+            // below (the task's future is a static).
             {
                 #[cfg(feature = "profile-a")]
                 let drive = &mut cx.shared.drive;
@@ -993,8 +1030,11 @@ mod app {
     /// - Priority 1.
     /// - Released by received bytes, and at least every 20 ms to time the
     ///   link (handshake retries, heartbeats, `get` timeouts).
-    /// - Budget: 3 ms, most of it writing instructions at 115200 baud.
-    #[task(priority = 1, local = [bytes_out, hmi_tx, saves_in, boot_notice], shared = [machine, hmi, stop])]
+    /// - Budget: 1 ms (the bytes received, a tick, the events, a page's
+    ///   instructions encoded and moved to the transmit ring: `cargo xtask
+    ///   bench`'s `hmi_wake`, 26 312 instructions with a second page change);
+    ///   it never waits on the line: [`usart1`] sends the bytes.
+    #[task(priority = 1, local = [bytes_out, tx_in, saves_in, boot_notice], shared = [machine, hmi, stop])]
     async fn hmi(mut cx: hmi::Context) {
         // Whether the screen has answered, or its silence was logged, since boot.
         let mut link_reported = false;
@@ -1002,13 +1042,14 @@ mod app {
             let first = Mono::timeout_after(HMI_TICK_MS.millis(), cx.local.bytes_out.recv()).await;
             let bytes_out = &mut cx.local.bytes_out;
             cx.shared.hmi.lock(|hmi| {
-                if let Ok(Ok(byte)) = first {
-                    hmi.push(byte);
-                    while let Ok(byte) = bytes_out.try_recv() {
-                        hmi.push(byte);
-                    }
+                let now = uptime_ms();
+                // One call site: the link's receive path is inlined once.
+                let mut item = first.ok().and_then(Result::ok);
+                while let Some(i) = item {
+                    screen_line::deliver(hmi, i, now);
+                    item = bytes_out.try_recv().ok();
                 }
-                hmi.tick(uptime_ms());
+                hmi.tick(now);
             });
             while let Some(event) = cx.shared.hmi.lock(|hmi| hmi.poll_event()) {
                 link_reported |= matches!(event, Event::Connected);
@@ -1018,15 +1059,14 @@ mod app {
                 defmt::warn!("touchscreen silent since boot: running on the saved settings");
                 link_reported = true;
             }
-            // Drain the transmit queue (blocking writes at priority 1).
-            let mut buf = [0u8; 32];
-            loop {
-                let n = cx.shared.hmi.lock(|hmi| hmi.poll_transmit(&mut buf));
-                if n == 0 {
+            // The queued instructions to the transmit ring (on the QEMU
+            // board, whose interrupt empties it at once, again until the
+            // link's queue is empty).
+            let tx_in = &mut cx.local.tx_in;
+            while cx.shared.hmi.lock(|hmi| screen_line::refill(hmi, tx_in)) > 0 {
+                board::kick_screen_tx();
+                if !cfg!(feature = "board-qemu") {
                     break;
-                }
-                for &b in buf.get(..n).unwrap_or(&[]) {
-                    let _ = nb::block!(cx.local.hmi_tx.write_u8(b));
                 }
             }
         }
@@ -1396,8 +1436,7 @@ mod app {
 
     /// The save itself, in its own stack frame: inlined into the priority-1
     /// tasks' dispatcher, its record buffers (≈ 0.7 KB) sat under every
-    /// priority-1 task and under the control task preempting them, on the
-    /// QEMU board's 8 KB.
+    /// priority-1 task and under the control task preempting them.
     #[inline(never)]
     fn save_settings(store: &mut Option<Store>, machine: &Machine) -> &'static str {
         match store.as_mut().map(|s| s.save(machine.settings())) {

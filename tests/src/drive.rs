@@ -12,13 +12,14 @@
 //! its requests are all on USART2.
 //!
 //! The driver is [`drive_link::virtual_driver::VirtualZlac`] (the
-//! ZLAC8015D's registers) behind a 59:1 gearbox ([`GEAR_RATIO`]): its speed
-//! register reads the simulated drum's speed × 59 in 0.1 r/min, sampled
+//! ZLAC8015D's registers) behind a 20:1 gearbox ([`GEAR_RATIO`]): its speed
+//! register reads the simulated drum's speed × 20 in 0.1 r/min, sampled
 //! at the request's end plus its turnaround (interpolated between the
-//! truth records around it, never ahead of the newest); its speed command
-//! (motor r/min) ÷ 59 drives the simulated drum when it is enabled and in
-//! velocity mode; the board applies it as the drive's speed loop (the
-//! command over the drive's n_max, through the simulated motor's lag).
+//! truth records around it, never ahead of the newest); its target speed
+//! (motor r/min, at its speed resolution, limited to its maximum speed)
+//! ÷ 20 drives the simulated drum when it is enabled and in velocity mode;
+//! the board applies it as the drive's speed loop (the command over the
+//! drive's n_max, through the simulated motor's lag).
 
 use std::collections::VecDeque;
 use std::io::{self, Read};
@@ -27,11 +28,13 @@ use std::net::TcpStream;
 use drive_link::timing::frame_time_us;
 use drive_link::virtual_driver::VirtualZlac;
 
-/// The virtual driver's motor turns per drum turn: 59:1, not paper A's
+/// The virtual driver's motor turns per drum turn: 20:1, not paper A's
 /// 118:1, whose motor speed overflows the ZLAC8015D's 0.1 r/min register
-/// above 27.77 drum r/min (docs/drive-link.md, "Limits"). The settings'
-/// scale for it: 100 000 / 59 = 1695 µr/min per count.
-pub const GEAR_RATIO: f64 = 59.0;
+/// above 27.77 drum r/min, and whose motor would need more than the
+/// driver's 1000 r/min (0x2008) for the drum's 44.7 (docs/drive-link.md,
+/// "Limits"). The settings' scale for it: 100 000 / 20 = 5000 µr/min per
+/// count.
+pub const GEAR_RATIO: f64 = 20.0;
 
 /// One control period's truth record from the QEMU board.
 #[derive(Clone, Debug, PartialEq)]
@@ -197,7 +200,7 @@ impl DriveBench {
         let enabled = d.enabled && d.fault_bits == 0;
         let bus = d.velocity_mode && self.command_seen;
         out.push(u8::from(enabled) | (u8::from(bus) << 1));
-        let command_milli = (f64::from(d.command_rpm) * 1000.0 / GEAR_RATIO).round() as i32;
+        let command_milli = (d.target_rpm() * 1000.0 / GEAR_RATIO).round() as i32;
         out.extend_from_slice(&command_milli.to_le_bytes());
         Ok(out)
     }

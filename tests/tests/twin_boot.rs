@@ -51,7 +51,7 @@ fn brr_for(fck: f64, baud: f64) -> u32 {
     ((usartdiv_x16 / 16) << 4) | (usartdiv_x16 % 16)
 }
 
-/// RTIC on a 4-priority-bit Cortex-M3 (PM0056 §4.2.7: the upper nibble is
+/// RTIC on a 4-priority-bit Cortex-M3 (PM0056 §4.3.7: the upper nibble is
 /// implemented): logical priority p maps to (16 − p) << 4.
 fn nvic_prio(p: u32) -> u32 {
     (16 - p) << 4
@@ -206,7 +206,7 @@ fn check_common(twin: &mut Twin, image: Image) {
         timeout(30e3) * 1e3
     );
 
-    // --- NVIC (PM0056 §4.2.7): the task map of firmware/src/main.rs:
+    // --- NVIC (PM0056 §4.3.7): the task map of firmware/src/main.rs:
     // USART1 (IRQ 37) at 4, TIM2 (IRQ 28) at 3; the software tasks at 2
     // and 1 run on the dispatchers CAN_RX1 (21), CAN_SCE (22), ADC1_2 (18).
     assert_eq!(ipr(twin, 37), nvic_prio(4), "USART1 priority");
@@ -403,5 +403,131 @@ fn the_outputs_are_driven_low_before_the_watchdog_starts() {
                 driven.at
             );
         }
+    }
+}
+
+/// The safe state at boot writes TIM1's (and profile B's TIM4's) compare
+/// mode, compare value and break register before those timers' clocks are
+/// on: the chip ignores them (RM0008 §7.3.7, §7.3.8: without its clock a
+/// peripheral's registers are not written, they read 0). The outputs must
+/// not need them: until `init` switches the timers on (their clock and
+/// an APB reset pulse, RM0008 §7.3.4) and hands the pins to them, the GPIO
+/// writes alone drive PA8, PB12, PA1 (and PB6) low. Checked from power-on
+/// to the watchdog's start, while the crystal is still starting.
+#[test]
+fn the_boot_safe_state_holds_the_outputs_without_the_timer_writes_made_before_their_clocks() {
+    const TIM1: u32 = 0x4001_2C00;
+    const TIM4: u32 = 0x4000_0800;
+    for image in [Image::ProfileA, Image::ProfileB] {
+        let mut twin = load(image);
+        let started = twin
+            .run_until(50, |t| t.state().bus.iwdg.started_at.is_some())
+            .expect("run");
+        assert!(started, "{image:?}: the watchdog never started");
+        let bus = &twin.state().bus;
+        let mut timers = vec![("TIM1", 0, TIM1)];
+        if image == Image::ProfileB {
+            timers.push(("TIM4", 3, TIM4));
+        }
+        for &(name, i, base) in &timers {
+            assert!(
+                !bus.clock_enabled(base),
+                "{image:?}: {name}'s clock already on"
+            );
+            let t = &bus.tim[i];
+            let dropped: Vec<u32> = bus
+                .dropped_writes
+                .iter()
+                .filter(|w| w.addr & !0x3FF == base)
+                .map(|w| w.addr - base)
+                .collect();
+            eprintln!("{image:?}: {name} writes lost before its clock: offsets {dropped:#x?}");
+            // CCMR1 (0x18) and CCR1 (0x34) written by the safe state, lost.
+            assert!(
+                dropped.contains(&0x18) && dropped.contains(&0x34),
+                "{image:?}: {name} writes before its clock: {dropped:#x?}"
+            );
+            assert_eq!(
+                (t.ccmr[0], t.ccr[0], t.bdtr),
+                (0, 0, 0),
+                "{image:?}: {name} CCMR1, CCR1, BDTR hold their reset values"
+            );
+        }
+        let mut outputs = vec![('A', 8), ('B', 12), ('A', 1)];
+        if image == Image::ProfileB {
+            outputs.push(('B', 6));
+        }
+        for (port, pin) in outputs {
+            assert_eq!(
+                twin.pin(port, pin),
+                twin::Level::Low,
+                "{image:?} P{port}{pin} with the timers unclocked"
+            );
+        }
+    }
+}
+
+/// Every handler is compiled to the AAPCS, which wants SP ≡ 0 (mod 8) at
+/// each function entry; the core provides it for exception entry only with
+/// SCB_CCR.STKALIGN set (PM0056 §4.4.7), and on the F103's Cortex-M3 r1p1
+/// (CPUID 0x411FC231) that bit resets to 0 (Cortex-M3 TRM r1p1, ARM DDI
+/// 0337E; ARM's ABI advisory IHI 0046B §2.3.3 asks startup code to set it).
+/// Inside many of the image's functions SP is ≡ 4 (mod 8) for a few
+/// instructions (`push {r4, r5, r6, r7, lr}`, 20 bytes, before the rest of
+/// the frame), and on the chip an interrupt can come at any instruction.
+/// The twin takes interrupts between translated blocks, so the probe makes
+/// that moment: in the idle loop (which uses no stack) SP is moved down by
+/// 4 and the Hall capture interrupt (TIM2) is pended; its handler must find
+/// an 8-byte aligned stack. SP is put back afterwards and the board runs on.
+#[test]
+fn handlers_find_an_8_byte_aligned_stack_whatever_sp_the_interrupt_finds() {
+    use twin::RegisterARM;
+    for image in [Image::ProfileA, Image::ProfileB] {
+        let mut twin = boot(image);
+        let sp = twin.reg(RegisterARM::SP);
+        assert_eq!(sp % 8, 0, "{image:?}: SP in the idle loop {sp:#x}");
+        twin.set_reg(RegisterARM::SP, sp - 4).expect("SP");
+        let (entries, misaligned) = {
+            let st = twin.state();
+            (st.exception_entries, st.frames_not_8_aligned)
+        };
+        twin.pend_irq(28);
+        twin.run_ticks(1).expect("run");
+        let (n, frame) = twin.state().last_entry.expect("an exception entry");
+        assert_eq!(n, 16 + 28, "{image:?}: the TIM2 handler");
+        // 20 ms more in the idle loop with that SP: SysTick and the
+        // tasks' interrupts come from there too.
+        twin.run_ms(20).expect("run");
+        let st = twin.state();
+        let (entries, misaligned) = (
+            st.exception_entries - entries,
+            st.frames_not_8_aligned - misaligned,
+        );
+        eprintln!(
+            "{image:?}: idle SP {:#x}; TIM2 frame at {frame:#x}; {entries} exception entries, \
+             {misaligned} of them on a stack not 8-byte aligned; CCR {:#x}",
+            sp - 4,
+            twin.peek(0xE000_ED14)
+        );
+        assert_eq!(frame % 8, 0, "{image:?}: the TIM2 handler's stack");
+        assert_eq!(
+            misaligned, 0,
+            "{image:?}: handlers entered on a 4-byte aligned stack"
+        );
+        let idle = twin
+            .run_until(50, |t| {
+                t.core == CoreState::Sleeping && t.state().nvic.active.is_empty()
+            })
+            .expect("run");
+        assert!(idle, "{image:?}: back in the idle loop");
+        assert_eq!(
+            twin.reg(RegisterARM::SP),
+            sp - 4,
+            "{image:?}: SP after the returns"
+        );
+        twin.set_reg(RegisterARM::SP, sp).expect("SP");
+        twin.run_ms(20).expect("run");
+        assert_eq!(twin.resets.len(), 1, "{image:?}: {:?}", twin.resets);
+        assert!(!twin.lockup(), "{image:?}: locked up");
     }
 }

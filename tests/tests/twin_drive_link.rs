@@ -27,8 +27,8 @@
 //!   (§2.5.1.1), so a DE still high one character later would not yet
 //!   collide, and on the twin the interrupt takes a few µs.
 //! - The read-back: the virtual driver's 0x20AB value (0.1 r/min of the
-//!   motor) × the settings' scale (1695 µr/min of the drum per count, the
-//!   59:1 gearbox of `qemu_tests::drive`) must appear as the drum's actual
+//!   motor) × the settings' scale (5000 µr/min of the drum per count, the
+//!   20:1 gearbox of `qemu_tests::drive`) must appear as the drum's actual
 //!   speed in the status line (within the supervisor's report filter).
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
@@ -58,7 +58,7 @@ fn settings_address() -> u32 {
     u32::from_str_radix(&hex, 16).unwrap()
 }
 
-/// Read-back feedback from a ZLAC8015D behind 59:1 at `baud`, PWM command.
+/// Read-back feedback from a ZLAC8015D behind 20:1 at `baud`, PWM command.
 fn settings(baud: u32) -> Settings {
     let mut s = Settings {
         drive_link: DriveLinkSettings {
@@ -74,11 +74,11 @@ fn settings(baud: u32) -> Settings {
     s
 }
 
-/// The settings' scale: 100 000 µr/min / 59 (the tests' 59:1 gearbox).
-const MICRO_RPM_PER_COUNT: i32 = 1695;
-/// The virtual driver's speed register: 118.0 r/min of the motor (2 r/min
-/// of the drum behind 59:1).
-const MOTOR_DECIRPM: i16 = 1180;
+/// The settings' scale: 100 000 µr/min / 20 (the tests' 20:1 gearbox).
+const MICRO_RPM_PER_COUNT: i32 = 5000;
+/// The virtual driver's speed register: 40.0 r/min of the motor (2 r/min
+/// of the drum behind 20:1).
+const MOTOR_DECIRPM: i16 = 400;
 /// The virtual driver's turnaround (request end → reply start), µs.
 const TURNAROUND_US: u32 = 2_000;
 
@@ -350,22 +350,26 @@ fn check(baud: u32, ms: u64) {
         if n == UNANSWERED {
             // No reply: the same request again once the reply timeout
             // (the longest reply, 9 characters of 11 bits, the silence
-            // that ends it, + 20 ms for the driver: docs/drive-link.md)
-            // and the silent interval have passed after TC, within two
-            // periods of the 1 ms link task.
+            // that ends it, + the driver's answer time, 60 ms by default:
+            // docs/drive-link.md) and the retry gap of quiet line (20 ms)
+            // have passed after TC, within two periods of the 1 ms link
+            // task.
             assert!(t.rx.is_empty(), "transaction {n}: {:?}", t.rx);
             let next = &transactions[n + 1];
             let bytes = |t: &Transaction| t.tx.iter().map(|b| b.2).collect::<Vec<_>>();
             assert_eq!(bytes(next), bytes(t), "the same request again");
-            let timeout = (9.0 * modbus_char_s + 20e-3) * TICKS_PER_S as f64 + silence;
+            let timing = drive_link::link::LinkTiming::DEFAULT;
+            let answer_s = f64::from(timing.reply_timeout_ms) * 1e-3;
+            let gap = (f64::from(timing.retry_gap_ms) * 1e-3 * TICKS_PER_S as f64).max(silence);
+            let timeout = (9.0 * modbus_char_s + answer_s) * TICKS_PER_S as f64 + silence;
             let wait = (next.tx[0].0 - tc) as f64;
             retry_wait = wait / 72.0;
             assert!(
-                wait >= timeout + silence && wait <= timeout + silence + 2.0 * 72_000.0,
+                wait >= timeout + gap && wait <= timeout + gap + 2.0 * 72_000.0,
                 "retry {:.1} µs after TC, expected {:.1}..{:.1}",
                 wait / 72.0,
-                (timeout + silence) / 72.0,
-                (timeout + silence) / 72.0 + 2000.0
+                (timeout + gap) / 72.0,
+                (timeout + gap) / 72.0 + 2000.0
             );
             continue;
         }

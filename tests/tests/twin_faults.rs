@@ -428,3 +428,45 @@ fn usart1_overrun_is_counted_and_the_link_recovers() {
         "Start after the overrun"
     );
 }
+
+/// The Stop's press on a flooded line while the firmware writes a page
+/// change: the operator leaves page 2 with the drum running, taps
+/// *Settings* on page 1 (the MCU writes page 6 and its values: 175 bytes,
+/// 15 ms of line), and the screen answers every write with `1A FF FF FF`
+/// (a screen file whose names are wrong), back to back, 40 frames before
+/// and after the Stop's press (page 2's `bstop`, taken from any page).
+/// The drum must stop within a control period or two of the press; no
+/// received byte may be dropped. Before, the hmi task waited on the
+/// transmitter for the whole page change: the 64-byte receive queue
+/// overflowed under the flood, the press was lost, and the drum ran on
+/// until the Stop's release.
+#[test]
+fn a_stop_press_on_a_flooded_line_during_a_page_change_stops_the_drum() {
+    let mut twin = running_drum();
+    twin.tap("bback").unwrap();
+    twin.run_ms(300).unwrap();
+    assert_eq!(twin.pin('B', 12), Level::High, "the drum runs on page 1");
+    let dropped_before = twin.static_u32("HMI_RX_DROPPED").unwrap_or(0);
+    let flood = [0x1Au8, 0xFF, 0xFF, 0xFF].repeat(40);
+    // `bset` (page 1, id 4) released: the MCU shows page 6.
+    let mut burst = vec![0x65, 0x01, 0x04, 0x00, 0xFF, 0xFF, 0xFF];
+    burst.extend_from_slice(&flood);
+    burst.extend_from_slice(&[0x65, 0x02, 0x04, 0x01, 0xFF, 0xFF, 0xFF]);
+    burst.extend_from_slice(&flood);
+    let t0 = twin.now();
+    twin.send_serial(0, &burst);
+    // The press's last stop bit, at 10 bits a byte.
+    let char_ticks = TICKS_PER_S * 10 / 115_200;
+    let press_end = t0 + (7 + 160 + 7) * char_ticks;
+    let stopped = twin
+        .run_until(300, |t| t.pin('B', 12) == Level::Low)
+        .unwrap();
+    let after_ms = (twin.now().saturating_sub(press_end)) as f64 * 1000.0 / TICKS_PER_S as f64;
+    let dropped = twin.static_u32("HMI_RX_DROPPED").unwrap_or(0) - dropped_before;
+    eprintln!(
+        "drum disabled {after_ms:.1} ms after the Stop's press; {dropped} received bytes dropped"
+    );
+    assert!(stopped, "the drum ran on ({dropped} bytes dropped)");
+    assert!(after_ms <= 25.0, "{after_ms:.1} ms");
+    assert_eq!(dropped, 0);
+}

@@ -41,7 +41,10 @@ pub struct Nvic {
     pub aircr: u32,
     /// SCR.
     pub scr: u32,
-    /// CCR.
+    /// CCR. Resets to 0 on the F103's Cortex-M3 r1p1 (CPUID 0x411FC231):
+    /// STKALIGN = 0, exception frames only 4-byte aligned (PM0056 §4.4.7:
+    /// "Reset value: 0x0000 0000 (STM32F1 series)", 0x200 on the r2p0
+    /// cores of the F2 and L1).
     pub ccr: u32,
     /// SHCSR.
     pub shcsr: u32,
@@ -66,7 +69,7 @@ impl Default for Nvic {
             vtor: 0,
             aircr: 0,
             scr: 0,
-            ccr: 0x200,
+            ccr: 0,
             shcsr: 0,
             cfsr: 0,
             hfsr: 0,
@@ -76,7 +79,10 @@ impl Default for Nvic {
     }
 }
 
-/// Priority bits implemented by the STM32F103: 4 (PM0056 §4.2.7).
+/// CCR.STKALIGN (PM0056 §4.4.7): 8-byte aligned exception frames.
+pub const CCR_STKALIGN: u32 = 1 << 9;
+
+/// Priority bits implemented by the STM32F103: 4 (PM0056 §4.3.7).
 pub const PRIO_MASK: u8 = 0xF0;
 
 impl Nvic {

@@ -168,10 +168,20 @@ pub struct State {
     /// Stop before the first block that starts at or after this time.
     deadline: Ticks,
     /// Instructions per translated block (start address, bytes).
-    block_insns: std::collections::HashMap<(u32, u32), u64>,
+    block_insns: std::collections::HashMap<(u32, u32), u64, BlockHash>,
+    /// Exceptions entered since the twin was built.
+    pub exception_entries: u64,
+    /// Of those, entries whose frame (the handler's SP) is not 8-byte
+    /// aligned: CCR.STKALIGN = 0 and SP ≡ 4 (mod 8) when the exception came
+    /// (AAPCS wants SP ≡ 0 mod 8 at every function entry, a handler's too).
+    pub frames_not_8_aligned: u64,
+    /// The last exception entry: (exception number, frame address).
+    pub last_entry: Option<(u32, u32)>,
 }
 
 impl State {
+    /// A CPU read on the private peripheral bus (a read of SYST_CSR clears
+    /// COUNTFLAG, PM0056 §4.5.1).
     fn ppb_read(&mut self, a: u32) -> u32 {
         match a {
             0xE000_E010 => {
@@ -179,13 +189,34 @@ impl State {
                 let st = &mut self.bus.systick;
                 st.ctrl | if st.countflag_take() { 1 << 16 } else { 0 }
             }
-            0xE000_E014 => self.bus.systick.load,
             0xE000_E018 => {
                 self.bus.advance_systick(self.now);
                 self.bus.systick.val()
             }
-            0xE000_E01C => 0x4000_2328, // CALIB: NOREF, 9000 (1 ms at HCLK/8)
-            0xE004_2000 => 0x2003_6410, // DBGMCU_IDCODE: medium density, rev X
+            _ => self.ppb_peek(a),
+        }
+    }
+
+    /// A register of the private peripheral bus as it reads now, without
+    /// side effects (SYST_CSR's COUNTFLAG is shown, not cleared).
+    pub fn ppb_peek(&self, a: u32) -> u32 {
+        match a {
+            0xE000_E010 | 0xE000_E018 => {
+                let (csr, cvr) = self.bus.systick.peek(self.now, &self.bus.clocks());
+                if a == 0xE000_E010 {
+                    csr
+                } else {
+                    cvr
+                }
+            }
+            0xE000_E014 => self.bus.systick.load,
+            // SYST_CALIB (PM0056 §4.5.4): NOREF = 0 (the HCLK/8 reference
+            // is there), SKEW = 1, TENMS = 9000 (1 ms at 72 MHz / 8).
+            0xE000_E01C => 0x4000_2328,
+            // DBGMCU_IDCODE (RM0008 §31.6.1): DEV_ID 0x410 (medium
+            // density), REV_ID 0x2003 (revision Y, 1, 2 or X); bits 14:13
+            // read as 1 on the chip.
+            0xE004_2000 => 0x2003_6410,
             0xE004_2004 => self.bus.dbgmcu_cr,
             0xE000_1004 => self.instructions as u32, // DWT_CYCCNT
             _ => self.nvic.read(a),
@@ -210,6 +241,36 @@ impl State {
         self.stop.get_or_insert(Stop::Replan);
     }
 }
+
+/// The hasher of the block table: looked up once per executed block, where
+/// the standard SipHash took a fifth of the host time. Keys are block
+/// addresses and sizes chosen by the image, not by an adversary.
+#[derive(Clone, Copy, Default)]
+pub struct BlockHasher(u64);
+
+impl std::hash::Hasher for BlockHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    fn write_u32(&mut self, v: u32) {
+        self.write_u64(u64::from(v));
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        // Fibonacci hashing: spread the bits over the whole word.
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+/// [`BlockHasher`] for `HashMap`.
+pub type BlockHash = std::hash::BuildHasherDefault<BlockHasher>;
 
 /// A probe on the twin's state ([`Twin::watch`]).
 pub type Watcher = Box<dyn FnMut(&State) -> bool>;
@@ -296,18 +357,7 @@ impl Twin {
             .clone()
             .unwrap_or_else(|| vec![0xFF; FLASH_SIZE as usize]);
         if options.flash.is_none() {
-            // Program the image's loadable sections (by load address).
-            for seg in file.segments() {
-                use object::ObjectSegment;
-                let (addr, _) = seg.file_range();
-                let _ = addr;
-                let paddr = seg.address();
-                let bytes = seg.data().map_err(|e| Error::Elf(e.to_string()))?;
-                let _ = (paddr, bytes);
-            }
-            for sec in file.sections() {
-                let _ = sec;
-            }
+            // Program the image's loadable segments (by load address).
             load_flash(&data, &mut flash)?;
         }
         let mut symbols = Vec::new();
@@ -320,6 +370,32 @@ impl Twin {
                 symbols.push((name.to_string(), s.address() as u32, s.size()));
             }
         }
+        Self::build(Some(elf), flash, symbols, rtt, options)
+    }
+
+    /// A fresh twin running a bare program: `image` is programmed at the
+    /// start of the flash (its vector table first), the rest erased; no
+    /// symbols, no RTT log. For the models' own tests.
+    pub fn from_program(image: &[u8], options: Options) -> Result<Self, Error> {
+        if image.len() > FLASH_SIZE as usize {
+            return Err(Error::Elf("program larger than the flash".into()));
+        }
+        let mut flash = vec![0xFF; FLASH_SIZE as usize];
+        flash[..image.len()].copy_from_slice(image);
+        let options = Options {
+            decode_logs: false,
+            ..options
+        };
+        Self::build(None, flash, Vec::new(), None, options)
+    }
+
+    fn build(
+        elf: Option<&Path>,
+        flash: Vec<u8>,
+        symbols: Vec<(String, u32, u64)>,
+        rtt: Option<u32>,
+        options: Options,
+    ) -> Result<Self, Error> {
         let state = State {
             now: 0,
             cost: 9,
@@ -333,7 +409,10 @@ impl Twin {
             bus_error: None,
             touched: false,
             deadline: 0,
-            block_insns: std::collections::HashMap::new(),
+            block_insns: std::collections::HashMap::default(),
+            exception_entries: 0,
+            frames_not_8_aligned: 0,
+            last_entry: None,
         };
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::MCLASS | Mode::LITTLE_ENDIAN, state)
             .map_err(uc_err)?;
@@ -352,10 +431,13 @@ impl Twin {
         map_peripherals(&mut uc)?;
         add_hooks(&mut uc)?;
         let vector_sp = u32::from_le_bytes(flash[0..4].try_into().unwrap_or([0; 4]));
-        let log = LogSink::start(elf, options.decode_logs, options.echo_logs)?;
+        let log = match elf {
+            Some(elf) => LogSink::start(elf, options.decode_logs, options.echo_logs)?,
+            None => LogSink::start(Path::new(""), false, false)?,
+        };
         let mut twin = Self {
             uc,
-            elf_path: elf.to_path_buf(),
+            elf_path: elf.map(Path::to_path_buf).unwrap_or_default(),
             vector_sp,
             rtt,
             symbols,
@@ -488,12 +570,7 @@ impl Twin {
     pub fn peek(&self, a: u32) -> u32 {
         let st = self.state();
         if (0xE000_0000..0xE010_0000).contains(&a) {
-            match a {
-                0xE000_E010 => st.bus.systick.ctrl,
-                0xE000_E014 => st.bus.systick.load,
-                0xE004_2004 => st.bus.dbgmcu_cr,
-                _ => st.nvic.read(a),
-            }
+            st.ppb_peek(a)
         } else {
             let mut bus = st.bus.clone();
             bus.read(a, st.now)
@@ -811,7 +888,11 @@ impl Twin {
         let xpsr = self.reg(RegisterARM::XPSR);
         let current = self.state().nvic.active.last().copied().unwrap_or(0);
         let mut sp = self.reg(RegisterARM::SP);
-        let align = sp & 4 != 0;
+        // With CCR.STKALIGN the frame starts on an 8-byte boundary (a
+        // padding word, flagged by xPSR bit 9); without it, wherever SP
+        // points (ARMv7-M B1.5.6 PushStack; PM0056 §4.4.7).
+        let stkalign = self.state().nvic.ccr & core::CCR_STKALIGN != 0;
+        let align = stkalign && sp & 4 != 0;
         if align {
             sp -= 4;
         }
@@ -836,6 +917,11 @@ impl Twin {
             let st = self.uc.get_data_mut();
             st.nvic.pending &= !(1u128 << n);
             st.nvic.active.push(n);
+            st.exception_entries += 1;
+            if sp & 7 != 0 {
+                st.frames_not_8_aligned += 1;
+            }
+            st.last_entry = Some((n, sp));
             // Entry latency: 12 cycles on the Cortex-M3.
             st.now += 12 * st.cost;
             if stack_fault {

@@ -135,6 +135,13 @@ pub struct Rcc {
 const HSE_STARTUP: Ticks = 2 * TICKS_PER_S / 1000;
 /// PLL lock time (datasheet tLOCK ≤ 200 µs).
 const PLL_LOCK: Ticks = 200 * TICKS_PER_S / 1_000_000;
+/// LSI start-up time, the maximum of the datasheet (DS5319 table 25,
+/// tSU(LSI) ≤ 85 µs): LSIRDY is set this long after the LSI is switched on.
+pub const LSI_STARTUP: Ticks = 85 * TICKS_PER_S / 1_000_000;
+
+/// RCC_CR bits (RM0008 §7.3.1).
+const CR_HSEON: u32 = 1 << 16;
+const CR_HSEBYP: u32 = 1 << 18;
 
 impl Rcc {
     fn new(csr: u32, hse_dead: bool) -> Self {
@@ -155,8 +162,13 @@ impl Rcc {
         }
     }
 
+    /// HSERDY: the crystal has started. With HSEBYP the oscillator is
+    /// bypassed and OSC_IN must carry an external clock; the board has a
+    /// crystal there, so nothing ever comes (RM0008 §7.2.1).
     fn hse_ready(&self, now: Ticks) -> bool {
-        !self.hse_dead && self.hse_on_at.is_some_and(|t| now >= t + HSE_STARTUP)
+        !self.hse_dead
+            && self.cr & CR_HSEBYP == 0
+            && self.hse_on_at.is_some_and(|t| now >= t + HSE_STARTUP)
     }
 
     fn pll_ready(&self, now: Ticks) -> bool {
@@ -253,7 +265,8 @@ impl Rcc {
             0x18 => self.apb2enr,
             0x1C => self.apb1enr,
             0x20 => self.bdcr,
-            0x24 => self.csr | 0x2, // LSIRDY: the LSI runs (the IWDG forces it on)
+            // LSIRDY is added by the bus (the IWDG also starts the LSI).
+            0x24 => self.csr & !0x2,
             _ => 0,
         }
     }
@@ -261,8 +274,14 @@ impl Rcc {
     fn write(&mut self, off: u32, v: u32, now: Ticks) {
         match off {
             0x00 => {
-                let rw = 0x0109_00F9; // HSION, HSITRIM, HSEON, HSEBYP, CSSON, PLLON
+                // HSION, HSITRIM, HSEON, HSEBYP, CSSON, PLLON; HSEBYP "can be
+                // written only if the HSE oscillator is disabled" (§7.3.1).
                 let old = self.cr;
+                let rw = if old & CR_HSEON == 0 {
+                    0x010D_00F9
+                } else {
+                    0x0109_00F9
+                };
                 self.cr = (self.cr & !rw) | (v & rw);
                 if self.cr & (1 << 16) != 0 && old & (1 << 16) == 0 {
                     self.hse_on_at = Some(now);
@@ -383,8 +402,11 @@ impl FlashCtl {
             0x0C => self.sr,
             0x10 => self.cr,
             0x14 => self.ar,
-            0x1C => 0x03FF_FFFC & 0x1C, // OBR: RDPRT off, software watchdog, nRST_STOP/STDBY
-            0x20 => 0xFFFF_FFFF,        // WRPR: no page write-protected
+            // OBR (PM0075, FLASH_OBR: reset value 0x03FF FFFC): the
+            // option bytes as ST delivers the chip: RDPRT off, software
+            // watchdog, no reset in Stop/Standby, Data0 = Data1 = 0xFF.
+            0x1C => 0x03FF_FFFC,
+            0x20 => 0xFFFF_FFFF, // WRPR: no page write-protected
             _ => 0,
         }
     }
@@ -628,7 +650,8 @@ impl Timer {
         }
         let elapsed = now - self.t + self.frac;
         self.t = now;
-        if !self.running() {
+        if !self.running() || clk_hz == 0 {
+            // Stopped, or no clock (RCC enable bit off, held in reset).
             self.frac = 0;
             return;
         }
@@ -685,7 +708,7 @@ impl Timer {
 
     /// Time of the next update event, if the counter runs.
     fn next_update(&self, clk_hz: u64) -> Ticks {
-        if !self.running() || self.arr_act == 0 {
+        if !self.running() || self.arr_act == 0 || clk_hz == 0 {
             return NEVER;
         }
         let div = u64::from(self.psc_act) + 1;
@@ -995,6 +1018,15 @@ impl Usart {
         self.line_log = log;
     }
 
+    /// An APB reset pulse (RCC_APBxRSTR): the registers back to their
+    /// reset values; bytes already on their way on the RX line still come
+    /// (the line is outside the chip).
+    fn peripheral_reset(&mut self) {
+        let line = std::mem::take(&mut self.rx_line);
+        self.reset();
+        self.rx_line = line;
+    }
+
     fn log(&mut self, e: LineEvent) {
         if self.record {
             self.line_log.push(e);
@@ -1013,6 +1045,10 @@ impl Usart {
     }
 
     fn advance(&mut self, now: Ticks, pclk: u64) {
+        if pclk == 0 {
+            // No clock (RCC enable bit off, held in reset): nothing moves.
+            return;
+        }
         // Transmitter.
         while let Some((b, done)) = self.tx_shift {
             if done > now {
@@ -1137,81 +1173,179 @@ impl Usart {
 // IWDG (RM0008 §19)
 // ---------------------------------------------------------------------------
 
-/// The independent watchdog.
+/// The independent watchdog. Its counter and its copies of PR and RLR live
+/// in the LSI (VDD) domain: a write to PR or RLR reaches them "up to 5 RC
+/// 40 kHz cycles" later, meanwhile IWDG_SR shows PVU or RVU and the
+/// register cannot be written again (RM0008 §19.4.4). The twin takes the
+/// five LSI cycles in full, counted from the write or from the LSI's
+/// start-up (DS5319 tSU(LSI)), whichever is later.
 #[derive(Clone, Debug)]
 pub struct Iwdg {
-    /// PR.
+    /// PR in force.
     pub pr: u32,
-    /// RLR.
+    /// RLR in force.
     pub rlr: u32,
+    /// A PR write on its way to the LSI domain: (value, written at).
+    pending_pr: Option<(u32, Ticks)>,
+    /// An RLR write on its way: (value, written at).
+    pending_rlr: Option<(u32, Ticks)>,
     /// Started (0xCCCC), cannot be stopped.
     pub running: bool,
     /// When it was started (the first 0xCCCC key).
     pub started_at: Option<Ticks>,
     unlocked: bool,
-    /// When the counter was last reloaded.
-    reloaded_at: Ticks,
+    /// The counter's value at `count_from`; it counts down from there, one
+    /// step every 4·2^PR LSI cycles.
+    count: u32,
+    count_from: Ticks,
+    /// When the LSI runs (after its start-up time), if it is on.
+    pub lsi_ready_at: Option<Ticks>,
     /// LSI frequency, Hz (30..60 kHz on the F103; 40 kHz nominal).
     pub lsi_hz: u64,
 }
+
+/// LSI cycles a PR or RLR update takes to reach the LSI domain (RM0008
+/// §19.4.4: "up to 5").
+const IWDG_UPDATE_LSI_CYCLES: u64 = 5;
 
 impl Iwdg {
     fn new(lsi_hz: u64) -> Self {
         Self {
             pr: 0,
             rlr: 0xFFF,
+            pending_pr: None,
+            pending_rlr: None,
             running: false,
             started_at: None,
             unlocked: false,
-            reloaded_at: 0,
+            count: 0xFFF,
+            count_from: 0,
+            lsi_ready_at: None,
             lsi_hz,
         }
     }
 
+    fn lsi_cycle(&self) -> Ticks {
+        TICKS_PER_S / self.lsi_hz.max(1)
+    }
+
+    /// One count of the counter at prescaler `pr`: 4·2^PR LSI cycles.
+    fn count_ticks(&self, pr: u32) -> Ticks {
+        (4u64 << pr.min(6)) * self.lsi_cycle()
+    }
+
     /// The timeout from a reload: (RLR + 1) × 4·2^PR LSI periods.
     pub fn timeout_ticks(&self) -> Ticks {
-        let div = 4u64 << self.pr.min(6);
-        (u64::from(self.rlr) + 1) * div * TICKS_PER_S / self.lsi_hz
+        (u64::from(self.rlr) + 1) * self.count_ticks(self.pr)
+    }
+
+    /// When an update written at `at` reaches the LSI domain.
+    fn update_done(&self, at: Ticks) -> Ticks {
+        self.lsi_ready_at.map_or(NEVER, |r| {
+            at.max(r) + IWDG_UPDATE_LSI_CYCLES * self.lsi_cycle()
+        })
+    }
+
+    /// The counter's value at `t` (≥ `count_from`).
+    fn count_at(&self, t: Ticks) -> u32 {
+        let steps = t.saturating_sub(self.count_from) / self.count_ticks(self.pr);
+        self.count
+            .saturating_sub(steps.min(u64::from(u32::MAX)) as u32)
+    }
+
+    /// Applies the updates that have reached the LSI domain by `now`.
+    fn settle(&mut self, now: Ticks) {
+        loop {
+            let pr_done = self.pending_pr.map(|(_, at)| self.update_done(at));
+            let rlr_done = self.pending_rlr.map(|(_, at)| self.update_done(at));
+            match (pr_done, rlr_done) {
+                (Some(p), r) if p <= now && r.is_none_or(|r| p <= r) => {
+                    // The counter goes on from where it is, at the new rate.
+                    if self.running {
+                        self.count = self.count_at(p);
+                        self.count_from = p;
+                    }
+                    self.pr = self.pending_pr.take().map_or(self.pr, |(v, _)| v);
+                }
+                (_, Some(r)) if r <= now => {
+                    self.rlr = self.pending_rlr.take().map_or(self.rlr, |(v, _)| v);
+                }
+                _ => return,
+            }
+        }
+    }
+
+    /// The LSI started (or stopped) at `ready` (its start-up included).
+    pub(crate) fn set_lsi_ready(&mut self, ready: Option<Ticks>, now: Ticks) {
+        self.settle(now);
+        self.lsi_ready_at = ready;
     }
 
     /// When the counter reaches 0 (a system reset).
     pub fn expires_at(&self) -> Ticks {
-        if self.running {
-            self.reloaded_at + self.timeout_ticks()
-        } else {
-            NEVER
+        if !self.running {
+            return NEVER;
+        }
+        let naive = self.count_from + (u64::from(self.count) + 1) * self.count_ticks(self.pr);
+        match self.pending_pr {
+            Some((v, at)) => {
+                let done = self.update_done(at);
+                if done < naive {
+                    let left = u64::from(self.count_at(done)) + 1;
+                    done + left * self.count_ticks(v)
+                } else {
+                    naive
+                }
+            }
+            None => naive,
         }
     }
 
     fn write(&mut self, off: u32, v: u32, now: Ticks) {
+        self.settle(now);
+        let from = self.lsi_ready_at.map_or(now, |r| r.max(now));
         match off {
             0x00 => match v & 0xFFFF {
                 0x5555 => self.unlocked = true,
                 0xAAAA => {
-                    self.reloaded_at = now;
+                    self.count = self.rlr;
+                    self.count_from = from;
                     self.unlocked = false;
                 }
                 0xCCCC => {
                     if !self.running {
+                        // The counter starts from its reset value 0xFFF
+                        // (§19.3) once the LSI runs (the bus starts it).
                         self.running = true;
                         self.started_at = Some(now);
-                        self.reloaded_at = now;
+                        self.count = 0xFFF;
+                        self.count_from = from;
                     }
                     self.unlocked = false;
                 }
                 _ => self.unlocked = false,
             },
-            0x04 if self.unlocked => self.pr = v & 7,
-            0x08 if self.unlocked => self.rlr = v & 0xFFF,
+            // "Prescaler value can be updated only when PVU bit is reset".
+            0x04 if self.unlocked && self.pending_pr.is_none() => {
+                self.pending_pr = Some((v & 7, now));
+            }
+            0x08 if self.unlocked && self.pending_rlr.is_none() => {
+                self.pending_rlr = Some((v & 0xFFF, now));
+            }
             _ => {}
         }
     }
 
-    fn read(&self, off: u32) -> u32 {
+    fn read(&mut self, off: u32, now: Ticks) -> u32 {
+        self.settle(now);
         match off {
             0x04 => self.pr,
             0x08 => self.rlr,
-            _ => 0, // SR: updates complete at once
+            // SR: PVU, RVU while an update is on its way.
+            0x0C => {
+                u32::from(self.pending_pr.is_some()) | u32::from(self.pending_rlr.is_some()) << 1
+            }
+            _ => 0,
         }
     }
 }
@@ -1245,6 +1379,14 @@ impl SysTick {
     /// CVR now (after an advance).
     pub fn val(&self) -> u32 {
         self.val
+    }
+
+    /// CSR (COUNTFLAG included, not cleared) and CVR as they are at `now`,
+    /// without touching the timer (a debugger's read).
+    pub fn peek(&self, now: Ticks, c: &Clocks) -> (u32, u32) {
+        let mut st = self.clone();
+        st.advance(now, c);
+        (st.ctrl | u32::from(st.countflag) << 16, st.val)
     }
 
     /// CSR written: counting restarts from the current value.
@@ -1400,6 +1542,68 @@ pub struct Bus {
     traced: Vec<(usize, u32, Level)>,
     /// The recorded level changes of the traced pins, in time order.
     pub pin_log: Vec<PinEvent>,
+    /// When the LSI was switched on (by LSION or by starting the IWDG).
+    lsi_on_at: Option<Ticks>,
+    /// Writes the silicon ignores because the peripheral's clock is off
+    /// or it is held in reset (the first [`DROPPED_WRITES_KEPT`]).
+    pub dropped_writes: Vec<DroppedWrite>,
+}
+
+/// How many dropped writes [`Bus::dropped_writes`] keeps.
+pub const DROPPED_WRITES_KEPT: usize = 256;
+
+/// A write to a peripheral whose clock was off (RM0008 §7.3.6–§7.3.8) or
+/// that was held in reset (§7.3.4, §7.3.5): the chip ignores it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DroppedWrite {
+    /// When.
+    pub at: Ticks,
+    /// The register's address.
+    pub addr: u32,
+    /// The value written.
+    pub value: u32,
+}
+
+/// The RCC bits that clock and reset a peripheral (RM0008 §7.3.4–§7.3.8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gate {
+    /// Bit n of APB1ENR and APB1RSTR.
+    Apb1(u32),
+    /// Bit n of APB2ENR and APB2RSTR.
+    Apb2(u32),
+    /// Bit n of AHBENR (no reset register on the medium-density parts).
+    Ahb(u32),
+}
+
+/// The clock gate of the peripheral at `base`; `None` for those with no
+/// enable bit (RCC, FLASH interface, IWDG, EXTI, the core's registers).
+pub fn gate(base: u32) -> Option<Gate> {
+    use Gate::*;
+    Some(match base {
+        addr::TIM2 => Apb1(0),
+        addr::TIM3 => Apb1(1),
+        addr::TIM4 => Apb1(2),
+        0x4000_2C00 => Apb1(11), // WWDG
+        0x4000_3800 => Apb1(14), // SPI2
+        addr::USART2 => Apb1(17),
+        0x4000_4800 => Apb1(18), // USART3
+        0x4000_5400 => Apb1(21), // I2C1
+        0x4000_5800 => Apb1(22), // I2C2
+        0x4000_5C00 => Apb1(23), // USB
+        0x4000_6400 => Apb1(25), // CAN
+        0x4000_6C00 => Apb1(27), // BKP
+        0x4000_7000 => Apb1(28), // PWR
+        addr::AFIO => Apb2(0),
+        0x4001_0800..=0x4001_1800 => Apb2(2 + (base - addr::GPIOA) / 0x400),
+        0x4001_2400 => Apb2(9),  // ADC1
+        0x4001_2800 => Apb2(10), // ADC2
+        addr::TIM1 => Apb2(11),
+        0x4001_3000 => Apb2(12), // SPI1
+        addr::USART1 => Apb2(14),
+        0x4002_0000 => Ahb(0), // DMA1
+        0x4002_3000 => Ahb(6), // CRC
+        _ => return None,
+    })
 }
 
 /// A traced pin's level change (a GPIO register write or a reset changed
@@ -1476,6 +1680,96 @@ impl Bus {
             clock_stopped: false,
             traced: Vec::new(),
             pin_log: Vec::new(),
+            lsi_on_at: None,
+            dropped_writes: Vec::new(),
+        }
+    }
+
+    /// Whether the peripheral at `base` has its clock (RM0008 §7.3.6–§7.3.8:
+    /// "When the peripheral clock is not active, the peripheral register
+    /// values may not be readable by software and the returned value is
+    /// always 0x0"; writes are ignored).
+    pub fn clock_enabled(&self, base: u32) -> bool {
+        match gate(base) {
+            Some(Gate::Apb1(b)) => self.rcc.apb1enr & (1 << b) != 0,
+            Some(Gate::Apb2(b)) => self.rcc.apb2enr & (1 << b) != 0,
+            Some(Gate::Ahb(b)) => self.rcc.ahbenr & (1 << b) != 0,
+            None => true,
+        }
+    }
+
+    /// Whether the peripheral at `base` is held in reset by its APBxRSTR bit.
+    pub fn held_in_reset(&self, base: u32) -> bool {
+        match gate(base) {
+            Some(Gate::Apb1(b)) => self.rcc.apb1rstr & (1 << b) != 0,
+            Some(Gate::Apb2(b)) => self.rcc.apb2rstr & (1 << b) != 0,
+            _ => false,
+        }
+    }
+
+    /// Whether the peripheral at `base` runs (clocked, not held in reset).
+    fn active(&self, base: u32) -> bool {
+        match gate(base) {
+            Some(Gate::Apb1(b)) => self.apb_active(false, b),
+            Some(Gate::Apb2(b)) => self.apb_active(true, b),
+            Some(Gate::Ahb(b)) => self.rcc.ahbenr & (1 << b) != 0,
+            None => true,
+        }
+    }
+
+    /// Returns every peripheral whose APBxRSTR bit is set to its reset
+    /// values (RM0008 §7.3.4, §7.3.5); it stays there while the bit is set.
+    fn apply_peripheral_resets(&mut self, now: Ticks) {
+        for (i, base) in [addr::TIM1, addr::TIM2, addr::TIM3, addr::TIM4]
+            .into_iter()
+            .enumerate()
+        {
+            if self.held_in_reset(base) {
+                self.tim[i].reset(now);
+            }
+        }
+        for (i, base) in [addr::USART1, addr::USART2].into_iter().enumerate() {
+            if self.held_in_reset(base) {
+                self.usart[i].peripheral_reset();
+            }
+        }
+        for p in 0..5 {
+            if self.held_in_reset(addr::GPIOA + 0x400 * p as u32) {
+                self.gpio[p] = Gpio::new();
+            }
+        }
+        if self.held_in_reset(addr::AFIO) {
+            self.afio = Afio::default();
+        }
+        self.check_traced(now);
+    }
+
+    /// The LSI runs while LSION is set or the IWDG runs (RM0008 §7.2.5,
+    /// §19.3: starting the IWDG starts the LSI that clocks it); `iwdg_starting` for the
+    /// 0xCCCC key being written now.
+    fn sync_lsi(&mut self, now: Ticks, iwdg_starting: bool) {
+        let on = self.rcc.csr & 1 != 0 || self.iwdg.running || iwdg_starting;
+        if !on {
+            self.lsi_on_at = None;
+        } else if self.lsi_on_at.is_none() {
+            self.lsi_on_at = Some(now);
+        }
+        let ready = self.lsi_on_at.map(|t| t + LSI_STARTUP);
+        self.iwdg.set_lsi_ready(ready, now);
+    }
+
+    /// LSIRDY (RCC_CSR bit 1): the LSI has run for its start-up time.
+    fn lsi_ready(&self, now: Ticks) -> bool {
+        self.lsi_on_at.is_some_and(|t| now >= t + LSI_STARTUP)
+    }
+
+    fn drop_write(&mut self, a: u32, v: u32, now: Ticks) {
+        if self.dropped_writes.len() < DROPPED_WRITES_KEPT {
+            self.dropped_writes.push(DroppedWrite {
+                at: now,
+                addr: a,
+                value: v,
+            });
         }
     }
 
@@ -1535,6 +1829,7 @@ impl Bus {
         self.dbgmcu_cr = 0;
         self.clock_stopped = false;
         self.flash_cmd = None;
+        self.lsi_on_at = None;
         self.check_traced(now);
     }
 
@@ -1578,27 +1873,72 @@ impl Bus {
         }
     }
 
+    /// TIMx's kernel clock, 0 while its RCC clock is off or it is held in
+    /// reset (the counter stands still).
     fn tim_clk(&self, i: usize) -> u64 {
-        let c = self.clocks();
-        if i == 0 {
-            c.tim_apb2
-        } else {
-            c.tim_apb1
+        self.tim_clk_in(i, &self.clocks())
+    }
+
+    /// [`Bus::tim_clk`] with the clock tree given.
+    fn tim_clk_in(&self, i: usize, c: &Clocks) -> u64 {
+        // TIM1: APB2 bit 11; TIM2..TIM4: APB1 bits 0..2 (RM0008 §7.3.4–§7.3.8).
+        let on = match i {
+            0 => self.apb_active(true, 11),
+            _ => self.apb_active(false, i as u32 - 1),
+        };
+        match (on, i) {
+            (false, _) => 0,
+            (true, 0) => c.tim_apb2,
+            (true, _) => c.tim_apb1,
         }
+    }
+
+    /// USARTn's PCLK, 0 while its clock is off or it is held in reset.
+    fn usart_clk(&self, i: usize) -> u64 {
+        self.usart_clk_in(i, &self.clocks())
+    }
+
+    /// [`Bus::usart_clk`] with the clock tree given.
+    fn usart_clk_in(&self, i: usize, c: &Clocks) -> u64 {
+        // USART1: APB2 bit 14; USART2: APB1 bit 17.
+        match i {
+            0 if self.apb_active(true, 14) => c.pclk2,
+            1 if self.apb_active(false, 17) => c.pclk1,
+            _ => 0,
+        }
+    }
+
+    /// Bit `bit` of APB2ENR (`apb2`) or APB1ENR set and of the matching
+    /// reset register clear.
+    fn apb_active(&self, apb2: bool, bit: u32) -> bool {
+        let (en, rst) = if apb2 {
+            (self.rcc.apb2enr, self.rcc.apb2rstr)
+        } else {
+            (self.rcc.apb1enr, self.rcc.apb1rstr)
+        };
+        (en & !rst) >> bit & 1 != 0
     }
 
     /// Brings the model behind `base` up to `now` before a register access
     /// (the others are advanced by the scheduler; a GPIO access advances
     /// all, for the AF outputs and EXTI).
     fn advance_for(&mut self, base: u32, now: Ticks) {
-        let c = self.clocks();
         match base {
-            addr::TIM1 => self.tim[0].advance(now, c.tim_apb2),
-            addr::TIM2 => self.tim[1].advance(now, c.tim_apb1),
-            addr::TIM3 => self.tim[2].advance(now, c.tim_apb1),
-            addr::TIM4 => self.tim[3].advance(now, c.tim_apb1),
-            addr::USART1 => self.usart[0].advance(now, c.pclk2),
-            addr::USART2 => self.usart[1].advance(now, c.pclk1),
+            addr::TIM1 | addr::TIM2 | addr::TIM3 | addr::TIM4 => {
+                let i = match base {
+                    addr::TIM1 => 0,
+                    addr::TIM2 => 1,
+                    addr::TIM3 => 2,
+                    _ => 3,
+                };
+                let clk = self.tim_clk(i);
+                self.tim[i].advance(now, clk);
+            }
+            addr::USART1 | addr::USART2 => {
+                let i = usize::from(base == addr::USART2);
+                let clk = self.usart_clk(i);
+                self.usart[i].advance(now, clk);
+            }
             addr::RCC => self.rcc.update_switch(now),
             addr::FLASH | addr::IWDG | addr::AFIO | addr::EXTI => {}
             _ => self.advance(now),
@@ -1618,11 +1958,13 @@ impl Bus {
         }
         let c = self.clocks();
         for i in 0..4 {
-            let clk = self.tim_clk(i);
+            let clk = self.tim_clk_in(i, &c);
             self.tim[i].advance(now, clk);
         }
-        self.usart[0].advance(now, c.pclk2);
-        self.usart[1].advance(now, c.pclk1);
+        for i in 0..2 {
+            let clk = self.usart_clk_in(i, &c);
+            self.usart[i].advance(now, clk);
+        }
         self.systick.advance(now, &c);
         self.rcc.update_switch(now);
         self.sample_exti();
@@ -1639,11 +1981,13 @@ impl Bus {
         for i in 0..4 {
             let tim = &self.tim[i];
             if tim.dier & 1 != 0 {
-                t = t.min(tim.next_update(self.tim_clk(i)));
+                t = t.min(tim.next_update(self.tim_clk_in(i, &c)));
             }
         }
-        for u in &self.usart {
-            t = t.min(u.next_event());
+        for (i, u) in self.usart.iter().enumerate() {
+            if self.usart_clk_in(i, &c) != 0 {
+                t = t.min(u.next_event());
+            }
         }
         t = t.min(self.systick.next_event(&c));
         if self.rcc.cr & (1 << 16) != 0 && !self.rcc.hse_dead {
@@ -1775,6 +2119,9 @@ impl Bus {
     /// `filter` says whether the capture is taken after the IC1F delay.
     pub fn hall_edge(&mut self, now: Ticks) {
         self.advance(now);
+        if self.tim_clk(1) == 0 {
+            return;
+        }
         let t = &self.tim[1];
         let falling = t.ccer & 2 != 0;
         if falling {
@@ -1787,12 +2134,15 @@ impl Bus {
         let off = a & 0x3FF;
         let base = a & !0x3FF;
         self.advance_for(base, now);
+        if !self.clock_enabled(base) {
+            return 0;
+        }
         match base {
             addr::TIM2 => self.tim[1].read(off),
             addr::TIM3 => self.tim[2].read(off),
             addr::TIM4 => self.tim[3].read(off),
             addr::TIM1 => self.tim[0].read(off),
-            addr::IWDG => self.iwdg.read(off),
+            addr::IWDG => self.iwdg.read(off, now),
             addr::USART2 => self.usart[1].read(off),
             addr::USART1 => self.usart[0].read(off),
             addr::AFIO => match off {
@@ -1828,7 +2178,14 @@ impl Bus {
                     _ => 0,
                 }
             }
-            addr::RCC => self.rcc.read(off, now),
+            addr::RCC => {
+                let v = self.rcc.read(off, now);
+                if off == 0x24 && self.lsi_ready(now) {
+                    v | 0x2
+                } else {
+                    v
+                }
+            }
             addr::FLASH => self.flash.read(off),
             _ => {
                 self.unmodelled.push((a, false));
@@ -1842,13 +2199,23 @@ impl Bus {
         let off = a & 0x3FF;
         let base = a & !0x3FF;
         self.advance_for(base, now);
+        if !self.active(base) {
+            self.drop_write(a, v, now);
+            return;
+        }
         let c = self.clocks();
         match base {
             addr::TIM2 => self.tim[1].write(off, v),
             addr::TIM3 => self.tim[2].write(off, v),
             addr::TIM4 => self.tim[3].write(off, v),
             addr::TIM1 => self.tim[0].write(off, v),
-            addr::IWDG => self.iwdg.write(off, v, now),
+            addr::IWDG => {
+                let starting = off == 0 && v & 0xFFFF == 0xCCCC;
+                if starting {
+                    self.sync_lsi(now, true);
+                }
+                self.iwdg.write(off, v, now);
+            }
             addr::USART2 => self.usart[1].write(off, v, now, c.pclk1),
             addr::USART1 => self.usart[0].write(off, v, now, c.pclk2),
             addr::AFIO => match off {
@@ -1884,7 +2251,17 @@ impl Bus {
                 }
                 self.check_traced(now);
             }
-            addr::RCC => self.rcc.write(off, v, now),
+            addr::RCC => {
+                // Everything up to now on the clocks, enables and resets in
+                // force before the write.
+                self.advance(now);
+                self.rcc.write(off, v, now);
+                match off {
+                    0x0C | 0x10 => self.apply_peripheral_resets(now),
+                    0x24 => self.sync_lsi(now, false),
+                    _ => {}
+                }
+            }
             addr::FLASH => {
                 if let Some(cmd) = self.flash.write(off, v) {
                     self.flash_cmd = Some(cmd);

@@ -17,7 +17,7 @@ use std::collections::VecDeque;
 
 use machine_sim::{Inputs, Machine};
 
-use crate::periph::{Bus, Level, Ticks, NEVER, TICKS_PER_S};
+use crate::periph::{addr, Bus, Level, Ticks, NEVER, TICKS_PER_S};
 
 /// Model step, µs.
 pub const STEP_US: u32 = 1000;
@@ -138,6 +138,10 @@ impl Plant {
     fn apply_count(&mut self, count: u16, bus: &mut Bus) {
         let delta = count.wrapping_sub(self.last_count) as i16;
         self.last_count = count;
+        // TIM3 counts only with its clock on (RM0008 §7.3.8) and out of reset.
+        if !bus.clock_enabled(addr::TIM3) || bus.held_in_reset(addr::TIM3) {
+            return;
+        }
         let tim3 = &mut bus.tim[2];
         let mode = tim3.encoder_mode();
         if mode == 0 || tim3.cr1 & 1 == 0 {

@@ -6,7 +6,7 @@
 //! cargo xtask report CAPTURE.txt   a field capture (probe-rs run's decoded defmt) into a run report
 //! cargo xtask test                 all host tests, then the firmware in QEMU driven from tests/
 //! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
-//! cargo xtask size                 flash and RAM of both boards against their budgets
+//! cargo xtask size                 flash, RAM and the static stack worst case of every image
 //! cargo xtask flash                build and flash a real board with probe-rs
 //! cargo xtask bench [--only NAME]  regenerate docs/PERFORMANCE.md (QEMU instruction counts, sizes);
 //!                                  NAME: tables, placement, link, row (one section, into target/)
@@ -23,21 +23,19 @@ use qemu_tests::{images, workspace_root, BootOptions};
 mod bench;
 mod plan;
 mod report;
+mod stack;
 
 type Result<T = ()> = std::result::Result<T, String>;
 
 const TARGET: &str = "thumbv7m-none-eabi";
 
-/// Flash and static-RAM budgets of each real-board image: 56 KB of flash, so
-/// that an image fits a 64 KB STM32F103C8 beside the 8 KB of settings pages
-/// (the developers' guide; where the bytes are: docs/firmware.md, "Memory
-/// and flash").
-const STM32F103_FLASH_BUDGET: u64 = 56 * 1024;
+/// Flash and static-RAM budgets of the real-board images without the drive
+/// link: the 128 KB parts (RB, CB) less the 8 KB of settings pages kept at
+/// 0x0800E000 and the last 8 KB (memory-stm32f103.x: 56 KB of code below
+/// the settings pages, 56 KB above; the linker holds each part to its
+/// region). Where the bytes are: docs/firmware.md, "Memory and flash".
+const STM32F103_FLASH_BUDGET: u64 = 112 * 1024;
 const STM32F103_RAM_BUDGET: u64 = 8 * 1024;
-/// The QEMU board has 8 KB of RAM in all; statics must leave room for the
-/// stack (interrupt frames of four priority levels plus the async tasks).
-const QEMU_RAM_SIZE: u64 = 8 * 1024;
-const QEMU_STACK_RESERVE: u64 = 2 * 1024;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -101,8 +99,8 @@ enum Board {
     Stm32f103,
     Stm32f103ProfileB,
     /// Profile A with the drum driver's link (feature `drive-link`), linked
-    /// for the 128 KB parts: it does not fit the C8's 56 KB yet
-    /// (docs/drive-link.md, "Images").
+    /// with its settings in the last 8 KB of the 128 KB parts
+    /// (memory-stm32f103-128k.x; docs/drive-link.md, "Images").
     Stm32f103DriveLink,
     Qemu,
 }
@@ -157,6 +155,22 @@ impl Board {
         images::elf_path(self.image_name())
     }
 
+    /// The chip it runs on, for the stack analysis: its RAM (the board's
+    /// `memory*.x`) and the NVIC's priority bits.
+    fn chip(self) -> stack::Chip {
+        // Both boards have the RB's 20 KB (the QEMU board's memory-qemu.x
+        // lays out netduino2's RAM like the RB's).
+        stack::Chip {
+            ram: 0x2000_0000..0x2000_0000 + 20 * 1024,
+            nvic_prio_bits: 4,
+            // The QEMU board's injected stack overflow (`stack_overflow=T`).
+            overflow_on_purpose: match self {
+                Board::Qemu => &["board::qemu::exhaust_stack"],
+                _ => &[],
+            },
+        }
+    }
+
     fn build(self) -> Result<PathBuf> {
         let what = format!("build firmware, board {}", self.name());
         let lock = images::lock().map_err(|e| format!("{what}: {e}"))?;
@@ -200,7 +214,60 @@ fn ensure_tools() -> Result {
         )?;
     }
     ensure_twin_tools()?;
+    ensure_peer_tools()?;
     ensure_linker()
+}
+
+/// The pymodbus release the independent ZLAC8015D peer is written for
+/// (tests/peers/zlac8015d).
+const PYMODBUS: &str = "pymodbus[serial]==3.16.1";
+
+/// Whether python3 has pymodbus 3.16.1 and pyserial (the peer's serial
+/// server).
+fn have_pymodbus() -> bool {
+    Command::new("python3")
+        .args([
+            "-c",
+            "import sys, serial, pymodbus; sys.exit(pymodbus.__version__ != '3.16.1')",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// The drive link's conformance test (crates/supervisor/tests/conformance.rs)
+/// runs the master against an independent Modbus RTU slave on a pty pair:
+/// `socat` (Debian's package) and pymodbus (PyPI), installed here when
+/// missing.
+fn ensure_peer_tools() -> Result {
+    let socat = Command::new("socat")
+        .arg("-V")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok();
+    if !socat {
+        apt_install(&["socat"], "the drive link's conformance test")?;
+    }
+    if have_pymodbus() {
+        return Ok(());
+    }
+    let pip = |extra: &[&str]| {
+        Command::new("python3")
+            .args(["-m", "pip", "install", "--quiet"])
+            .args(extra)
+            .arg(PYMODBUS)
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    // Debian's own python3 refuses pip outside a venv (PEP 668) unless told.
+    if (pip(&[]) || pip(&["--break-system-packages"])) && have_pymodbus() {
+        return Ok(());
+    }
+    Err(format!(
+        "the drive link's conformance test needs `python3 -m pip install '{PYMODBUS}'`"
+    ))
 }
 
 /// Whether a file name is one that bindgen (clang-sys) loads as libclang.
@@ -331,7 +398,7 @@ fn qemu(args: &[String]) -> Result {
     let elf = Board::Qemu.build()?;
     std::env::set_var("FIRMWARE_QEMU_ELF", &elf);
     eprintln!(
-        "xtask: the firmware in qemu-system-arm -machine stm32vldiscovery for {seconds} s of \
+        "xtask: the firmware in qemu-system-arm -machine netduino2 for {seconds} s of \
          firmware time, against the simulated machine (Low 2, a +10 % travel-speed change at \
          {} s), with a virtual touchscreen on USART1",
         seconds / 2
@@ -402,6 +469,9 @@ fn qemu(args: &[String]) -> Result {
         .wait_exit(Duration::from_secs(30))
         .map_err(|e| e.to_string())?;
     let report = write_qemu_report(&logs, seconds)?;
+    // The run's measured stack depth against the static analysis.
+    let stack = stack::analyse(&elf, &llvm_tool("llvm-objdump")?, &Board::Qemu.chip())?;
+    eprintln!("xtask: {}", stack::check_measured(&stack, &logs)?);
     if status.success() && logs.iter().any(|l| l.contains("drum: Running")) {
         eprintln!("xtask: the firmware ended its run: {status}");
         eprintln!("xtask: run report (open it in a browser):");
@@ -751,6 +821,67 @@ fn check_forbidden_symbols(elf: &Path) -> Result {
     Ok(())
 }
 
+/// The settings pages of the images without the drive link
+/// (memory-stm32f103.x), which boards in the field already hold.
+const STM32F103_SETTINGS_PAGES: std::ops::Range<u64> = 0x0800_E000..0x0801_0000;
+
+/// The loaded bytes of an ELF (`PT_LOAD` with file bytes): load address
+/// and length, from `llvm-readobj -l` (rustup's llvm-tools).
+fn loaded_ranges(elf: &Path) -> Result<Vec<std::ops::Range<u64>>> {
+    let readobj = llvm_tool("llvm-readobj")?;
+    let out = Command::new(&readobj)
+        .args(["--elf-output-style=GNU", "-l"])
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("{}: {e}", readobj.display()))?;
+    if !out.status.success() {
+        return Err(format!("llvm-readobj failed on {}", elf.display()));
+    }
+    let hex = |w: &str| u64::from_str_radix(w.trim_start_matches("0x"), 16).ok();
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| {
+            // LOAD  Offset VirtAddr PhysAddr FileSiz MemSiz Flg Align
+            let w: Vec<&str> = l.split_whitespace().collect();
+            let (paddr, filesz) = match w.as_slice() {
+                ["LOAD", _, _, p, f, ..] => (hex(p)?, hex(f)?),
+                _ => return None,
+            };
+            (filesz > 0).then(|| paddr..paddr.saturating_add(filesz))
+        })
+        .collect())
+}
+
+/// The first loaded range that falls on `pages`: flashing the image would
+/// erase what they hold (probe-rs and cargo-flash erase every page a
+/// segment covers).
+fn on_pages(
+    loaded: &[std::ops::Range<u64>],
+    pages: &std::ops::Range<u64>,
+) -> Option<std::ops::Range<u64>> {
+    loaded
+        .iter()
+        .find(|r| r.start < pages.end && pages.start < r.end)
+        .cloned()
+}
+
+/// An image without the link must leave the settings pages unflashed.
+fn check_settings_pages_kept(elf: &Path) -> Result {
+    match on_pages(&loaded_ranges(elf)?, &STM32F103_SETTINGS_PAGES) {
+        Some(r) => Err(format!(
+            "{}: loaded bytes {:#010x}..{:#010x} fall on the settings pages \
+             {:#010x}..{:#010x}: flashing it would erase a board's settings \
+             (memory-stm32f103.x)",
+            elf.display(),
+            r.start,
+            r.end,
+            STM32F103_SETTINGS_PAGES.start,
+            STM32F103_SETTINGS_PAGES.end
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Section sizes of an ELF, from `llvm-size -A` (rustup's llvm-tools).
 fn sections(elf: &Path) -> Result<Vec<(String, u64)>> {
     let llvm_size = llvm_tool("llvm-size")?;
@@ -785,7 +916,9 @@ fn footprint(elf: &Path) -> Result<(u64, u64)> {
     let mut ram = 0;
     for (name, size) in sections(elf)? {
         match name.as_str() {
-            ".vector_table" | ".text" | ".rodata" | ".gnu.sgstubs" => flash += size,
+            // `.upper_text`: the code above the settings pages
+            // (memory-stm32f103.x).
+            ".vector_table" | ".text" | ".upper_text" | ".rodata" | ".gnu.sgstubs" => flash += size,
             ".data" => {
                 flash += size;
                 ram += size;
@@ -812,7 +945,8 @@ fn size() -> Result {
             }
             // The 128 KB parts' 120 KB (their last 8 KB hold the settings).
             Board::Stm32f103DriveLink => (120 * 1024, STM32F103_RAM_BUDGET),
-            Board::Qemu => (120 * 1024, QEMU_RAM_SIZE - QEMU_STACK_RESERVE),
+            // The QEMU board has the real board's RAM (memory-qemu.x).
+            Board::Qemu => (120 * 1024, STM32F103_RAM_BUDGET),
         };
         println!(
             "| {} | {flash} B | {flash_budget} B | {ram} B | {ram_budget} B |",
@@ -828,11 +962,29 @@ fn size() -> Result {
             over.push(format!("{}: RAM {ram} B > {ram_budget} B", board.name()));
         }
     }
+    let objdump = llvm_tool("llvm-objdump")?;
+    for board in Board::ALL {
+        let elf = board.elf();
+        let started = Instant::now();
+        let report = stack::analyse(&elf, &objdump, &board.chip())
+            .map_err(|e| format!("stack analysis, board {}: {e}", board.name()))?;
+        println!(
+            "\n### Stack: {} ({:.1} s)\n\n{}",
+            board.name(),
+            started.elapsed().as_secs_f64(),
+            report.table()
+        );
+        if let Err(e) = report.check_margin() {
+            over.push(format!("{}: {e}", board.name()));
+        }
+    }
     if !over.is_empty() {
         return Err(format!("over budget: {}", over.join("; ")));
     }
     check_forbidden_symbols(&Board::Stm32f103.elf())?;
     check_forbidden_symbols(&Board::Stm32f103ProfileB.elf())?;
+    check_settings_pages_kept(&Board::Stm32f103.elf())?;
+    check_settings_pages_kept(&Board::Stm32f103ProfileB.elf())?;
     check_forbidden_symbols(&Board::Stm32f103DriveLink.elf())
 }
 
@@ -858,7 +1010,24 @@ fn flash() -> Result {
 
 #[cfg(test)]
 mod tests {
-    use super::is_libclang;
+    use super::{is_libclang, on_pages, STM32F103_SETTINGS_PAGES};
+
+    /// Loaded bytes next to the settings pages pass; one byte on them, at
+    /// either end, is found.
+    #[test]
+    fn loaded_bytes_on_the_settings_pages_are_found() {
+        let pages = STM32F103_SETTINGS_PAGES;
+        let below = 0x0800_0000..0x0800_E000;
+        let above = 0x0801_0000..0x0801_1000;
+        assert_eq!(on_pages(&[below.clone(), above.clone()], &pages), None);
+        let first = 0x0800_C000..0x0800_E001;
+        assert_eq!(
+            on_pages(&[below.clone(), first.clone()], &pages),
+            Some(first)
+        );
+        let last = 0x0800_FFFF..0x0801_0004;
+        assert_eq!(on_pages(&[above, last.clone()], &pages), Some(last));
+    }
 
     #[test]
     fn libclang_is_the_library_bindgen_loads_not_libclang_cpp() {

@@ -107,28 +107,45 @@ pub struct DriverProfile {
     /// Register and value that select velocity mode, written at start-up.
     pub velocity_mode: Option<(u16, u16)>,
     /// Holding register of the speed command and its scale (drum
-    /// micro-r/min per count), when the driver takes speed commands.
+    /// micro-r/min per count at a speed resolution of 1), when the driver
+    /// takes speed commands.
     pub speed_command: Option<(u16, i32)>,
+    /// The driver's communication-loss ("offline") time register, written
+    /// at start-up with the link's offline time in ms
+    /// ([`crate::link::LinkTiming::offline_time_ms`]).
+    pub offline_register: Option<u16>,
+    /// The driver's speed-resolution register, read at start-up: the
+    /// command register counts 1/n of the command scale's unit when it
+    /// holds n (1–10; the ZLAC8015D's 0x2022: 1 = 1 r/min, 10 = 0.1 r/min).
+    /// The speed feedback does not follow it.
+    pub resolution_register: Option<u16>,
+    /// The driver's maximum-speed register, read at start-up, in counts of
+    /// the speed command at a resolution of 1 (the ZLAC8015D's 0x2008,
+    /// r/min of its motor, 1–1000): the drum's top speed must fit under it,
+    /// or the link refuses the driver (a command above it would be
+    /// silently limited).
+    pub max_speed_register: Option<u16>,
 }
 
 /// The ZLAC8015D (ZLTECH dual-channel BLDC driver), left motor, slave 1 at
-/// 115 200 baud: control word 0x200E (0x08 enable, 0x07 disable, 0x06 clear
-/// alarm), mode 0x200D = 3 (velocity), speed command 0x2088 in r/min, actual
-/// speed 0x20AB in 0.1 r/min, fault bits 0x20A5 (over-voltage 0x0001,
-/// under-voltage 0x0002, over-current 0x0004, overload 0x0008, encoder out
-/// of tolerance 0x0020, Hall error 0x0200, motor over-temperature 0x0400; as
-/// read from ZLTECH's manual — check your driver's). The drum is taken as
-/// driven 1:1 by the motor: set a [`GenericSettings`] with the gearbox in
-/// the scale otherwise.
-///
-/// The speed command register counts whole r/min (its feedback 0.1 r/min).
+/// 115 200 baud, from ZLTECH's *RS485 Communication Instruction* V1.06:
+/// control word 0x200E (0x08 enable, 0x07 stop, 0x06 clear alarm), mode
+/// 0x200D = 3 (velocity), target speed 0x2088 in r/min divided by the
+/// given-speed resolution 0x2022 (1: 1 r/min, 10: 0.1 r/min), actual speed
+/// 0x20AB in 0.1 r/min whatever 0x2022 holds, maximum motor speed 0x2008
+/// (1–1000 r/min: a target above it is limited to it), offline time 0x2000
+/// (ms), fault bits 0x20A5 (over-voltage 0x0001, under-voltage 0x0002,
+/// over-current 0x0004, overload 0x0008, encoder out of tolerance 0x0020,
+/// Hall error 0x0200, encoder error 0x0800 — these three are one name —
+/// motor over-temperature 0x0400). The drum is taken as driven 1:1 by the
+/// motor: the supervisor's ZLAC8015D kind puts the gearbox in the scales.
 pub const ZLAC8015D: DriverProfile = DriverProfile {
     slave: 1,
     baud: 115_200,
     speed_feedback: 0x20AB,
     micro_rpm_per_count: 100_000,
     fault_register: 0x20A5,
-    fault_masks: [0x0004, 0x0001, 0x0002, 0x0008, 0x0220, 0x0400],
+    fault_masks: [0x0004, 0x0001, 0x0002, 0x0008, 0x0A20, 0x0400],
     control: Some(ControlWord {
         address: 0x200E,
         enable: 0x08,
@@ -137,7 +154,14 @@ pub const ZLAC8015D: DriverProfile = DriverProfile {
     }),
     velocity_mode: Some((0x200D, 3)),
     speed_command: Some((0x2088, 1_000_000)),
+    offline_register: Some(0x2000),
+    resolution_register: Some(0x2022),
+    max_speed_register: Some(0x2008),
 };
+
+/// The highest speed resolution the link takes from a resolution register
+/// (the ZLAC8015D's 0x2022 holds 1–10).
+pub const MAX_RESOLUTION: u16 = 10;
 
 impl DriverProfile {
     /// Drum speed in milli-r/min from a speed register's raw value.
@@ -154,18 +178,29 @@ impl DriverProfile {
         i32::try_from(milli).unwrap_or(if milli < 0 { i32::MIN } else { i32::MAX })
     }
 
-    /// The speed command register's value for a drum speed, rounded to the
-    /// nearest count and limited to the register's range.
-    /// `None` when the driver takes no speed command.
+    /// The speed command register's value for a drum speed at a speed
+    /// resolution of 1 ([`DriverProfile::command_counts_at`]).
     #[must_use]
     pub fn command_counts(&self, drum_milli_rpm: i32) -> Option<u16> {
+        self.command_counts_at(drum_milli_rpm, 1)
+    }
+
+    /// The speed command register's value for a drum speed when the
+    /// driver's resolution register holds `resolution` (the register then
+    /// counts 1/`resolution` of the scale's unit), rounded to the nearest
+    /// count and limited to the register's range. `None` when the driver
+    /// takes no speed command.
+    #[must_use]
+    pub fn command_counts_at(&self, drum_milli_rpm: i32, resolution: u16) -> Option<u16> {
         let (_, scale) = self.speed_command?;
         let scale = i64::from(scale);
         if scale == 0 {
             return Some(0);
         }
-        let num = i64::from(drum_milli_rpm).saturating_mul(1000);
-        // Round half away from zero, on magnitudes (|num| < 2^31, |scale| ≤ 2^31).
+        let num = i64::from(drum_milli_rpm)
+            .saturating_mul(1000)
+            .saturating_mul(i64::from(resolution.max(1)));
+        // Round half away from zero, on magnitudes (|num| < 2^45, |scale| ≤ 2^31).
         let magnitude = num
             .unsigned_abs()
             .saturating_add(scale.unsigned_abs() / 2)
@@ -182,18 +217,48 @@ impl DriverProfile {
         Some(u16::from_ne_bytes(small.to_ne_bytes()))
     }
 
+    /// The command counts (at a resolution of 1, rounded up, magnitude) a
+    /// drum speed needs: what the driver's maximum-speed register must
+    /// allow. `None` without a speed command.
+    #[must_use]
+    pub fn command_counts_needed(&self, drum_milli_rpm: u32) -> Option<u32> {
+        let (_, scale) = self.speed_command?;
+        // In u32 (no 64-bit division on the boot path): a drum top speed
+        // beyond 4294 r/min saturates, and needs the most anyway.
+        Some(
+            drum_milli_rpm
+                .saturating_mul(1000)
+                .div_ceil(scale.unsigned_abs().max(1)),
+        )
+    }
+
     /// The named faults in a fault word, then the unnamed bits as one
     /// [`DriverFault::Other`].
     pub fn faults(&self, word: u16) -> impl Iterator<Item = DriverFault> + '_ {
-        let named = self.fault_masks.iter().fold(0u16, |acc, m| acc | m);
-        let other = word & !named;
-        NAMED_FAULTS
-            .iter()
-            .zip(self.fault_masks.iter())
-            .filter(move |(_, &mask)| mask != 0 && word & mask != 0)
-            .map(|(&f, _)| f)
-            .chain((other != 0).then_some(DriverFault::Other(other)))
+        faults_in(&self.fault_masks, word)
     }
+}
+
+/// The named faults of a fault word under `masks` ([`NAMED_FAULTS`]'
+/// order), then the unnamed bits as one [`DriverFault::Other`].
+pub fn faults_in(masks: &[u16; 6], word: u16) -> impl Iterator<Item = DriverFault> + '_ {
+    let named = masks.iter().fold(0u16, |acc, m| acc | m);
+    let other = word & !named;
+    NAMED_FAULTS
+        .iter()
+        .zip(masks.iter())
+        .filter(move |(_, &mask)| mask != 0 && word & mask != 0)
+        .map(|(&f, _)| f)
+        .chain((other != 0).then_some(DriverFault::Other(other)))
+}
+
+/// The first fault of a nonzero fault word under `masks` (what an alarm
+/// names).
+#[must_use]
+pub fn first_fault(masks: &[u16; 6], word: u16) -> DriverFault {
+    faults_in(masks, word)
+        .next()
+        .unwrap_or(DriverFault::Other(word))
 }
 
 /// The largest |scale| a generic profile may name: 100 r/min per count
@@ -201,6 +266,12 @@ impl DriverProfile {
 pub const MAX_SCALE: i32 = 100_000_000;
 
 /// A generic driver, as the operator enters it on the screen.
+///
+/// It describes any driver that speaks Modbus RTU with functions 03 and
+/// 06, a ZLAC8015D behind a gearbox included: the feedback and the command
+/// have scales of their own (the ZLAC8015D reports 0.1 r/min and takes
+/// whole r/min), and the control word, the mode write, the offline time,
+/// the speed resolution and the maximum speed are optional registers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GenericSettings {
@@ -210,14 +281,29 @@ pub struct GenericSettings {
     pub baud: u32,
     /// Speed feedback register.
     pub speed_feedback: u16,
-    /// Drum micro-r/min per count, nonzero, |scale| ≤ [`MAX_SCALE`].
+    /// Drum micro-r/min per count of the feedback, nonzero, |scale| ≤
+    /// [`MAX_SCALE`].
     pub micro_rpm_per_count: i32,
     /// Fault register.
     pub fault_register: u16,
     /// Masks of the named faults (pairwise disjoint).
     pub fault_masks: [u16; 6],
-    /// Speed command register (same scale), if the driver takes one.
+    /// Speed command register, if the driver takes one.
     pub speed_command: Option<u16>,
+    /// Drum micro-r/min per count of the speed command at a speed
+    /// resolution of 1, nonzero, |scale| ≤ [`MAX_SCALE`] (checked when
+    /// there is a command register).
+    pub command_scale: i32,
+    /// The control word (enable, disable, clear alarm), if any.
+    pub control: Option<ControlWord>,
+    /// Register and value that select velocity mode, written at start-up.
+    pub velocity_mode: Option<(u16, u16)>,
+    /// The offline-time register ([`DriverProfile::offline_register`]).
+    pub offline_register: Option<u16>,
+    /// The speed-resolution register ([`DriverProfile::resolution_register`]).
+    pub resolution_register: Option<u16>,
+    /// The maximum-speed register ([`DriverProfile::max_speed_register`]).
+    pub max_speed_register: Option<u16>,
 }
 
 /// Why a generic profile was refused.
@@ -230,11 +316,15 @@ pub enum ProfileError {
     Baud(u32),
     /// Scale 0 or beyond ±[`MAX_SCALE`].
     Scale(i32),
+    /// The command scale 0 or beyond ±[`MAX_SCALE`].
+    CommandScale(i32),
     /// Two named faults share a bit.
     FaultMasksOverlap,
-    /// The speed feedback and the fault register are the same register, or
-    /// the speed command writes to one of them.
+    /// Two of the registers the profile names are the same register.
     RegisterClash,
+    /// Two of the control word's values (enable, disable, clear) are the
+    /// same.
+    ControlValues,
 }
 
 impl fmt::Display for ProfileError {
@@ -246,8 +336,13 @@ impl fmt::Display for ProfileError {
                 f,
                 "speed scale {s} micro-r/min per count (0 or beyond 100 r/min)"
             ),
+            Self::CommandScale(s) => write!(
+                f,
+                "command scale {s} micro-r/min per count (0 or beyond 100 r/min)"
+            ),
             Self::FaultMasksOverlap => f.write_str("two fault names share a bit"),
-            Self::RegisterClash => f.write_str("speed, fault and command registers must differ"),
+            Self::RegisterClash => f.write_str("the profile's registers must differ"),
+            Self::ControlValues => f.write_str("enable, disable and clear values must differ"),
         }
     }
 }
@@ -261,11 +356,14 @@ pub fn check_line(slave: u8, baud: u32, micro_rpm_per_count: i32) -> Result<(), 
     if !BAUD_RATES.contains(&baud) {
         return Err(ProfileError::Baud(baud));
     }
-    let s = micro_rpm_per_count;
-    if s == 0 || s.unsigned_abs() > MAX_SCALE.unsigned_abs() {
-        return Err(ProfileError::Scale(s));
+    if !scale_ok(micro_rpm_per_count) {
+        return Err(ProfileError::Scale(micro_rpm_per_count));
     }
     Ok(())
+}
+
+fn scale_ok(s: i32) -> bool {
+    s != 0 && s.unsigned_abs() <= MAX_SCALE.unsigned_abs()
 }
 
 impl GenericSettings {
@@ -273,6 +371,9 @@ impl GenericSettings {
     pub fn build(&self) -> Result<DriverProfile, ProfileError> {
         let s = self.micro_rpm_per_count;
         check_line(self.slave, self.baud, s)?;
+        if self.speed_command.is_some() && !scale_ok(self.command_scale) {
+            return Err(ProfileError::CommandScale(self.command_scale));
+        }
         let mut seen = 0u16;
         for &m in &self.fault_masks {
             if seen & m != 0 {
@@ -280,12 +381,26 @@ impl GenericSettings {
             }
             seen |= m;
         }
-        if self.speed_feedback == self.fault_register
-            || self
-                .speed_command
-                .is_some_and(|c| c == self.speed_feedback || c == self.fault_register)
-        {
-            return Err(ProfileError::RegisterClash);
+        let registers = [
+            Some(self.speed_feedback),
+            Some(self.fault_register),
+            self.speed_command,
+            self.control.map(|c| c.address),
+            self.velocity_mode.map(|m| m.0),
+            self.offline_register,
+            self.resolution_register,
+            self.max_speed_register,
+        ];
+        for (i, a) in registers.iter().enumerate() {
+            let later = registers.get(i.saturating_add(1)..).unwrap_or(&[]);
+            if a.is_some() && later.contains(a) {
+                return Err(ProfileError::RegisterClash);
+            }
+        }
+        if let Some(c) = self.control {
+            if c.enable == c.disable || c.enable == c.clear_alarm || c.disable == c.clear_alarm {
+                return Err(ProfileError::ControlValues);
+            }
         }
         Ok(DriverProfile {
             slave: self.slave,
@@ -294,9 +409,12 @@ impl GenericSettings {
             micro_rpm_per_count: s,
             fault_register: self.fault_register,
             fault_masks: self.fault_masks,
-            control: None,
-            velocity_mode: None,
-            speed_command: self.speed_command.map(|c| (c, s)),
+            control: self.control,
+            velocity_mode: self.velocity_mode,
+            speed_command: self.speed_command.map(|c| (c, self.command_scale)),
+            offline_register: self.offline_register,
+            resolution_register: self.resolution_register,
+            max_speed_register: self.max_speed_register,
         })
     }
 }
@@ -315,6 +433,12 @@ mod tests {
             fault_register: 0x0011,
             fault_masks: [1, 2, 4, 8, 16, 32],
             speed_command: Some(0x0020),
+            command_scale: -250_000,
+            control: None,
+            velocity_mode: None,
+            offline_register: None,
+            resolution_register: None,
+            max_speed_register: None,
         }
     }
 
@@ -445,6 +569,7 @@ mod tests {
         // motor: 100 000 / 118 = 847.46 → 847 µr/min of the drum per count.
         let p = GenericSettings {
             micro_rpm_per_count: 847,
+            command_scale: 847,
             ..generic()
         }
         .build()
@@ -455,5 +580,78 @@ mod tests {
         // The command in the same scale: 20 r/min / 0.847 milli = 23 612.75
         // → 23 613 counts.
         assert_eq!(p.command_counts(20_000), Some(23_613));
+    }
+
+    /// A ZLAC8015D behind a 20:1 gearbox through the generic profile: its
+    /// feedback counts 0.1 r/min of the motor (100 000 / 20 = 5000 µr/min
+    /// of the drum per count), its command whole r/min (1 000 000 / 20 =
+    /// 50 000), its control word and velocity mode written, the offline
+    /// time, resolution and maximum-speed registers named: the same
+    /// profile as the shipped one with the gearbox in the two scales.
+    #[test]
+    fn a_zlac8015d_with_a_gearbox_through_the_generic_profile() {
+        let g = GenericSettings {
+            slave: 1,
+            baud: 115_200,
+            speed_feedback: 0x20AB,
+            micro_rpm_per_count: 5000,
+            fault_register: 0x20A5,
+            fault_masks: ZLAC8015D.fault_masks,
+            speed_command: Some(0x2088),
+            command_scale: 50_000,
+            control: ZLAC8015D.control,
+            velocity_mode: Some((0x200D, 3)),
+            offline_register: Some(0x2000),
+            resolution_register: Some(0x2022),
+            max_speed_register: Some(0x2008),
+        };
+        let p = g.build().unwrap();
+        assert_eq!(
+            p,
+            DriverProfile {
+                micro_rpm_per_count: 5000,
+                speed_command: Some((0x2088, 50_000)),
+                ..ZLAC8015D
+            }
+        );
+        // 20.0 drum r/min = 400 motor r/min: 400 counts, 4000 at 0.1 r/min.
+        assert_eq!(p.command_counts(20_000), Some(400));
+        assert_eq!(p.command_counts_at(20_000, 10), Some(4000));
+        // Read back: 4000 × 0.1 r/min / 20 = 20.0 drum r/min.
+        assert_eq!(p.speed_from_register(4000), 20_000);
+        // The drum's 44.7 r/min needs 894 motor r/min.
+        assert_eq!(p.command_counts_needed(44_700), Some(894));
+        // One register named twice, or two equal control values: refused.
+        let twice = GenericSettings {
+            offline_register: Some(0x2088),
+            ..g
+        };
+        assert_eq!(twice.build(), Err(ProfileError::RegisterClash));
+        let mut same = g;
+        if let Some(c) = &mut same.control {
+            c.clear_alarm = c.enable;
+        }
+        assert_eq!(same.build(), Err(ProfileError::ControlValues));
+        let zero = GenericSettings {
+            command_scale: 0,
+            ..g
+        };
+        assert_eq!(zero.build(), Err(ProfileError::CommandScale(0)));
+        // Without a command register the command scale is not used.
+        let no_command = GenericSettings {
+            speed_command: None,
+            ..zero
+        };
+        assert!(no_command.build().is_ok());
+    }
+
+    /// The manual's fault word bit 0x0800, encoder error, is named (it was
+    /// reported raw, "driver fault 0x0800").
+    #[test]
+    fn the_encoder_error_bit_is_named() {
+        assert_eq!(
+            ZLAC8015D.faults(0x0800).collect::<std::vec::Vec<_>>(),
+            [DriverFault::HallOrEncoder]
+        );
     }
 }

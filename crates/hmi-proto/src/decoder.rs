@@ -204,6 +204,9 @@ pub struct Decoder {
     expected_start: [Option<(u8, u8)>; 2],
     /// While recovering: a frame found must end at or after this index.
     min_end: u8,
+    /// Whether frames only a request brings are expected
+    /// ([`Decoder::expect_replies`]).
+    replies: bool,
     stats: DecoderStats,
 }
 
@@ -243,12 +246,34 @@ impl Decoder {
             examined: 0,
             expected_start: [None; 2],
             min_end: 0,
+            replies: true,
             stats: DecoderStats {
                 frames: 0,
                 dropped_frames: 0,
                 dropped_bytes: 0,
             },
         }
+    }
+
+    /// Says whether the frames that only a request brings are expected
+    /// (the default): a string (`0x70`, `get x.txt`), a number (`0x71`,
+    /// `get x.val`) and touch coordinates (`0x67`/`0x68`, `sendxy=1`).
+    /// When not, such a header between frames is read as a stray byte
+    /// (reported as [`DecodeError::UnknownHeader`]): a string, a number or
+    /// a coordinate frame would otherwise take the touch frame after it as
+    /// its payload (`71 65 03 07 01 FF FF FF` is a valid number frame).
+    pub fn expect_replies(&mut self, expected: bool) {
+        self.replies = expected;
+    }
+
+    /// `header` starts a frame that only a request brings, and none is
+    /// expected ([`expect_replies`](Self::expect_replies)).
+    fn unexpected(&self, header: u8) -> bool {
+        !self.replies
+            && matches!(
+                header,
+                HEADER_STRING | HEADER_NUMBER | HEADER_XY_AWAKE | HEADER_XY_ASLEEP
+            )
     }
 
     /// Counters since construction.
@@ -326,6 +351,11 @@ impl Decoder {
                 // A stray terminator byte between frames.
                 self.drop_front(1);
                 return Step::Again;
+            }
+            // A frame that only a request brings, none made: a stray byte,
+            // which would take the frame after it as its payload.
+            Some(&h) if self.unexpected(h) => {
+                return self.broken(DecodeError::UnknownHeader(h), None);
             }
             Some(_) => {}
         }
@@ -419,7 +449,9 @@ impl Decoder {
     fn frame_ending_at(&self, end: usize) -> Option<usize> {
         let valid = |start: usize| {
             let bytes = self.buf.get(start..end).unwrap_or(&[]);
-            bytes.first() != Some(&0xFF)
+            bytes
+                .first()
+                .is_some_and(|&h| h != 0xFF && !self.unexpected(h))
                 && scan(bytes) == Scan::Complete(bytes.len())
                 && parse(bytes).is_ok()
         };

@@ -16,7 +16,14 @@
 //!   the page's `tmsg` box and the old value written back (nothing changes);
 //! * while a `get` reply is awaited, further touch events are queued (up to
 //!   [`TOUCH_QUEUE`]), never lost; *Stop* bypasses the queue;
-//! * the MCU drives navigation (`page N`) and writes settings and live status.
+//! * the MCU drives navigation (`page N`) and writes settings and live status;
+//!   the `sendme` it queues are counted, and an answer owed by one queued
+//!   before the last `page` instruction (it names the page before) is not
+//!   taken as the page shown;
+//! * received bytes come with their arrival time ([`Hmi::push_at`]): a
+//!   partial frame followed by [`RX_GAP_MS`] of quiet line is forgotten; and
+//!   while no `get` is awaited, a reply header (`70`, `71`, `67`, `68`) is
+//!   read as a stray byte, so it never takes the touch frame after it.
 //!
 //! Boot handshake: until the screen answers, [`Hmi::tick`] sends a lone
 //! terminator (to end any partial instruction) and `sendme` every
@@ -95,7 +102,8 @@ pub const HEARTBEAT_MS: u32 = 1_000;
 pub const LINK_TIMEOUT_MS: u32 = 2_500;
 /// A partial frame is forgotten when the line has been quiet for this long
 /// (a screen sends each frame in one go: 9 bytes take 0.8 ms at 115200 baud),
-/// so the next byte is read as a header whatever came before it.
+/// so the next byte is read as a header whatever came before it. Measured
+/// between the bytes' arrival times ([`Hmi::push_at`]).
 pub const RX_GAP_MS: u32 = 10;
 
 /// A motor-starting button's release counts only this long after its press
@@ -173,6 +181,10 @@ pub struct HmiStats {
     /// (another touch frame between them, a lost or hit press, or held
     /// longer than [`START_TAP_MS`]): ignored.
     pub unpaired_starts: u32,
+    /// `0x66` answers to a `sendme` queued before a later `page`
+    /// instruction (they name the page shown before it): not taken as the
+    /// page shown.
+    pub stale_page_answers: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -198,7 +210,7 @@ enum Link {
 ///
 /// Fixed size (≤ 728 bytes, asserted by a test: see the `*_QUEUE` and
 /// [`TX_CAPACITY`] consts), no heap.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Hmi {
     decoder: Decoder,
     link: Link,
@@ -213,9 +225,7 @@ pub struct Hmi {
     events: heapless::Deque<Event, EVENT_QUEUE>,
     tx: heapless::Deque<u8, TX_CAPACITY>,
     stats: HmiStats,
-    /// Bytes arrived since the last [`tick`](Self::tick).
-    rx_since_tick: bool,
-    /// The last tick that followed received bytes.
+    /// When the last byte arrived.
     last_rx_ms: u32,
     /// A startup frame came since the screen was last set up: a `0x66`
     /// answer naming page 0 then means the screen restarted (its `0x88`
@@ -232,6 +242,12 @@ pub struct Hmi {
     /// The last touch frame was the press of a motor-starting button on
     /// the page shown: its page, id and the time.
     start_press: Option<(u8, u8, u32)>,
+    /// `sendme` queued since the last `page` instruction, not answered yet.
+    probes: u8,
+    /// Answers still to come to `sendme` queued before the last `page`
+    /// instruction: the screen answers them with the page it showed
+    /// before, so they do not say which page is shown now.
+    stale_answers: u8,
 }
 
 impl Hmi {
@@ -254,12 +270,13 @@ impl Hmi {
             events: heapless::Deque::new(),
             tx: heapless::Deque::new(),
             stats: HmiStats::default(),
-            rx_since_tick: false,
             last_rx_ms: 0,
             restart_seen: false,
             stop_held: false,
             page_known: false,
             start_press: None,
+            probes: 0,
+            stale_answers: 0,
         }
     }
 
@@ -310,9 +327,33 @@ impl Hmi {
         self.tx.len()
     }
 
-    /// Feeds one received byte.
+    /// Feeds one received byte that arrived at `at_ms` (the receive
+    /// interrupt's time, however late the link gets it): a partial frame
+    /// followed by [`RX_GAP_MS`] of quiet line is forgotten before the
+    /// byte, which then starts a frame (docs/hmi.md §3, "Line errors").
+    pub fn push_at(&mut self, byte: u8, at_ms: u32) {
+        if !self.decoder.is_idle() && quiet_since(self.last_rx_ms, at_ms) >= RX_GAP_MS.cast_signed()
+        {
+            // The rest of that frame is not coming: this byte is a header.
+            self.decoder.reset();
+            self.stats.gap_resyncs = self.stats.gap_resyncs.wrapping_add(1);
+        }
+        self.last_rx_ms = at_ms;
+        // A number reply is expected only while a `get` is awaited; a
+        // string or touch coordinates never (the MCU asks for neither): a
+        // stray `70`, `71`, `67` or `68` then never takes the touch frame
+        // after it (docs/hmi.md §3, "Line errors").
+        self.decoder.expect_replies(self.pending.is_some());
+        self.decode(byte);
+    }
+
+    /// Feeds one received byte that arrived at the last [`tick`](Self::tick)'s
+    /// time ([`push_at`](Self::push_at) with that time).
     pub fn push(&mut self, byte: u8) {
-        self.rx_since_tick = true;
+        self.push_at(byte, self.now_ms);
+    }
+
+    fn decode(&mut self, byte: u8) {
         let mut next = self.decoder.push(byte);
         while let Some(result) = next {
             match result {
@@ -325,7 +366,8 @@ impl Hmi {
         }
     }
 
-    /// Feeds received bytes.
+    /// Feeds received bytes that arrived at the last
+    /// [`tick`](Self::tick)'s time.
     pub fn push_slice(&mut self, bytes: &[u8]) {
         for &b in bytes {
             self.push(b);
@@ -337,13 +379,6 @@ impl Hmi {
     /// timed from the last `tick`.
     pub fn tick(&mut self, now_ms: u32) {
         self.now_ms = now_ms;
-        if core::mem::take(&mut self.rx_since_tick) {
-            self.last_rx_ms = now_ms;
-        } else if !self.decoder.is_idle() && now_ms.wrapping_sub(self.last_rx_ms) >= RX_GAP_MS {
-            // The rest of that frame is not coming: the next byte is a header.
-            self.decoder.reset();
-            self.stats.gap_resyncs = self.stats.gap_resyncs.wrapping_add(1);
-        }
         if let Link::Connected { heard_ms, probe_ms } = self.link {
             let quiet = now_ms.wrapping_sub(heard_ms);
             if quiet >= LINK_TIMEOUT_MS {
@@ -353,7 +388,7 @@ impl Hmi {
                     heard_ms,
                     probe_ms: now_ms,
                 };
-                let _ = self.send(&Instruction::SendMe);
+                self.ask_page();
             }
         }
         if let Link::Connecting { last_try_ms } = self.link {
@@ -368,7 +403,7 @@ impl Hmi {
                 // Drop stale handshake bytes not yet sent.
                 self.tx.clear();
                 let _ = self.send(&Instruction::Flush);
-                let _ = self.send(&Instruction::SendMe);
+                self.ask_page();
             }
         }
         if let Some(p) = self.pending {
@@ -423,6 +458,9 @@ impl Hmi {
         let sent = self.send(&Instruction::Page(page.id()));
         self.page_known = sent.is_ok();
         sent?;
+        // The `sendme` queued before it are answered with the page before.
+        self.stale_answers = self.stale_answers.wrapping_add(self.probes);
+        self.probes = 0;
         // `page_instructions`, component by component (no list on the
         // stack).
         for comp in Component::on_page(page) {
@@ -517,6 +555,27 @@ impl Hmi {
         Ok(())
     }
 
+    /// A `0x66` answer came: counts it against the `sendme` queued;
+    /// `true` when it answers one queued before the last `page`
+    /// instruction (stale).
+    fn answered(&mut self) -> bool {
+        if self.stale_answers > 0 {
+            self.stale_answers = self.stale_answers.wrapping_sub(1);
+            true
+        } else {
+            self.probes = self.probes.saturating_sub(1);
+            false
+        }
+    }
+
+    /// Queues `sendme` (the screen answers `0x66 page`), counted so that
+    /// an answer crossing a later `page` instruction is known as such.
+    fn ask_page(&mut self) {
+        if self.send(&Instruction::SendMe).is_ok() {
+            self.probes = self.probes.wrapping_add(1);
+        }
+    }
+
     fn event(&mut self, e: Event) {
         // Room is kept so that a burst of screen errors (a screen file with
         // a wrong name answers `0x1A` to every status write) never costs an
@@ -548,6 +607,8 @@ impl Hmi {
         self.stop_held = false;
         self.start_press = None;
         self.page_known = false;
+        self.probes = 0;
+        self.stale_answers = 0;
         self.stats.link_losses = self.stats.link_losses.wrapping_add(1);
         self.event(Event::Disconnected);
     }
@@ -562,6 +623,11 @@ impl Hmi {
         self.restart_seen = false;
         self.stop_held = false;
         self.start_press = None;
+        // The handshake's `sendme` not answered by now were lost (the screen
+        // was off or restarting); a late answer naming page 0 is ignored
+        // below.
+        self.probes = 0;
+        self.stale_answers = 0;
         let _ = self.send(&Instruction::BkCmd(BkCmd::OnFailure));
         let _ = self.send(&Instruction::Dims(self.settings.brightness.raw()));
         let _ = self.show_page(self.home_page());
@@ -577,9 +643,14 @@ impl Hmi {
             };
         }
         match frame {
-            Frame::CurrentPage(p) => match self.link {
-                Link::Connecting { .. } => self.connect(),
-                Link::Connected { .. } => match Page::from_id(p) {
+            Frame::Touch {
+                page,
+                component,
+                event,
+            } => self.on_touch(page, component, event),
+            Frame::CurrentPage(p) => match (self.link, self.answered()) {
+                (Link::Connecting { .. }, _) => self.connect(),
+                (Link::Connected { .. }, stale) => match Page::from_id(p) {
                     // The screen shows page 0 `boot` only at power-on, before
                     // the handshake: a reply naming it now is a late answer
                     // to a handshake `sendme` (the screen booted and sent
@@ -589,6 +660,13 @@ impl Hmi {
                     // was lost.
                     Some(Page::Boot) if self.restart_seen => self.connect(),
                     Some(Page::Boot) | None => {}
+                    // An answer to a `sendme` queued before the last `page`
+                    // instruction names the page shown before it: not the
+                    // page now.
+                    Some(_) if stale => {
+                        self.stats.stale_page_answers =
+                            self.stats.stale_page_answers.wrapping_add(1);
+                    }
                     Some(page) => {
                         self.page = page;
                         self.page_known = true;
@@ -603,11 +681,6 @@ impl Hmi {
             // dropping the link for it threw the operator off the run page.
             Frame::Startup => self.restart_seen = true,
             Frame::Ready => self.connect(),
-            Frame::Touch {
-                page,
-                component,
-                event,
-            } => self.on_touch(page, component, event),
             Frame::Number(v) => match self.pending.take() {
                 Some(p) => {
                     self.on_value(p.field, v);
@@ -674,7 +747,7 @@ impl Hmi {
             // Another page than the one shown (in flight across a page
             // change, or a hit page byte), or the page is not known: ask
             // the screen, so that a page believed wrongly is put right.
-            let _ = self.send(&Instruction::SendMe);
+            self.ask_page();
             if self.page_known || starts_motor {
                 self.stats.foreign_page_touches = self.stats.foreign_page_touches.wrapping_add(1);
                 return;
@@ -854,4 +927,10 @@ impl Hmi {
             }
         }
     }
+}
+
+/// Milliseconds from `from` to `to` (wrapping clock); negative when `to`
+/// is before `from` (a byte stamped before the last tick).
+fn quiet_since(from: u32, to: u32) -> i32 {
+    to.wrapping_sub(from).cast_signed()
 }

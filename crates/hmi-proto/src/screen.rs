@@ -233,7 +233,7 @@ impl CalibrationKind {
 }
 
 /// The drum driver link's setting page 10 edits (docs/drive-link.md,
-/// settings format 5): one at a time, picked with `blpar`, its value in
+/// settings format 6): one at a time, picked with `blpar`, its value in
 /// `nlval`, applied with `blval`. The codes of the three choices are in
 /// their labels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -251,6 +251,12 @@ pub enum LinkParameter {
     Slave,
     /// Baud rate: 9600, 19 200, 38 400, 57 600 or 115 200.
     Baud,
+    /// Reply timeout: the driver's answer time allowed, ms (5–1000).
+    ReplyTimeout,
+    /// Quiet line before a retry, ms (2–1000).
+    RetryGap,
+    /// The driver's offline (communication-loss) time, ms.
+    OfflineTime,
     /// Read-back scale: micro-r/min of the drum per register count (the
     /// gearbox included; negative: the driver counts the other way).
     Scale,
@@ -260,20 +266,55 @@ pub enum LinkParameter {
     FaultRegister,
     /// Generic driver: the speed command's holding register (0: none).
     CommandRegister,
+    /// Generic driver: the command scale, micro-r/min of the drum per
+    /// command count at a speed resolution of 1.
+    CommandScale,
+    /// Generic driver: the control word's register (0: none).
+    ControlRegister,
+    /// Generic driver: the control word's enable value.
+    EnableValue,
+    /// Generic driver: the control word's disable value.
+    DisableValue,
+    /// Generic driver: the control word's clear-alarm value.
+    ClearValue,
+    /// Generic driver: the register written at start-up to select
+    /// velocity mode (0: none).
+    ModeRegister,
+    /// Generic driver: the value written there.
+    ModeValue,
+    /// Generic driver: the offline-time register (0: none).
+    OfflineRegister,
+    /// Generic driver: the speed-resolution register (0: none).
+    ResolutionRegister,
+    /// Generic driver: the maximum-speed register (0: none).
+    MaxSpeedRegister,
 }
 
 impl LinkParameter {
     /// Every parameter, in the selector's order.
-    pub const ALL: [LinkParameter; 9] = [
+    pub const ALL: [LinkParameter; 22] = [
         Self::Feedback,
         Self::Command,
         Self::Driver,
         Self::Slave,
         Self::Baud,
+        Self::ReplyTimeout,
+        Self::RetryGap,
+        Self::OfflineTime,
         Self::Scale,
         Self::SpeedRegister,
         Self::FaultRegister,
         Self::CommandRegister,
+        Self::CommandScale,
+        Self::ControlRegister,
+        Self::EnableValue,
+        Self::DisableValue,
+        Self::ClearValue,
+        Self::ModeRegister,
+        Self::ModeValue,
+        Self::OfflineRegister,
+        Self::ResolutionRegister,
+        Self::MaxSpeedRegister,
     ];
 
     /// The label shown in `tlpar` (≤ 40 characters).
@@ -284,26 +325,34 @@ impl LinkParameter {
             Self::Driver => "Driver 0none 1ZLAC 2gen",
             Self::Slave => "Slave id",
             Self::Baud => "Baud",
+            Self::ReplyTimeout => "Reply timeout ms",
+            Self::RetryGap => "Retry gap ms",
+            Self::OfflineTime => "Driver offline time ms",
             Self::Scale => "Scale urpm/count",
             Self::SpeedRegister => "Speed register",
             Self::FaultRegister => "Fault register",
             Self::CommandRegister => "Command reg (0 none)",
+            Self::CommandScale => "Command scale urpm/count",
+            Self::ControlRegister => "Control reg (0 none)",
+            Self::EnableValue => "Control: enable value",
+            Self::DisableValue => "Control: disable value",
+            Self::ClearValue => "Control: clear value",
+            Self::ModeRegister => "Mode reg (0 none)",
+            Self::ModeValue => "Mode value",
+            Self::OfflineRegister => "Offline time reg (0 none)",
+            Self::ResolutionRegister => "Resolution reg (0 none)",
+            Self::MaxSpeedRegister => "Max speed reg (0 none)",
         }
     }
 
-    /// The next parameter (the last wraps to the first).
-    pub const fn next(self) -> Self {
-        match self {
-            Self::Feedback => Self::Command,
-            Self::Command => Self::Driver,
-            Self::Driver => Self::Slave,
-            Self::Slave => Self::Baud,
-            Self::Baud => Self::Scale,
-            Self::Scale => Self::SpeedRegister,
-            Self::SpeedRegister => Self::FaultRegister,
-            Self::FaultRegister => Self::CommandRegister,
-            Self::CommandRegister => Self::Feedback,
-        }
+    /// The next parameter (the last wraps to the first): the one after it
+    /// in [`LinkParameter::ALL`], whose order is the declaration's.
+    #[must_use]
+    pub fn next(self) -> Self {
+        Self::ALL
+            .get((self as usize).saturating_add(1))
+            .copied()
+            .unwrap_or(Self::Feedback)
     }
 }
 
@@ -1399,13 +1448,7 @@ const SOURCE: &[Source] = &[
     ),
     c(P::Mode, 7, "tmsg", K::Text, R::Message),
     // 2 fixed
-    c(
-        P::Fixed,
-        1,
-        "nspeed",
-        K::Xfloat(2),
-        R::Input(Field::FixedDrumSpeed),
-    ),
+    c(P::Fixed, 1, "bstart", K::Button, R::Action(A::Start)),
     c(
         P::Fixed,
         2,
@@ -1413,21 +1456,27 @@ const SOURCE: &[Source] = &[
         K::Button,
         R::Action(A::Apply(Field::FixedDrumSpeed)),
     ),
-    c(P::Fixed, 3, "bstart", K::Button, R::Action(A::Start)),
+    c(
+        P::Fixed,
+        3,
+        "nspeed",
+        K::Xfloat(2),
+        R::Input(Field::FixedDrumSpeed),
+    ),
     c(P::Fixed, 4, "bstop", K::Button, R::Action(A::Stop)),
     c(
         P::Fixed,
         5,
-        "bback",
-        K::Button,
-        R::Action(A::ShowPage(P::Mode)),
+        "xtravel",
+        K::Xfloat(2),
+        R::Status(StatusField::TravelSpeed),
     ),
     c(
         P::Fixed,
         6,
-        "xtravel",
-        K::Xfloat(2),
-        R::Status(StatusField::TravelSpeed),
+        "bback",
+        K::Button,
+        R::Action(A::ShowPage(P::Mode)),
     ),
     c(
         P::Fixed,
@@ -1476,7 +1525,13 @@ const SOURCE: &[Source] = &[
     c(P::Adaptive, 3, "bgeardn", K::Button, R::Action(A::GearDown)),
     c(P::Adaptive, 4, "bgearup", K::Button, R::Action(A::GearUp)),
     c(P::Adaptive, 5, "tgear", K::Text, R::GearLabel),
-    c(P::Adaptive, 6, "bstart", K::Button, R::Action(A::Start)),
+    c(
+        P::Adaptive,
+        6,
+        "xdist",
+        K::Xfloat(1),
+        R::Status(StatusField::Distance),
+    ),
     c(P::Adaptive, 7, "bstop", K::Button, R::Action(A::Stop)),
     c(
         P::Adaptive,
@@ -1513,13 +1568,7 @@ const SOURCE: &[Source] = &[
         K::Number,
         R::Status(StatusField::Plants),
     ),
-    c(
-        P::Adaptive,
-        13,
-        "xdist",
-        K::Xfloat(1),
-        R::Status(StatusField::Distance),
-    ),
+    c(P::Adaptive, 13, "bstart", K::Button, R::Action(A::Start)),
     c(P::Adaptive, 14, "tmsg", K::Text, R::Message),
     // Planting quality since Start (the control's, not the seedlings' fall:
     // the page's static label says so, docs/hmi.md).
@@ -1739,9 +1788,9 @@ const SOURCE: &[Source] = &[
     c(
         P::Belt,
         3,
-        "bpar",
-        K::Button,
-        R::Action(A::ShowPage(P::BeltParameters)),
+        "xn1",
+        K::Xfloat(2),
+        R::Status(StatusField::PlantMotorSpeed),
     ),
     c(
         P::Belt,
@@ -1760,9 +1809,9 @@ const SOURCE: &[Source] = &[
     c(
         P::Belt,
         6,
-        "xn1",
-        K::Xfloat(2),
-        R::Status(StatusField::PlantMotorSpeed),
+        "bpar",
+        K::Button,
+        R::Action(A::ShowPage(P::BeltParameters)),
     ),
     c(
         P::Belt,
@@ -1905,9 +1954,9 @@ const SOURCE: &[Source] = &[
     c(
         P::Drive,
         1,
-        "bident",
-        K::Button,
-        R::Action(A::IdentifyDrive),
+        "xtau",
+        K::Xfloat(1),
+        R::Status(StatusField::DriveTau),
     ),
     c(
         P::Drive,
@@ -1933,9 +1982,9 @@ const SOURCE: &[Source] = &[
     c(
         P::Drive,
         5,
-        "xtau",
-        K::Xfloat(1),
-        R::Status(StatusField::DriveTau),
+        "bident",
+        K::Button,
+        R::Action(A::IdentifyDrive),
     ),
     c(
         P::Drive,

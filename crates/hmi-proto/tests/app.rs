@@ -467,8 +467,8 @@ fn a_burst_of_screen_errors_never_costs_a_stop_or_a_command() {
     // A queue full of Starts (eight taps, press and release, in 112 bytes)
     // then Stop: the last word is Stop.
     for _ in 0..EVENT_QUEUE {
-        hmi.push_slice(&[0x65, 0x03, 0x06, 0x01, 0xFF, 0xFF, 0xFF]);
-        hmi.push_slice(&[0x65, 0x03, 0x06, 0x00, 0xFF, 0xFF, 0xFF]);
+        hmi.push_slice(&[0x65, 0x03, 0x0D, 0x01, 0xFF, 0xFF, 0xFF]);
+        hmi.push_slice(&[0x65, 0x03, 0x0D, 0x00, 0xFF, 0xFF, 0xFF]);
     }
     hmi.push_slice(&[0x65, 0x03, 0x07, 0x00, 0xFF, 0xFF, 0xFF]);
     let mut ev = Vec::new();
@@ -480,23 +480,24 @@ fn a_burst_of_screen_errors_never_costs_a_stop_or_a_command() {
     assert_eq!(ev.last(), Some(&cmd(Command::Stop)), "{ev:?}");
 }
 
-/// On page 3 `bstart` is id 6 and `bstop` id 7: one bit apart. The screen
-/// sends Stop on press and on release (docs/hmi.md §3); if the release
-/// `65 03 07 00` has its id bit 0 hit on the line it reads `65 03 06 00`,
-/// a Start release. A single-touch screen sends no other component's
-/// release between a press and its release, so that frame is the Stop's
-/// release: expected, the machine stays stopped. Measured before the fix:
-/// `[Stop, Start]` — the drum restarted as the operator lifted the finger
-/// from Stop.
+/// On page 3 `bstop` is id 7 and `bgeardn` id 3: one bit apart (until the
+/// ids were chosen two bits from every Start, `bstart` was id 6, one bit
+/// from Stop too). The screen sends Stop on press and on release
+/// (docs/hmi.md §3); if the release `65 03 07 00` has its id bit 2 hit on
+/// the line it reads `65 03 03 00`, a Gear - release. A single-touch screen
+/// sends no other component's release between a press and its release, so
+/// that frame is the Stop's release: ignored. Measured before the rule
+/// (with `bstart` at id 6): `[Stop, Start]` — the drum restarted as the
+/// operator lifted the finger from Stop.
 #[test]
-fn a_stop_release_hit_into_a_start_does_not_restart() {
+fn a_stop_release_hit_into_another_button_is_ignored() {
     let (mut hmi, mut screen) = connected();
     screen.release("badapt").unwrap();
     pump(&mut hmi, &mut screen);
     screen.tap("bstart").unwrap();
     assert_eq!(pump(&mut hmi, &mut screen), vec![cmd(Command::Start)]);
     hmi.push_slice(&[0x65, 0x03, 0x07, 0x01, 0xFF, 0xFF, 0xFF]); // Stop press
-    hmi.push_slice(&[0x65, 0x03, 0x06, 0x00, 0xFF, 0xFF, 0xFF]); // its release, hit
+    hmi.push_slice(&[0x65, 0x03, 0x03, 0x00, 0xFF, 0xFF, 0xFF]); // its release, hit
     let mut ev = Vec::new();
     while let Some(e) = hmi.poll_event() {
         ev.push(e);
@@ -1105,6 +1106,38 @@ fn docs_list_every_component() {
         let row = format!("| {} | `{}` |", c.id(), c.name());
         assert!(doc.contains(&row), "missing {row} ({:?})", c.page);
     }
+    // A builder creates the components in the order listed (the editor's
+    // ids): each page's table lists ids 1, 2, 3, … in that order, and
+    // exactly the contract's.
+    for p in Page::ALL {
+        let heading = format!("### Page {} `{}`", p.id(), p.name());
+        let section = doc.split(&heading).nth(1).expect("page section");
+        let section = section.split("### Page").next().unwrap_or("");
+        let listed: Vec<(u8, &str)> = section
+            .lines()
+            .filter_map(|l| {
+                let mut cells = l.split('|').map(str::trim);
+                cells.next()?;
+                let id = cells.next()?.parse().ok()?;
+                let name = cells.next()?.strip_prefix('`')?.strip_suffix('`')?;
+                Some((id, name))
+            })
+            .collect();
+        let mut contract: Vec<(u8, &str)> =
+            Component::on_page(p).map(|c| (c.id(), c.name())).collect();
+        contract.sort_unstable();
+        // (The doc may list static components the MCU never touches, such
+        // as page 3's label `tqlabel`.)
+        let known: Vec<(u8, &str)> = listed
+            .iter()
+            .copied()
+            .filter(|&(id, _)| Component::lookup(p.id(), id).is_some())
+            .collect();
+        assert_eq!(known, contract, "page {p:?}: rows in the doc's order");
+        let ids: Vec<u8> = listed.iter().map(|&(id, _)| id).collect();
+        let dense: Vec<u8> = (1..=u8::try_from(ids.len()).unwrap_or(u8::MAX)).collect();
+        assert_eq!(ids, dense, "page {p:?}: ids 1..n in creation order");
+    }
 }
 
 /// A Stop survives one lost or corrupted frame only if the screen sends it
@@ -1333,7 +1366,7 @@ proptest! {
 }
 
 /// Page 10 (docs/hmi.md): from page 9's `blink`, the selector walks the
-/// nine link settings (label in `tlpar`, each step a command so that the
+/// link settings (label in `tlpar`, each step a command so that the
 /// supervisor sends the value back), `blval` reads `nlval` and commands the
 /// value for the selected one with the restart notice; a value beyond
 /// ±10⁸ is refused on the screen, the old value written back.
@@ -1349,7 +1382,8 @@ fn page_10_edits_the_drive_link_one_setting_at_a_time() {
     assert_eq!(screen.page(), 10);
     assert_eq!(screen.text("tlpar"), Some("Feedback 0enc 1drv 2both"));
     let mut seen = vec![LinkParameter::Feedback];
-    for _ in 0..9 {
+    let n = LinkParameter::ALL.len();
+    for _ in 0..n {
         screen.release("blpar").unwrap();
         let ev = pump(&mut hmi, &mut screen);
         let [Event::Command(Command::SelectLinkParameter(p))] = ev[..] else {
@@ -1358,9 +1392,9 @@ fn page_10_edits_the_drive_link_one_setting_at_a_time() {
         assert_eq!(screen.text("tlpar"), Some(p.label()));
         seen.push(p);
     }
-    // Nine steps: every parameter once, back to the first.
-    assert_eq!(seen[..9], LinkParameter::ALL);
-    assert_eq!(seen[9], LinkParameter::Feedback);
+    // One step each: every parameter once, back to the first.
+    assert_eq!(seen[..n], LinkParameter::ALL);
+    assert_eq!(seen[n], LinkParameter::Feedback);
     screen.set_value("nlval", 1).unwrap();
     screen.release("blval").unwrap();
     assert_eq!(

@@ -2,14 +2,15 @@
 //! (docs/hmi.md §3, "Motor-starting buttons").
 //!
 //! Nextion touch frames `65 <page> <id> <event> FF FF FF` carry no CRC, and
-//! the Start and Identify buttons are one bit away from other buttons: from
-//! docs/hmi.md §6, page 3 `bstart` is id 6 (`bgearup` 4 = 0b100 and `bapply`
-//! 2 = 0b010 are one bit from 6 = 0b110, and so is `bstop` 7), page 2
-//! `bstart` is id 3 (`bapply` 2, `bfixed`/`bcoef`/`bgeardn`… ids 1 and 7 on
-//! other pages), page 7 `bstart` is id 1 (`bpar` 3), page 9 `bident` is id
-//! 1 (`bback` 3). Before this change a touch was taken from any page and a
-//! release alone started the drum, so one bit error in another button's
-//! frame could start a motor.
+//! with the ids of the earlier screen layout the Start and Identify buttons
+//! were one bit away from other buttons (page 3 `bstart` id 6 next to
+//! `bgearup` 4, `bapply` 2 and `bstop` 7; page 2 `bstart` id 3 next to
+//! `bapply` 2; page 7 `bstart` id 1 next to `bpar` 3; page 9 `bident` id 1
+//! next to `bback` 3 and page 1's `bfixed` 1). Before this rule a touch was
+//! taken from any page and a release alone started the drum, so one bit
+//! error in another button's frame could start a motor. (The ids now keep
+//! every motor start two bits from every other button:
+//! `tests/start_flips.rs` tests two and three hit bits.)
 //!
 //! Now a motor-starting command needs the press *and* the release of the
 //! same component, nothing between them, within `START_TAP_MS`, both naming
@@ -69,8 +70,8 @@ fn starts_motor(e: &Event) -> bool {
 }
 
 /// The motor-starting buttons of the contract (docs/hmi.md §6): page 2
-/// `bstart` id 3, page 3 `bstart` id 6, page 7 `bstart` id 1 (profile B's
-/// two steppers), page 9 `bident` id 1 (runs the drum for 7 s). Calibration's
+/// `bstart` id 1, page 3 `bstart` id 13, page 7 `bstart` id 1 (profile B's
+/// two steppers), page 9 `bident` id 5 (runs the drum for 7 s). Calibration's
 /// *Start run* (page 4 `bcstart`) only starts counting: the k3 run's drum is
 /// started with page 2's Start.
 #[test]
@@ -84,10 +85,10 @@ fn the_motor_starting_buttons_are_start_and_identify() {
     assert_eq!(
         starters,
         [
-            (2, 3, "bstart"),
-            (3, 6, "bstart"),
+            (2, 1, "bstart"),
+            (3, 13, "bstart"),
             (7, 1, "bstart"),
-            (9, 1, "bident")
+            (9, 5, "bident")
         ]
     );
     for a in [Action::Start, Action::IdentifyDrive] {
@@ -184,10 +185,10 @@ fn a_press_and_release_of_start_starts() {
     // (page, the button's id, another button's id on the page: `bapply`,
     // `bapply`, `bpar`, `bback`; docs/hmi.md §6)
     for (page, id, other, want) in [
-        (Page::Fixed, 3, 2, Command::Start),
-        (Page::Adaptive, 6, 2, Command::Start),
-        (Page::Belt, 1, 3, Command::Start),
-        (Page::Drive, 1, 3, Command::IdentifyDrive),
+        (Page::Fixed, 1, 2, Command::Start),
+        (Page::Adaptive, 13, 2, Command::Start),
+        (Page::Belt, 1, 6, Command::Start),
+        (Page::Drive, 5, 3, Command::IdentifyDrive),
     ] {
         let mut hmi = showing(page);
         hmi.push_slice(&touch(page.id(), id, TouchEvent::Press));
@@ -226,11 +227,11 @@ fn a_press_and_release_of_start_starts() {
 /// (every bit of every byte): no start; the next clean tap starts.
 #[test]
 fn a_start_press_then_a_corrupted_release_does_not_start() {
-    let press = touch(3, 6, TouchEvent::Press);
+    let press = touch(3, 13, TouchEvent::Press);
     for byte in 0..7 {
         for bit in 0..8 {
             let mut hmi = showing(Page::Adaptive);
-            let mut release = touch(3, 6, TouchEvent::Release);
+            let mut release = touch(3, 13, TouchEvent::Release);
             release[byte] ^= 1 << bit;
             hmi.push_slice(&press);
             hmi.push_slice(&release);
@@ -243,7 +244,7 @@ fn a_start_press_then_a_corrupted_release_does_not_start() {
             let ev = events(&mut hmi);
             assert!(!ev.iter().any(starts_motor), "{release:02X?} -> {ev:?}");
             hmi.push_slice(&press);
-            hmi.push_slice(&touch(3, 6, TouchEvent::Release));
+            hmi.push_slice(&touch(3, 13, TouchEvent::Release));
             assert_eq!(events(&mut hmi), [Event::Command(Command::Start)]);
         }
     }
@@ -281,8 +282,8 @@ fn a_touch_from_another_page_is_ignored_and_the_page_asked() {
     // The screen says it shows page 3: its touches count again.
     hmi.push_slice(&[0x66, 0x03, 0xFF, 0xFF, 0xFF]);
     assert_eq!(hmi.page(), Page::Adaptive);
-    hmi.push_slice(&touch(3, 6, TouchEvent::Press));
-    hmi.push_slice(&touch(3, 6, TouchEvent::Release));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Press));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Release));
     assert_eq!(events(&mut hmi), [Event::Command(Command::Start)]);
 }
 
@@ -300,8 +301,8 @@ fn while_the_page_is_unknown_no_motor_starts() {
     assert!(hmi.show_page(Page::Adaptive).is_err());
     let mut tx = [0u8; 1024];
     hmi.poll_transmit(&mut tx);
-    hmi.push_slice(&touch(3, 6, TouchEvent::Press));
-    hmi.push_slice(&touch(3, 6, TouchEvent::Release));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Press));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Release));
     assert_eq!(events(&mut hmi), []);
     assert_eq!(hmi.stats().foreign_page_touches, 1);
     // Gear up (page 3, id 4) is taken as before.
@@ -313,8 +314,8 @@ fn while_the_page_is_unknown_no_motor_starts() {
     let n = hmi.poll_transmit(&mut tx);
     assert!(tx[..n].windows(9).any(|w| w == b"sendme\xff\xff\xff"));
     hmi.push_slice(&[0x66, 0x03, 0xFF, 0xFF, 0xFF]);
-    hmi.push_slice(&touch(3, 6, TouchEvent::Press));
-    hmi.push_slice(&touch(3, 6, TouchEvent::Release));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Press));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Release));
     assert_eq!(events(&mut hmi), [Event::Command(Command::Start)]);
 }
 
@@ -326,13 +327,13 @@ fn after_a_reconnect_an_old_pages_start_is_ignored() {
     hmi.tick(HEARTBEAT_MS * 3);
     assert!(!hmi.is_connected());
     // Not connected: a Start pair is ignored.
-    hmi.push_slice(&touch(3, 6, TouchEvent::Press));
-    hmi.push_slice(&touch(3, 6, TouchEvent::Release));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Press));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Release));
     assert!(!events(&mut hmi).iter().any(starts_motor));
     hmi.push_slice(&[0x66, 0x03, 0xFF, 0xFF, 0xFF]); // connects, shows page 1
     assert_eq!(events(&mut hmi), [Event::Connected]);
     assert_eq!(hmi.page(), Page::Mode);
-    hmi.push_slice(&touch(3, 6, TouchEvent::Press));
-    hmi.push_slice(&touch(3, 6, TouchEvent::Release));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Press));
+    hmi.push_slice(&touch(3, 13, TouchEvent::Release));
     assert_eq!(events(&mut hmi), []);
 }

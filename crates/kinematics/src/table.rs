@@ -204,8 +204,8 @@ impl CoeffTable {
     }
 
     /// [`CoeffTable::from_bytes`] into `self`, without a second table on the
-    /// stack (the settings are decoded in `init`, on the QEMU board's 4 KB
-    /// stack); returns the number of bytes consumed. On an error `self` is
+    /// stack (the settings are decoded in `init`); returns the number of
+    /// bytes consumed. On an error `self` is
     /// the identity table ([`CoeffTable::one`]).
     pub fn read_from(&mut self, bytes: &[u8]) -> Result<usize, TableError> {
         let r = self.parse(bytes);

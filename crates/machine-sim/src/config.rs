@@ -5,15 +5,9 @@ use kinematics::consts::{self, Gear};
 
 use crate::machine::Machine;
 
-/// Longest transport delay the delay line holds, milliseconds: 63 on the
-/// host (feature `std`: drives with their own speed loop, ramp or RS-485
-/// read-back, 20–60 ms, issue 16 item 3), 15 without `std` (the QEMU
-/// board's RAM).
-#[cfg(feature = "std")]
+/// Longest transport delay the delay line holds, milliseconds: enough for
+/// drives with their own speed loop, ramp or RS-485 read-back (20–60 ms).
 pub const MAX_TRANSPORT_DELAY_MS: u8 = 63;
-/// See above.
-#[cfg(not(feature = "std"))]
-pub const MAX_TRANSPORT_DELAY_MS: u8 = 15;
 
 /// Which machine the plants come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -77,7 +71,7 @@ pub struct Config {
     /// instantaneous). Default 0.
     pub track_tau_s: f32,
     /// Largest deceleration of the wheel (track rolling) speed, mm/s² (0 =
-    /// no limit; an integer so that the model stays within its 528 bytes).
+    /// no limit; an integer so that the model stays within its 592 bytes).
     /// A tracked chassis whose tracks do not skid slows down at most as fast
     /// as the friction between track and ground allows (μ·g,
     /// docs/machine-sim.md); with `track_tau_s` 0 a stop is then a constant

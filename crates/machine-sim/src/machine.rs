@@ -8,14 +8,9 @@ use crate::rng::{hash_signed_unit, splitmix64, Rng};
 use crate::tables;
 
 /// Slots of the transport-delay line (one per millisecond): up to
-/// [`crate::MAX_TRANSPORT_DELAY_MS`] (63 ms on the host with `std`, 15 ms
-/// without it, i.e. on the QEMU board, whose 8 KB of RAM has no room to
-/// spare). Each slot holds the duty in `u16` fractions of 1 (1/65 535, far
-/// finer than the PWM's 1/3600).
-#[cfg(feature = "std")]
-const RING: usize = 64;
-#[cfg(not(feature = "std"))]
-const RING: usize = 16;
+/// [`crate::MAX_TRANSPORT_DELAY_MS`]. Each slot holds the duty in `u16`
+/// fractions of 1 (1/65 535, far finer than the PWM's 1/3600).
+const RING: usize = crate::MAX_TRANSPORT_DELAY_MS as usize + 1;
 /// Scale of a delay-line slot (see [`RING`]).
 const DUTY_SCALE: f32 = 65_535.0;
 /// The model's internal grid: sub-steps never cross a millisecond boundary.

@@ -1,5 +1,5 @@
 //! Field metrics of the planted row as streaming accumulators (no lists: the
-//! QEMU board has 8 KB of RAM).
+//! model runs without a heap on the QEMU board).
 //!
 //! With `X` the target spacing and `s` each spacing between consecutive
 //! plants (ISO 7256-1 classes):

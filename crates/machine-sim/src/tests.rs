@@ -255,9 +255,8 @@ fn same_seed_same_run_different_seed_different_run() {
 fn machine_state_is_small() {
     let size = core::mem::size_of::<Machine>();
     std::println!("size_of::<Machine>() = {size} bytes");
-    // 8 KB of RAM on the QEMU board: the model must stay small. With `std`
-    // (the host) the delay line holds 63 ms (64 u16 slots, issue 16 item
-    // 3); the QEMU board's build (no `std`) keeps 16 slots, 96 bytes less.
+    // The QEMU board keeps the model in a static: it must stay small (the
+    // delay line is 64 u16 slots of it).
     assert!(size <= 592, "{size} bytes");
 }
 

@@ -136,6 +136,12 @@ pub enum Alarm {
     /// (a generic profile's registers, most often). As [`Alarm::LinkLost`]
     /// otherwise.
     LinkRefused,
+    /// The driver answers, but its set-up refuses it: its maximum speed
+    /// is below what the drum's top speed needs through the gearbox, or
+    /// its speed resolution is unusable
+    /// ([`drive_link::link::SetupFault`]). As [`Alarm::LinkLost`]
+    /// otherwise; cleared once the driver's register is corrected.
+    DriverSetup(crate::drive_link::SetupRefusal),
     /// Encoder and driver read-back disagree beyond the cross-check's
     /// margin for its hold time ([`drive_link::cross_check`]): a lost
     /// encoder, or a driver reporting wrong. Latched.
@@ -153,6 +159,7 @@ impl Alarm {
                 | Self::DriverFault(_)
                 | Self::LinkLost
                 | Self::LinkRefused
+                | Self::DriverSetup(_)
                 | Self::SpeedMismatch
         )
     }
@@ -180,6 +187,12 @@ impl Alarm {
             }
             Self::LinkLost => w.write_str("Drum driver link lost"),
             Self::LinkRefused => w.write_str("Driver refuses register: check profile"),
+            Self::DriverSetup(crate::drive_link::SetupRefusal::MaxSpeed) => {
+                w.write_str("Driver max speed too low for gearbox")
+            }
+            Self::DriverSetup(crate::drive_link::SetupRefusal::Resolution) => {
+                w.write_str("Driver speed resolution unusable")
+            }
             Self::SpeedMismatch => w.write_str("Encoder or driver speed wrong"),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
@@ -397,8 +410,7 @@ pub struct Supervisor {
     estimator: MtEstimator,
     /// The drum controller, or, while the drive is identified, the
     /// identification in its place (they are never needed together; sharing
-    /// the space keeps the supervisor small enough for the QEMU board's
-    /// 8 KB of RAM).
+    /// the space keeps the supervisor small).
     drum: Drum,
     /// The last identification's outcome (its model until saved).
     identified: IdentifyState,
@@ -411,7 +423,7 @@ pub struct Supervisor {
     /// The link settings in force: those the supervisor was built with.
     /// Page 10 edits `settings.drive_link`, which the board's link task
     /// takes only at the next start (docs/drive-link.md).
-    link_in_force: crate::drive_link::DriveLinkSettings,
+    link_in_force: crate::drive_link::LinkInForce,
     /// Drum encoder counts since boot.
     drum_counts_total: u64,
     last_encoder: Option<u16>,
@@ -903,8 +915,7 @@ impl Supervisor {
     ///
     /// The controller itself is built at the first control step (or Start),
     /// not here: building the fuzzy tuner takes 1.3 KB of stack, which at
-    /// boot would sit on top of the supervisor's own 1.5 KB being built —
-    /// more than the QEMU board's 4.7 KB of stack holds with the rest of
+    /// boot would sit on top of the supervisor's own 1.5 KB being built, in
     /// `init`. The scheduled configuration is valid for every valid drive
     /// model (its gains are scaled by `s ∈ (0, 1]`, test
     /// `scheduled_configs_build_for_extreme_models`).
@@ -942,9 +953,9 @@ impl Supervisor {
         // Without the link in the image: encoder and PWM, the saved link
         // settings kept for the record.
         let link_in_force = if cfg!(feature = "drive-link") {
-            settings.drive_link
+            crate::drive_link::LinkInForce::from(&settings.drive_link)
         } else {
-            crate::drive_link::DriveLinkSettings::default()
+            crate::drive_link::LinkInForce::default()
         };
         let phase = Phase::new(hw.encoder_counts_per_drum_rev, settings.spacing.raw());
         Ok(Self {
@@ -1133,9 +1144,9 @@ impl Supervisor {
                 // Rebuilt by the next control step, not here: a Stop comes
                 // through the screen task, and building the
                 // fuzzy controller (≈ 1.4 KB of stack) on top of its frame
-                // reached 4.7 KB on the QEMU board's 4 KB stack (static
-                // analysis of the image: handle_event → command → stop →
-                // restore_controller → Config::build).
+                // reached 4.7 KB of stack (static analysis of the image:
+                // handle_event → command → stop → restore_controller →
+                // Config::build).
                 self.drum = Drum::Unbuilt;
             }
         }
@@ -1154,7 +1165,7 @@ impl Supervisor {
                 Drum::Control(c) => c.start(),
                 // Built (and started, since running) by the next control
                 // step's `ensure_controller`, not here on the screen task's
-                // stack (the QEMU board's 4 KB, see `stop`).
+                // stack (see `stop`).
                 Drum::Unbuilt => {}
             }
             self.run = RunState::Running;
@@ -1983,6 +1994,7 @@ impl Supervisor {
             age_us: age,
         });
         s.lost = sample.lost;
+        s.setup = sample.setup;
         s.refused = sample.refused;
         s.answering = sample.answering;
         s.fault_word = sample.fault_word;
@@ -2031,7 +2043,7 @@ impl Supervisor {
         let m = self.settings.drive;
         let link = &self.link_in_force;
         // One transaction's delay for the read-back as the feedback, one
-        // more for the bus command (written every other transaction).
+        // more for the bus command (written about every other transaction).
         let transactions = u32::from(link.feedback == FeedbackSource::Driver)
             .saturating_add(u32::from(link.command == CommandPath::Modbus));
         if transactions == 0 {
@@ -2064,7 +2076,7 @@ impl Supervisor {
             0
         };
         // The bus command reaches the driver one transaction later (on
-        // average; written every other transaction).
+        // average; written about every other transaction).
         let command = if link.command == CommandPath::Modbus {
             periods(link.readback_delay_us())
         } else {
@@ -2130,23 +2142,20 @@ impl Supervisor {
         }
         let sample = self.link.sample;
         if sample.lost {
-            self.latch(if sample.refused {
-                Alarm::LinkRefused
-            } else {
-                Alarm::LinkLost
+            self.latch(match sample.setup {
+                Some(fault) => Alarm::DriverSetup(fault),
+                None if sample.refused => Alarm::LinkRefused,
+                None => Alarm::LinkLost,
             });
             return;
         }
         if sample.fault_word != 0
             && !(self.link.acked && self.link.acked_fault_reads == sample.fault_reads)
         {
-            let fault = self
-                .link_in_force
-                .build()
-                .ok()
-                .flatten()
-                .and_then(|p| p.faults(sample.fault_word).next())
-                .unwrap_or(drive_link::profile::DriverFault::Other(sample.fault_word));
+            let fault = drive_link::profile::first_fault(
+                &self.link_in_force.fault_masks(),
+                sample.fault_word,
+            );
             if self.alarm != Some(Alarm::DriverFault(fault)) {
                 self.latch(Alarm::DriverFault(fault));
             }
@@ -2180,7 +2189,7 @@ impl Supervisor {
     /// alarm (a fault still there comes back with the next fault read).
     fn acknowledge_link_alarm(&mut self) -> Option<Effect> {
         match self.alarm {
-            Some(Alarm::LinkLost | Alarm::LinkRefused)
+            Some(Alarm::LinkLost | Alarm::LinkRefused | Alarm::DriverSetup(_))
                 if !self.link.sample.answering || self.link.sample.lost =>
             {
                 Some(Effect::Message("Drum driver still not answering"))
@@ -2270,9 +2279,8 @@ impl Supervisor {
     /// The controller is not built here but by the next control step
     /// ([`Supervisor::ensure_controller`], in the control task): built here,
     /// in the screen task (the operator's *Save* on page 9), its frames
-    /// (≈ 2.6 KB: the command, the build, the fuzzy tuner) overflowed the
-    /// QEMU board's stack when the control task preempted it
-    /// (tests/tests/identify.rs). Every model [`DriveModel`] accepts builds
+    /// (≈ 2.6 KB: the command, the build, the fuzzy tuner) would sit under
+    /// the control task preempting it. Every model [`DriveModel`] accepts builds
     /// (`scheduled_configs_build_for_extreme_models`).
     #[inline(never)]
     fn use_drive(&mut self, model: DriveModel) {
@@ -2618,8 +2626,24 @@ mod tests {
             set(&mut sup, P::Driver, 1),
             Effect::Message("Scale under 1365: reads < 44.7 r/min")
         );
+        // Behind 59:1 (1695) the drum's 44.7 r/min needs 2638 motor r/min,
+        // beyond the ZLAC8015D's 1000 (0x2008): refused by name; behind
+        // 20:1 (5000) it needs 894: taken.
         assert_eq!(set(&mut sup, P::Scale, 1695), Effect::SettingsChanged);
+        assert_eq!(
+            set(&mut sup, P::Driver, 1),
+            Effect::Message("Gearbox needs over 1000 motor r/min")
+        );
+        assert_eq!(set(&mut sup, P::Scale, 5000), Effect::SettingsChanged);
         assert_eq!(set(&mut sup, P::Driver, 1), Effect::SettingsChanged);
+        // A reply timeout beyond 1000 ms is refused; the saved one stays.
+        assert_eq!(
+            set(&mut sup, P::ReplyTimeout, 1001),
+            Effect::Message("Reply timeout: 5-1000 ms")
+        );
+        assert_eq!(sup.settings().drive_link.timing.reply_timeout_ms, 60);
+        assert_eq!(set(&mut sup, P::ReplyTimeout, 80), Effect::SettingsChanged);
+        assert_eq!(sup.settings().drive_link.timing.reply_timeout_ms, 80);
         assert_eq!(set(&mut sup, P::Feedback, 1), Effect::SettingsChanged);
         assert_eq!(sup.settings().drive_link.feedback, FeedbackSource::Driver);
         assert_eq!(sup.screen_settings().link_value, 1);
@@ -2676,7 +2700,7 @@ mod tests {
             kind: DriverKind::Zlac8015d,
             ..DriveLinkSettings::default()
         };
-        settings.drive_link.generic.micro_rpm_per_count = 1695;
+        settings.drive_link.generic.micro_rpm_per_count = 5000;
         assert!(settings.drive_link.build().is_ok());
         let saved = settings.drive_link;
         let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
@@ -2917,7 +2941,7 @@ mod tests {
                 kind: DriverKind::Zlac8015d,
                 ..DriveLinkSettings::default()
             };
-            drive_link.generic.micro_rpm_per_count = 1695;
+            drive_link.generic.micro_rpm_per_count = 5000;
             let settings = Settings {
                 drive_link,
                 ..Settings::default()

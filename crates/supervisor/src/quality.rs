@@ -251,7 +251,7 @@ pub struct Quality {
     pass: Tally,
     /// Where the pass in progress began (ground distance, µm), or [`NONE`]
     /// (a sentinel rather than an `Option`: 16 bytes less in the
-    /// supervisor, which the QEMU board builds on its 4.4 KB stack).
+    /// supervisor).
     pass_from_um: u64,
     /// The last plant of this pass, ground distance µm, or [`NONE`].
     last_plant_um: u64,

@@ -1,8 +1,13 @@
 //! The persisted settings and their versioned byte format.
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
-//! multi-byte number is little endian. Format version 5. [`decode`] still
-//! reads the older formats: version 4 is version 5 without its last 31
+//! multi-byte number is little endian. Format version 6. [`decode`] still
+//! reads the older formats: version 5 has the drive link block's first 31
+//! bytes only (written before the link's timing settings and the generic
+//! profile's command scale and optional registers; read with the default
+//! timing and a generic profile that does what it did: the command in the
+//! feedback's scale, no control word, mode, offline-time, resolution or
+//! maximum-speed register), version 4 is version 5 without its last 31
 //! bytes (written before the drum driver's link; read with encoder
 //! feedback, PWM command and no driver, the behaviour then), version 3 is version 4 without its last 2 bytes
 //! and knows flag bit 0 only (written before the placement setting and the
@@ -15,7 +20,7 @@
 //!
 //! | offset | size | field | encoding |
 //! |---|---|---|---|
-//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 5 |
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 6 |
 //! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
 //! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
 //! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
@@ -28,9 +33,9 @@
 //! | 243 | 1 | flags | bit 0: [`Settings::drum_encoder_reversed`]; bit 1 (format 4): [`Settings::placement`] is [`Placement::SpeedFollowing`]; bit 2 (format 4): [`Settings::work_switch_fitted`]; bits 3–7 zero |
 //! | 244 | 6 | [`Settings::drive`] | [`DriveModel::to_bytes`]: `n_max` r/min × 100, τ and dead time in 0.1 ms, u16 each |
 //! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`], default 100) |
-//! | 252 | 31 | [`Settings::drive_link`] (format 5) | [`DriveLinkSettings::to_bytes`]: feedback, command path, driver kind, slave id, baud (u32), speed register, scale (i32, micro-r/min per count), fault register, six fault masks, speed command register (presence byte + u16) |
+//! | 252 | 59 | [`Settings::drive_link`] (format 6; 31 bytes in format 5) | [`DriveLinkSettings::to_bytes`]: feedback, command path, driver kind, slave id, baud (u32), speed register, scale (i32, micro-r/min per count), fault register, six fault masks, speed command register (presence byte + u16); then (format 6) reply timeout, retry gap, offline time (ms, u16 each), command scale (i32), control register and its three values, mode register and value, offline-time, resolution and maximum-speed registers (u16 each, register 0: none) |
 //!
-//! Total 283 bytes (version 4: 252, version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! Total 311 bytes (version 5: 283, version 4: 252, version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -46,12 +51,12 @@
 //! s.spacing = Spacing::new(120).unwrap();
 //! let bytes = s.encode();
 //! assert_eq!(bytes.len(), SETTINGS_BYTES);
-//! // version 5, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // version 6, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
 //! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
 //! // brightness 100 (0x64).
 //! assert_eq!(
 //!     bytes[..10],
-//!     [5, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//!     [6, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
 //! );
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
@@ -66,11 +71,11 @@ use kinematics::table::TableError;
 use kinematics::travel::{Calibration, CALIBRATION_BYTES};
 
 use crate::drive::{DriveModel, DriveModelError, DRIVE_MODEL_BYTES};
-use crate::drive_link::{DriveLinkError, DriveLinkSettings, DRIVE_LINK_BYTES};
+use crate::drive_link::{DriveLinkError, DriveLinkSettings, DRIVE_LINK_BYTES, DRIVE_LINK_V5_BYTES};
 use crate::profile_b::{ProfileBConfig, CONFIG_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
-pub const SETTINGS_FORMAT_VERSION: u8 = 5;
+pub const SETTINGS_FORMAT_VERSION: u8 = 6;
 
 /// Bytes before the calibration block: version, mode, spacing, drum speed,
 /// motor coefficient, gear, brightness.
@@ -88,7 +93,10 @@ pub const SETTINGS_V3_BYTES: usize = SETTINGS_V2_BYTES + 1 + DRIVE_MODEL_BYTES;
 /// Size of a format-4 record: 250 + 2 = 252.
 pub const SETTINGS_V4_BYTES: usize = SETTINGS_V3_BYTES + 2;
 
-/// Size of an encoded [`Settings`] (format version 5): 252 + 31 = 283.
+/// Size of a format-5 record: 252 + 31 = 283.
+pub const SETTINGS_V5_BYTES: usize = SETTINGS_V4_BYTES + DRIVE_LINK_V5_BYTES;
+
+/// Size of an encoded [`Settings`] (format version 6): 252 + 59 = 311.
 pub const SETTINGS_BYTES: usize = SETTINGS_V4_BYTES + DRIVE_LINK_BYTES;
 
 /// Flags byte (offset 243), bit 0: the drum encoder counts backwards.
@@ -247,7 +255,7 @@ pub enum SettingsError {
     Flags(u8),
     /// The drive model (offset 244) failed validation.
     Drive(DriveModelError),
-    /// The drive link block (offset 252, format 5) failed validation.
+    /// The drive link block (offset 252, format 5 and 6) failed validation.
     DriveLink(DriveLinkError),
 }
 
@@ -319,7 +327,7 @@ const fn mode_from_byte(b: u8) -> Option<Mode> {
 }
 
 impl Settings {
-    /// Serialises in format version 5 (layout in the [module docs](self)).
+    /// Serialises in format version 6 (layout in the [module docs](self)).
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
@@ -381,10 +389,20 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, SettingsError> {
 }
 
 /// [`decode`] into `out`, the calibration tables in place: no second
-/// `Settings` on the stack (the store decodes in `init`, on the QEMU board's
-/// 4 KB stack). On an error `out` holds valid values but not the record's:
+/// `Settings` on the stack (the store decodes in `init`). On an error `out`
+/// holds valid values but not the record's:
 /// decode into a scratch value.
 pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError> {
+    decode_into_unchecked_link(bytes, out)?;
+    out.drive_link.check().map_err(SettingsError::DriveLink)
+}
+
+/// [`decode_into`] but the drive link block is parsed, not checked
+/// ([`DriveLinkSettings::check`]): the store checks it once its read
+/// buffer is off the stack (on the QEMU board's boot path the two frames
+/// come one after the other, not one on top of the other). A record is
+/// valid only when both pass.
+pub fn decode_into_unchecked_link(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError> {
     // Every field is written below: this pattern stops compiling when a
     // field is added, until it is decoded here too.
     let Settings {
@@ -414,6 +432,7 @@ pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError
         2 => SETTINGS_V2_BYTES,
         3 => SETTINGS_V3_BYTES,
         4 => SETTINGS_V4_BYTES,
+        5 => SETTINGS_V5_BYTES,
         SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
         other => return Err(SettingsError::UnsupportedVersion(other)),
     };
@@ -424,10 +443,17 @@ pub fn decode_into(bytes: &[u8], out: &mut Settings) -> Result<(), SettingsError
         });
     }
     let (v4, v5) = bytes.split_at(bytes.len().min(SETTINGS_V4_BYTES));
-    let drive_link = match v5.try_into() {
-        Ok(block) => DriveLinkSettings::from_bytes(block).map_err(SettingsError::DriveLink)?,
-        Err(_) if v5.is_empty() => DriveLinkSettings::default(),
-        Err(_) => return Err(length),
+    // Parsed here, checked by the caller (`decode_into`, the store).
+    let drive_link = if v5.is_empty() {
+        DriveLinkSettings::default()
+    } else if let Ok(block) = <&[u8; DRIVE_LINK_BYTES]>::try_from(v5) {
+        DriveLinkSettings::parse(block).map_err(SettingsError::DriveLink)?
+    } else if let Ok(block) = <&[u8; DRIVE_LINK_V5_BYTES]>::try_from(v5) {
+        // Format 5: migrated (the timing's defaults, a generic profile as
+        // it worked then).
+        DriveLinkSettings::parse_v5(block).map_err(SettingsError::DriveLink)?
+    } else {
+        return Err(length);
     };
     let (v3, v4) = v4.split_at(v4.len().min(SETTINGS_V3_BYTES));
     let first_plant_distance = match v4 {
@@ -537,10 +563,15 @@ mod tests {
         assert_eq!(SETTINGS_V3_BYTES, 250);
         // + the first-plant distance (u16).
         assert_eq!(SETTINGS_V4_BYTES, 252);
-        // + the drive link block: 4 bytes, baud u32, register u16, scale
-        // i32, register u16, 6 masks u16, presence byte, register u16.
-        assert_eq!(DRIVE_LINK_BYTES, 4 + 4 + 2 + 4 + 2 + 12 + 1 + 2);
-        assert_eq!(SETTINGS_BYTES, 283);
+        // + the drive link block of format 5: 4 bytes, baud u32, register
+        // u16, scale i32, register u16, 6 masks u16, presence byte,
+        // register u16.
+        assert_eq!(DRIVE_LINK_V5_BYTES, 4 + 4 + 2 + 4 + 2 + 12 + 1 + 2);
+        assert_eq!(SETTINGS_V5_BYTES, 283);
+        // Format 6: + 3 timings u16, command scale i32, control register
+        // and 3 values u16, mode register and value u16, 3 registers u16.
+        assert_eq!(DRIVE_LINK_BYTES, DRIVE_LINK_V5_BYTES + 6 + 4 + 8 + 4 + 6);
+        assert_eq!(SETTINGS_BYTES, 311);
     }
 
     #[test]
@@ -586,12 +617,23 @@ mod tests {
                     fault_register: 0x0100,
                     fault_masks: [1, 2, 4, 8, 0x10, 0x8000],
                     speed_command: Some(0x0200),
+                    command_scale: -25_000,
+                    control: None,
+                    velocity_mode: Some((0x0300, 2)),
+                    offline_register: None,
+                    resolution_register: Some(0x0400),
+                    max_speed_register: None,
+                },
+                timing: drive_link::link::LinkTiming {
+                    reply_timeout_ms: 50,
+                    retry_gap_ms: 10,
+                    offline_time_ms: 400,
                 },
             },
         };
         let b = s.encode();
         // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
-        assert_eq!(b[..10], [5, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
+        assert_eq!(b[..10], [6, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
         assert_eq!(b[10..209], Calibration::identity().to_bytes());
         // Profile B (2) and its parameters.
         assert_eq!(b[209], 2);
@@ -604,14 +646,20 @@ mod tests {
             b[243..252],
             [7, 0xB3, 0x16, 0x6B, 0x03, 0x58, 0x02, 0xE8, 0x03]
         );
-        // Format 5's drive link block: both (2), Modbus (1), generic (2),
-        // slave 17; 9600 = 0x2580 (u32); 0x1234; −2500 = 0xFFFFF63C (i32);
-        // 0x0100; the masks; command present (1), 0x0200.
+        // The drive link block: both (2), Modbus (1), generic (2), slave
+        // 17; 9600 = 0x2580 (u32); 0x1234; −2500 = 0xFFFFF63C (i32);
+        // 0x0100; the masks; command present (1), 0x0200; then (format 6)
+        // 50 ms, 10 ms, 400 ms = 0x0190; −25 000 = 0xFFFF9E58; no control
+        // register (0) with the ZLAC8015D's values 8, 7, 6 stored; mode
+        // register 0x0300 = 2; no offline register; resolution register
+        // 0x0400; no maximum-speed register.
         assert_eq!(
             b[252..],
             [
                 2, 1, 2, 17, 0x80, 0x25, 0, 0, 0x34, 0x12, 0x3C, 0xF6, 0xFF, 0xFF, 0x00, 0x01, 1,
-                0, 2, 0, 4, 0, 8, 0, 0x10, 0, 0x00, 0x80, 1, 0x00, 0x02
+                0, 2, 0, 4, 0, 8, 0, 0x10, 0, 0x00, 0x80, 1, 0x00, 0x02, 50, 0, 10, 0, 0x90, 0x01,
+                0x58, 0x9E, 0xFF, 0xFF, 0, 0, 8, 0, 7, 0, 6, 0, 0x00, 0x03, 2, 0, 0, 0, 0x00, 0x04,
+                0, 0
             ]
         );
         assert_eq!(decode(&b).unwrap(), s);
@@ -735,7 +783,64 @@ mod tests {
         );
     }
 
+    /// A record of format 5 (before the link's timing and the generic
+    /// profile's command scale and optional registers): its first 283
+    /// bytes, version 5. It reads with everything as saved, the link's
+    /// timing at its defaults, and a generic profile that does what it did
+    /// (its command in the feedback's scale, none of the new registers);
+    /// saved again it becomes format 6 and reads back the same.
     #[test]
+    fn a_version_5_record_reads_with_the_default_timing() {
+        let s = Settings {
+            drive_link: DriveLinkSettings {
+                feedback: FeedbackSource::Driver,
+                command: CommandPath::Modbus,
+                kind: DriverKind::Generic,
+                generic: GenericSettings {
+                    micro_rpm_per_count: 1695,
+                    speed_command: Some(0x2088),
+                    command_scale: 1695,
+                    control: None,
+                    velocity_mode: None,
+                    offline_register: None,
+                    resolution_register: None,
+                    max_speed_register: None,
+                    ..crate::drive_link::GENERIC_DEFAULT
+                },
+                ..DriveLinkSettings::default()
+            },
+            spacing: Spacing::new(120).unwrap(),
+            ..Settings::default()
+        };
+        let mut v5 = [0u8; SETTINGS_V5_BYTES];
+        v5.copy_from_slice(&s.encode()[..SETTINGS_V5_BYTES]);
+        v5[0] = 5;
+        let read = decode(&v5).unwrap();
+        assert_eq!(read, s);
+        assert_eq!(
+            read.drive_link.timing,
+            drive_link::link::LinkTiming::DEFAULT
+        );
+        assert_eq!(decode(&read.encode()), Ok(s));
+        // A format-5 record whose link block is bad stays refused (by an
+        // image with the link: without it, the block's check is light).
+        v5[255] = 0;
+        if cfg!(feature = "drive-link") {
+            assert!(matches!(decode(&v5), Err(SettingsError::DriveLink(_))));
+        }
+        // A version-6 record is 311 bytes long.
+        v5[0] = 6;
+        assert_eq!(
+            decode(&v5),
+            Err(SettingsError::Length {
+                expected: 311,
+                found: 283
+            })
+        );
+    }
+
+    #[test]
+    #[cfg(feature = "drive-link")]
     fn rejects_a_drive_link_that_cannot_work() {
         // Driver feedback without a driver (byte 252 = 1, kind byte 254 = 0).
         let mut b = Settings::default().encode();
@@ -751,8 +856,8 @@ mod tests {
         );
         // With the ZLAC8015D behind paper A's 118:1 (the default scale,
         // 847 µr/min per count) its speed register ends at 27.753 r/min:
-        // refused; with a 59:1 gearbox (1695 = 0x069F, bytes 262–265) it
-        // loads; slave id 0 (byte 255) is refused.
+        // refused; with a 20:1 gearbox (5000, bytes 262–265) it loads;
+        // slave id 0 (byte 255) is refused.
         b[254] = 1;
         assert_eq!(
             decode(&b),
@@ -762,7 +867,7 @@ mod tests {
                 }
             ))
         );
-        b[262..266].copy_from_slice(&1695i32.to_le_bytes());
+        b[262..266].copy_from_slice(&5000i32.to_le_bytes());
         assert_eq!(
             decode(&b).map(|s| s.drive_link.feedback),
             Ok(FeedbackSource::Driver)
@@ -877,7 +982,7 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(0, 6), Err(SettingsError::UnsupportedVersion(6)));
+        assert_eq!(with(0, 7), Err(SettingsError::UnsupportedVersion(7)));
         assert_eq!(with(0, 0xFF), Err(SettingsError::UnsupportedVersion(0xFF)));
         assert_eq!(with(1, 0), Err(SettingsError::Mode(0)));
         assert_eq!(with(1, 3), Err(SettingsError::Mode(3)));
@@ -919,19 +1024,19 @@ mod tests {
         assert_eq!(
             decode(&[]),
             Err(SettingsError::Length {
-                expected: 283,
+                expected: 311,
                 found: 0
             })
         );
         assert_eq!(
-            decode(&good[..282]),
+            decode(&good[..310]),
             Err(SettingsError::Length {
-                expected: 283,
-                found: 282
+                expected: 311,
+                found: 310
             })
         );
-        let mut long = [0u8; 284];
-        long[..283].copy_from_slice(&good);
+        let mut long = [0u8; 312];
+        long[..311].copy_from_slice(&good);
         assert!(matches!(decode(&long), Err(SettingsError::Length { .. })));
         // A version-1 record must be 209 bytes long.
         let mut v1_short = good;
@@ -940,7 +1045,7 @@ mod tests {
             decode(&v1_short),
             Err(SettingsError::Length {
                 expected: 209,
-                found: 283
+                found: 311
             })
         );
         assert_eq!(
@@ -1060,7 +1165,7 @@ mod tests {
                                 feedback: FeedbackSource::Driver,
                                 kind: DriverKind::Zlac8015d,
                                 generic: drive_link::profile::GenericSettings {
-                                    micro_rpm_per_count: 1695,
+                                    micro_rpm_per_count: 5000,
                                     ..crate::drive_link::GENERIC_DEFAULT
                                 },
                                 ..DriveLinkSettings::default()

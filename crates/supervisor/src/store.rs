@@ -9,15 +9,15 @@
 //! |---|---|---|
 //! | 0 | 4 | magic [`MAGIC`] = `"TPS1"` |
 //! | 4 | 4 | sequence, u32; the newer record has the higher sequence, compared with wrap-around |
-//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 283 for settings format 5; 252, 250, 243 and 209 for formats 4, 3, 2 and 1) |
+//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 311 for settings format 6; 283, 252, 250, 243 and 209 for formats 5, 4, 3, 2 and 1) |
 //! | 10 | 2 | `!n` (guards the length before the CRC is known) |
 //! | 12 | `n` | payload: [`Settings::encode`] |
 //! | 12 + n | 0–3 | zero padding to a multiple of 4 |
 //! | `c` = 12 + ⌈n⌉₄ | 4 | CRC-32 ([`crate::crc`]) of bytes 4 .. `c`: sequence, length, `!n`, payload, padding |
 //! | ⌈c + 4⌉_W | max(4, W) | commit word [`COMMIT`] = `"DONE"` (then zeros up to `W`, the flash's `WRITE_SIZE`) |
 //!
-//! With the STM32F1 (`WRITE_SIZE` = 2) a record is 272 bytes: header at 0,
-//! payload at 12, CRC at 264, commit word at 268.
+//! With the STM32F1 (`WRITE_SIZE` = 2) a record of settings format 6 is 332
+//! bytes: header at 0, payload at 12, CRC at 324, commit word at 328.
 //!
 //! A save ([`SettingsStore::save`]) targets the slot that does **not** hold
 //! the newest valid record: it erases that page, programs everything up to
@@ -77,10 +77,10 @@
 //!
 //! // The bytes in flash follow the documented layout.
 //! let flash = store.into_inner();
-//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\x1B\x01\xE4\xFE"); // magic, seq 1, n = 283, !n
-//! assert_eq!(flash.0[12], 5); // settings format version
-//! assert_eq!(&flash.0[300..304], b"DONE");
-//! assert_eq!(flash.0[304], 0xFF); // the record ends there
+//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\x37\x01\xC8\xFE"); // magic, seq 1, n = 311, !n
+//! assert_eq!(flash.0[12], 6); // settings format version
+//! assert_eq!(&flash.0[328..332], b"DONE");
+//! assert_eq!(flash.0[332], 0xFF); // the record ends there
 //! # Ok::<(), supervisor::store::StoreError<NorFlashErrorKind>>(())
 //! ```
 
@@ -90,8 +90,8 @@ use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 
 use crate::crc::Crc32;
 use crate::settings::{
-    decode_into, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION,
-    SETTINGS_V1_BYTES, SETTINGS_V2_BYTES, SETTINGS_V3_BYTES, SETTINGS_V4_BYTES,
+    decode_into_unchecked_link, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION,
+    SETTINGS_V1_BYTES, SETTINGS_V2_BYTES, SETTINGS_V3_BYTES, SETTINGS_V4_BYTES, SETTINGS_V5_BYTES,
 };
 
 /// Record magic at offset 0: `"TPS1"` (transplanter settings, record format 1).
@@ -106,8 +106,9 @@ pub const MAX_ACCESS_SIZE: usize = 32;
 
 const CRC_BYTES: usize = 4;
 /// Write buffer: header + padded payload + CRC, rounded up for any supported
-/// `WRITE_SIZE` (12 + 284 + 4 = 300 → 320 for format 5's 283 bytes).
-const BODY_BUF: usize = 320;
+/// `WRITE_SIZE` (12 + 312 + 4 = 328 → 352 for format 6's 311 bytes).
+const BODY_BUF: usize = (HEADER_BYTES + SETTINGS_BYTES.next_multiple_of(4) + CRC_BYTES)
+    .next_multiple_of(MAX_ACCESS_SIZE);
 
 /// Where the parts of a record with an `len`-byte payload lie for a flash
 /// with `WRITE_SIZE` = `write`.
@@ -178,6 +179,22 @@ impl fmt::Display for DefaultsReason {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.message())
     }
+}
+
+/// What [`SettingsStore::load_into`] put into the caller's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LoadStatus {
+    /// The newest valid record, of this sequence number.
+    Saved {
+        /// Its sequence number.
+        sequence: u32,
+    },
+    /// No valid record: [`Settings::default`], and why.
+    Defaults {
+        /// Why (shown on the screen).
+        reason: DefaultsReason,
+    },
 }
 
 /// What [`SettingsStore::load`] found.
@@ -415,15 +432,27 @@ impl<F: NorFlash> SettingsStore<F> {
     /// defaults with the reason. Never writes.
     #[inline(never)]
     pub fn load(&mut self) -> Loaded {
+        let mut settings = Settings::default();
+        match self.load_into(&mut settings) {
+            LoadStatus::Saved { sequence } => Loaded::Saved { settings, sequence },
+            LoadStatus::Defaults { reason } => Loaded::Defaults { settings, reason },
+        }
+    }
+
+    /// [`SettingsStore::load`] into the caller's `settings` (the defaults
+    /// when no record is valid): no second record on the caller's stack
+    /// (the firmware's boot builds the machine from it, on the QEMU
+    /// board's few KB of stack). Out of line: its frame and the defaults'
+    /// temporaries stay off the caller's.
+    #[inline(never)]
+    pub fn load_into(&mut self, settings: &mut Settings) -> LoadStatus {
         // Statuses first, then the newest valid slot once more: each decode
         // goes into the one `settings` value (in place, table by table), so
         // no second decoded record is ever on the stack (this runs in
-        // `init`, on the QEMU board's ≈ 4 KB stack). Nothing writes the
-        // flash in between.
-        let mut settings = Settings::default();
+        // `init`). Nothing writes the flash in between.
         let slots = [
-            self.scan_into(0, &mut settings).status(),
-            self.scan_into(1, &mut settings).status(),
+            self.scan_into(0, settings).status(),
+            self.scan_into(1, settings).status(),
         ];
         let newest = slots
             .iter()
@@ -434,8 +463,8 @@ impl<F: NorFlash> SettingsStore<F> {
             })
             .reduce(|a, b| if is_newer(b.1, a.1) { b } else { a });
         if let Some((slot, _)) = newest {
-            if let Slot::Valid(sequence, ()) = self.scan_into(slot, &mut settings) {
-                return Loaded::Saved { settings, sequence };
+            if let Slot::Valid(sequence, ()) = self.scan_into(slot, settings) {
+                return LoadStatus::Saved { sequence };
             }
         }
         let any = |f: fn(&SlotStatus) -> bool| slots.iter().any(f);
@@ -448,10 +477,8 @@ impl<F: NorFlash> SettingsStore<F> {
         } else {
             DefaultsReason::Blank
         };
-        Loaded::Defaults {
-            settings: Settings::default(),
-            reason,
-        }
+        *settings = Settings::default();
+        LoadStatus::Defaults { reason }
     }
 
     /// What each slot holds, slot 0 first (diagnostics and tests).
@@ -472,7 +499,7 @@ impl<F: NorFlash> SettingsStore<F> {
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
         // The decision reads the slots through one scratch decode; the
         // records are compared as bytes (the encoding is canonical), so that
-        // no two decoded records add up in one frame (the QEMU board's 8 KB).
+        // no two decoded records add up in one frame.
         let (target, sequence) = match self.plan_save(settings)? {
             Ok(unchanged) => return Ok(unchanged),
             Err(plan) => plan,
@@ -660,7 +687,7 @@ impl<F: NorFlash> SettingsStore<F> {
     /// hands each to `visit` with its offset, until `visit` says stop
     /// (`false`): one loop for the CRC, the blank check and the byte
     /// comparisons. Out of line, so that its chunk buffer does not add to
-    /// `scan`'s frame (it runs in `init`, on the QEMU board's 4.2 KB stack).
+    /// `scan`'s frame (it runs in `init`).
     #[inline(never)]
     fn walk(
         &mut self,
@@ -714,6 +741,9 @@ impl<F: NorFlash> SettingsStore<F> {
     /// `Valid`).
     fn scan_into(&mut self, slot: SlotIndex, out: &mut Settings) -> Slot<F::Error, ()> {
         match self.try_scan(slot, out) {
+            // The drive link block is checked here, the read buffer off
+            // the stack (`decode_into_unchecked_link`).
+            Ok(Slot::Valid(..)) if out.drive_link.check().is_err() => Slot::Corrupt,
             Ok(s) => s,
             Err(ReadFail::Flash(e)) => Slot::Unreadable(e),
             Err(ReadFail::Bounds) => Slot::Corrupt,
@@ -754,10 +784,12 @@ impl<F: NorFlash> SettingsStore<F> {
         if self.crc(slot, 4, lay.crc_off)? != u32::from_le_bytes(word) {
             return Ok(Slot::Corrupt);
         }
-        // This format, format 3 (written before the work switch), format 2
-        // (before the drive model) or format 1 (before profile B): the
-        // decoder reads all four.
+        // This format, format 5 (before the link's timing), format 4
+        // (before the drive link), format 3 (before the work switch),
+        // format 2 (before the drive model) or format 1 (before profile
+        // B): the decoder reads them all.
         if lay.len == SETTINGS_BYTES
+            || lay.len == SETTINGS_V5_BYTES
             || lay.len == SETTINGS_V4_BYTES
             || lay.len == SETTINGS_V3_BYTES
             || lay.len == SETTINGS_V2_BYTES
@@ -794,7 +826,7 @@ impl<F: NorFlash> SettingsStore<F> {
         let mut buf = [0u8; SETTINGS_BYTES];
         let payload = buf.get_mut(..len).ok_or(ReadFail::Bounds)?;
         self.read(slot, HEADER_BYTES, payload)?;
-        Ok(match decode_into(payload, out) {
+        Ok(match decode_into_unchecked_link(payload, out) {
             Ok(()) => Slot::Valid(sequence, ()),
             Err(SettingsError::UnsupportedVersion(_)) => Slot::Unsupported(sequence),
             Err(_) => Slot::Corrupt,
@@ -853,17 +885,17 @@ mod tests {
 
     #[test]
     fn f1_layout() {
-        // 283-byte payload (format 5), WRITE_SIZE 2: CRC at 12 + 284 (the
-        // payload padded to a word) = 296, commit at 300, end 304 = 152
+        // 311-byte payload (format 6), WRITE_SIZE 2: CRC at 12 + 312 (the
+        // payload padded to a word) = 324, commit at 328, end 332 = 166
         // half-words.
         let l = layout(SETTINGS_BYTES, 2).unwrap();
         assert_eq!(
             (l.crc_off, l.commit_off, l.commit_len, l.end),
-            (296, 300, 4, 304)
+            (324, 328, 4, 332)
         );
-        // WRITE_SIZE 8: the commit gets its own double word at 304.
+        // WRITE_SIZE 8: the commit gets its own double word at 328.
         let l = layout(SETTINGS_BYTES, 8).unwrap();
-        assert_eq!((l.commit_off, l.commit_len, l.end), (304, 8, 312));
+        assert_eq!((l.commit_off, l.commit_len, l.end), (328, 8, 336));
     }
 
     #[test]

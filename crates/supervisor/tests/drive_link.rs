@@ -74,12 +74,13 @@ fn the_poll_period_and_readback_age_match_the_line_at_both_bauds() {
         let (_, rig) = tracks_eq7(CommandPath::Pwm, baud);
         // Hand formula of one speed read: request 8 chars + turnaround
         // 2 ms + reply 7 chars + the 3.5-character gap after each frame;
-        // every 4th poll is a fault read of the same length.
+        // every 6th poll is a fault read of the same length.
         let ch = 11.0e6 / f64::from(baud);
         let gap = if baud > 19_200 { 1750.0 } else { 3.5 * ch };
         let one = 8.0 * ch + 2000.0 + 7.0 * ch + gap + gap;
-        // Speed reads are 3 of every 4 polls: mean interval 4/3 of one.
-        let expected = one * 4.0 / 3.0;
+        // Speed reads are 5 of every 6 polls: mean interval 6/5 of one.
+        let every = f64::from(drive_link::link::FAULT_POLL_EVERY);
+        let expected = one * every / (every - 1.0);
         let r = &rig.speed_reads;
         let measured = (r[r.len() - 1] - r[r.len() - 301]) as f64 / 300.0;
         eprintln!(
@@ -150,9 +151,11 @@ fn distance_locked_rows_on_the_readback_raise_no_instability_warning() {
     // drum 30–90 ms late, overshot them. Each row must also keep its count
     // within ±0.5 % (distance-locked rows at 7 cm lose one place at the
     // start and the Hall sensor's −0.1 %: docs/placement.md) and its phase:
-    // the belt within 5 mm of its line from the second plant on (worst
-    // measured 3.4 mm: the Hall edges every 25 mm correct the ground), where
-    // speed-following leaves 50–70 mm (bench §10's rig).
+    // the belt within 5.5 mm of its line from the second plant on (worst
+    // measured 5.1 mm, seeds 1–30, and 5.3 mm over seeds 1–180: the Hall
+    // edges every 25 mm correct the ground; 4.0 mm before the fault word
+    // had its own poll turn, when a fault went unseen under the Modbus
+    // command), where speed-following leaves 50–70 mm (bench §10's rig).
     for command in [CommandPath::Modbus, CommandPath::Pwm] {
         for seed in 1..=30 {
             let (row, rig) = row_70m_placed(
@@ -170,7 +173,7 @@ fn distance_locked_rows_on_the_readback_raise_no_instability_warning() {
                 row.plants
             );
             assert!(
-                row.worst_phase_um.abs() <= 5_000,
+                row.worst_phase_um.abs() <= 5_500,
                 "seed {seed}, {command:?}: phase {} µm",
                 row.worst_phase_um
             );
@@ -221,9 +224,9 @@ fn a_driver_fault_is_named_and_the_outputs_go_safe() {
     rig.sup.alarm().unwrap().write_text(&mut text).unwrap();
     assert_eq!(text, "Driver fault: over-current");
     assert_eq!(rig.act, Actuation::OFF);
-    // Faults are read every 4th poll: within 4 polls of 6.9 ms plus a
+    // Faults are read every 6th poll: within 6 polls of 6.9 ms plus a
     // control period (hand formula at 115 200 baud, as the test above).
-    assert!(seen - at <= 4 * 6_900 + 10_000 + 2_000, "{} us", seen - at);
+    assert!(seen - at <= 6 * 6_900 + 10_000 + 2_000, "{} us", seen - at);
     // Acknowledged: the driver's alarm is cleared through its control word.
     rig.sup.command(Command::AcknowledgeAlarm);
     rig.run_ms(100);
@@ -245,11 +248,13 @@ fn a_cut_link_is_lost_within_the_retry_budget_and_recovers_on_acknowledge() {
         // retry's timeout: within 10 ms (≤ 100 ms required).
         assert!(alarm - lost <= 10_000, "{} us", alarm - lost);
         // Hand formula: three attempts of (request 8 chars + reply timeout
-        // + gap), plus up to one poll cycle before the cut was met.
+        // + the retry gap), plus up to one poll cycle before the cut was met.
         let ch = 11.0e6 / f64::from(baud);
         let gap = if baud > 19_200 { 1750.0 } else { 3.5 * ch };
-        let timeout = f64::from(LinkConfig::for_baud(baud).unwrap().reply_timeout_us);
-        let budget = 3.0 * (8.0 * ch + timeout + gap) + (15.0 * ch + 2000.0 + 2.0 * gap);
+        let c = LinkConfig::for_baud(baud).unwrap();
+        let timeout = f64::from(c.reply_timeout_us);
+        let retry_gap = f64::from(c.retry_gap_us);
+        let budget = 3.0 * (8.0 * ch + timeout + retry_gap) + (15.0 * ch + 2000.0 + 2.0 * gap);
         eprintln!(
             "{baud} baud: lost {:.1} ms after the cut (bound {:.1} ms), outputs safe {:.1} ms after",
             (lost - cut) as f64 / 1000.0,
@@ -389,12 +394,11 @@ fn crc_errors_and_late_replies_are_counted_and_survived() {
         // Two corrupted replies in a row (the retry budget is two).
         rig.drv.inject.corrupt_replies = 2;
         rig.run_ms(500);
-        // A reply 25 ms late: beyond the reply timeout at both rates
-        // (2 + 25 ms + the reply's 7 characters + 3.5 characters of
-        // silence: 38.7 ms > 34.3 ms at 9600, 27.6 > 22.6 at 115 200), so
-        // the request is retried and the late frame counted.
+        // A reply 65 ms late: its answer (2 + 65 ms) starts beyond the
+        // 60 ms the link allows, so the request times out; the retry waits
+        // for a quiet line and the late reply is heard and taken first.
         rig.drv.inject.late_replies = 1;
-        rig.drv.inject.extra_delay_us = 25_000;
+        rig.drv.inject.extra_delay_us = 65_000;
         rig.run_ms(1_000);
         let c = rig.link.counters();
         eprintln!("{baud}: {c:?}");
@@ -403,6 +407,7 @@ fn crc_errors_and_late_replies_are_counted_and_survived() {
         assert_eq!(rig.sup.alarm(), None);
         assert_eq!(rig.sup.run_state(), RunState::Running);
         assert_eq!(c.timeouts, 1);
-        assert_eq!(c.late_replies, 1);
+        // The two corrupted replies were sent again; the late one was not.
+        assert_eq!((c.retries, c.late_replies), (2, 0));
     }
 }

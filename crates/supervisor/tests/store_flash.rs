@@ -289,10 +289,15 @@ fn settings_b() -> Settings {
             feedback: supervisor::drive_link::FeedbackSource::Driver,
             command: supervisor::drive_link::CommandPath::Modbus,
             kind: supervisor::drive_link::DriverKind::Zlac8015d,
-            // A 59:1 gearbox behind the driver's 0.1 r/min (100 000 / 59).
+            // A 20:1 gearbox behind the driver's 0.1 r/min (100 000 / 20).
             generic: drive_link::profile::GenericSettings {
-                micro_rpm_per_count: 1695,
+                micro_rpm_per_count: 5000,
                 ..supervisor::drive_link::GENERIC_DEFAULT
+            },
+            timing: drive_link::link::LinkTiming {
+                reply_timeout_ms: 45,
+                retry_gap_ms: 15,
+                offline_time_ms: 800,
             },
         },
     }
@@ -438,9 +443,9 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&a).unwrap();
     let only_a = st.into_inner();
     let total = sweep(&only_a, &a, &b);
-    // One erase + 304 bytes / 2 = 152 half-word programs (283-byte payload,
-    // format 5: header 12, payload 283 + 1 padding, CRC 4, commit 4).
-    assert_eq!(total, 153);
+    // One erase + 332 bytes / 2 = 166 half-word programs (311-byte payload,
+    // format 6: header 12, payload 311 + 1 padding, CRC 4, commit 4).
+    assert_eq!(total, 167);
 
     // 2. X (seq 1) in slot 0, A (seq 2) in slot 1; B overwrites X's slot.
     //    X must never come back, whatever the torn erase leaves of it.
@@ -448,30 +453,30 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&x).unwrap();
     st.save(&a).unwrap();
     let x_then_a = st.into_inner();
-    assert_eq!(sweep(&x_then_a, &a, &b), 153);
+    assert_eq!(sweep(&x_then_a, &a, &b), 167);
 
     // 3. Sequence wrap: X at u32::MAX − 1 in slot 0, A at u32::MAX in slot 1;
     //    B gets sequence 0 in slot 0.
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(u32::MAX - 1, &x.encode()));
     put_raw(&mut f, 1, &raw_record(u32::MAX, &a.encode()));
-    assert_eq!(sweep(&f, &a, &b), 153);
+    assert_eq!(sweep(&f, &a, &b), 167);
 }
 
 #[test]
 fn power_cut_with_wider_program_units() {
     // A flash with 8-byte program units (and 8-byte reads): the commit word
-    // takes its own unit at 304, the record ends at 312 = 39 units.
+    // takes its own unit at 328, the record ends at 336 = 42 units.
     let (a, b) = (settings_a(), settings_b());
     let mut st = store(SimFlash::<8>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 39);
-    // And 1-byte units: 304 programs.
+    assert_eq!(sweep(&f, &a, &b), 1 + 42);
+    // And 1-byte units: 332 programs.
     let mut st = store(SimFlash::<1>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 304);
+    assert_eq!(sweep(&f, &a, &b), 1 + 332);
 }
 
 #[test]
@@ -523,26 +528,26 @@ fn record_bytes_follow_the_documented_layout() {
     assert_eq!(st.save(&settings_b()), Ok(1));
     let f = st.into_inner();
     let rec = raw_record(1, &settings_b().encode());
-    assert_eq!(rec.len(), 304);
+    assert_eq!(rec.len(), 332);
     let slot0 = slot_bytes(&f, 0);
-    assert_eq!(&slot0[..304], &rec[..]);
-    assert!(slot0[304..].iter().all(|&b| b == 0xFF));
+    assert_eq!(&slot0[..332], &rec[..]);
+    assert!(slot0[332..].iter().all(|&b| b == 0xFF));
     assert!(slot_bytes(&f, 1).iter().all(|&b| b == 0xFF));
-    // Header bytes spelled out: "TPS1", seq 1, n = 283 = 0x011B, !n = 0xFEE4.
+    // Header bytes spelled out: "TPS1", seq 1, n = 311 = 0x0137, !n = 0xFEC8.
     assert_eq!(
         &slot0[..12],
-        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0x1B, 0x01, 0xE4, 0xFE]
+        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0x37, 0x01, 0xC8, 0xFE]
     );
-    assert_eq!(SETTINGS_BYTES, 283);
+    assert_eq!(SETTINGS_BYTES, 311);
 }
 
 #[test]
-fn one_save_costs_one_erase_and_152_programs() {
+fn one_save_costs_one_erase_and_166_programs() {
     let mut st = store(SimFlash::<2>::new());
     st.save(&settings_a()).unwrap();
     let f = st.into_inner();
-    // 1 erase + 304 / 2 half-words (record layout: end of commit word at 304).
-    assert_eq!(f.ops, 153);
+    // 1 erase + 332 / 2 half-words (record layout: end of commit word at 332).
+    assert_eq!(f.ops, 167);
     assert_eq!(f.erases, [0, 1, 0, 0]);
 }
 
@@ -552,15 +557,15 @@ fn erase_first_then_body_in_order_then_commit_word_last() {
     st.save(&settings_a()).unwrap();
     st.save(&settings_b()).unwrap(); // into slot 1 at offset 2048
     let log = st.into_inner().log;
-    let second = &log[153..];
+    let second = &log[167..];
     assert_eq!(second[0], (true, 2 * PAGE));
-    // Half-words 0, 2, …, 298 of the page: header, payload, padding, CRC.
-    let body: Vec<_> = (0..150).map(|i| (false, 2 * PAGE + 2 * i)).collect();
-    assert_eq!(&second[1..151], &body[..]);
-    // Then, and only then, the commit word "DONE" at 300 and 302.
+    // Half-words 0, 2, …, 326 of the page: header, payload, padding, CRC.
+    let body: Vec<_> = (0..164).map(|i| (false, 2 * PAGE + 2 * i)).collect();
+    assert_eq!(&second[1..165], &body[..]);
+    // Then, and only then, the commit word "DONE" at 328 and 330.
     assert_eq!(
-        &second[151..],
-        &[(false, 2 * PAGE + 300), (false, 2 * PAGE + 302)]
+        &second[165..],
+        &[(false, 2 * PAGE + 328), (false, 2 * PAGE + 330)]
     );
 }
 
@@ -689,6 +694,34 @@ fn a_record_with_valid_crc_but_invalid_field_is_corrupt() {
     assert_eq!(boot(&f).defaults_reason(), Some(DefaultsReason::Corrupt));
 }
 
+/// A record whose drive link block parses but does not pass its checks
+/// (the store checks it after the decode, `decode_into_unchecked_link`):
+/// a ZLAC8015D behind 59:1 needs 2638 motor r/min, beyond its 1000. It
+/// is corrupt: the older valid record (or the defaults) is used. (An image
+/// without the link checks the block no further than its bytes.)
+#[test]
+#[cfg(feature = "drive-link")]
+fn a_record_whose_drive_link_fails_its_checks_is_corrupt() {
+    let mut bad = settings_b();
+    bad.drive_link.generic.micro_rpm_per_count = 1695;
+    assert!(bad.drive_link.build().is_err());
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 0, &raw_record(4, &settings_a().encode()));
+    put_raw(&mut f, 1, &raw_record(5, &bad.encode()));
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: settings_a(),
+            sequence: 4
+        }
+    );
+    let mut st = store(f);
+    assert_eq!(
+        st.slots(),
+        [SlotStatus::Valid { sequence: 4 }, SlotStatus::Corrupt]
+    );
+}
+
 #[test]
 fn a_record_written_before_profile_b_still_loads() {
     // Format 1: the first 209 bytes of today's payload, version byte 1
@@ -770,7 +803,7 @@ fn a_record_written_before_the_work_switch_still_loads() {
 fn a_record_written_before_the_drive_link_still_loads() {
     // Format 4: the first 252 bytes of today's payload, version byte 4. It
     // loads with today's behaviour (encoder feedback, PWM, no driver); the
-    // next save writes format 5.
+    // next save writes format 6.
     let b = settings_b();
     let mut v4 = b.encode()[..252].to_vec();
     v4[0] = 4;
@@ -800,10 +833,55 @@ fn a_record_written_before_the_drive_link_still_loads() {
 }
 
 #[test]
+fn a_record_written_before_the_link_timing_still_loads() {
+    // Format 5: the first 283 bytes of a payload whose link block holds
+    // only what format 5 had (a generic driver: command in the feedback's
+    // scale, none of the optional registers, the default timing), version
+    // byte 5. It loads as saved; the next save writes format 6, and a
+    // changed setting is saved with it.
+    let mut b = settings_b();
+    b.drive_link.kind = supervisor::drive_link::DriverKind::Generic;
+    b.drive_link.timing = drive_link::link::LinkTiming::DEFAULT;
+    b.drive_link.generic = drive_link::profile::GenericSettings {
+        speed_command: Some(0x2088),
+        command_scale: 5000,
+        control: None,
+        velocity_mode: None,
+        offline_register: None,
+        resolution_register: None,
+        max_speed_register: None,
+        ..b.drive_link.generic
+    };
+    let mut v5 = b.encode()[..283].to_vec();
+    v5[0] = 5;
+    let mut f = SimFlash::new();
+    put_raw(&mut f, 0, &raw_record(7, &v5));
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: b.clone(),
+            sequence: 7
+        }
+    );
+    let mut st = store(f);
+    b.drive_link.timing.reply_timeout_ms = 50;
+    assert_eq!(st.save(&b), Ok(8));
+    let f = st.into_inner();
+    assert_eq!(slot_bytes(&f, 1)[12], 6, "format byte of the new record");
+    assert_eq!(
+        boot(&f),
+        Loaded::Saved {
+            settings: b,
+            sequence: 8
+        }
+    );
+}
+
+#[test]
 fn saving_what_an_older_record_decodes_to_upgrades_it() {
     // Records are compared as bytes in today's format: a format-4 record
     // that decodes to exactly the settings being saved is still rewritten
-    // once as format 5 (sequence 4, version byte 5 in the new slot), and a
+    // once as format 6 (sequence 4, version byte 6 in the new slot), and a
     // second save of the same settings then writes nothing.
     let b = settings_b();
     let mut v4 = b.encode()[..252].to_vec();
@@ -817,7 +895,7 @@ fn saving_what_an_older_record_decodes_to_upgrades_it() {
     assert_eq!(st.save(&old), Ok(4));
     assert_eq!(st.save(&old), Ok(4));
     let f = st.into_inner();
-    assert_eq!(slot_bytes(&f, 1)[12], 5, "format byte of the new record");
+    assert_eq!(slot_bytes(&f, 1)[12], 6, "format byte of the new record");
     // One erase, of slot 1 (pages: sentinel, slot 0, slot 1, sentinel).
     assert_eq!(f.erases, [0, 0, 1, 0]);
 }
@@ -863,8 +941,8 @@ fn a_record_written_before_the_drive_model_still_loads() {
 #[test]
 fn unsupported_version_falls_back_or_is_reported() {
     let a = settings_a();
-    // A record of a future format 6 (payload version byte 6, longer payload).
-    let mut v2 = vec![6u8; 300];
+    // A record of a future format 7 (payload version byte 7, longer payload).
+    let mut v2 = vec![7u8; 330];
     v2[1] = 7;
     // Alone: defaults, reason UnsupportedVersion.
     let mut f = SimFlash::new();
@@ -894,7 +972,7 @@ fn unsupported_version_falls_back_or_is_reported() {
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(5, &a.encode()));
     let mut same_len = settings_b().encode();
-    same_len[0] = 6;
+    same_len[0] = 7;
     put_raw(&mut f, 1, &raw_record(6, &same_len));
     assert_eq!(
         boot(&f),
@@ -903,7 +981,7 @@ fn unsupported_version_falls_back_or_is_reported() {
             sequence: 5
         }
     );
-    // The next save overwrites the v6 record (slot 1) with sequence 7.
+    // The next save overwrites the v7 record (slot 1) with sequence 7.
     let mut st = store(f);
     assert_eq!(st.save(&settings_b()), Ok(7));
     assert_eq!(

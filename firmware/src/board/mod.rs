@@ -4,8 +4,8 @@
 //!
 //! | item | `board-stm32f103` (default) | `board-qemu` |
 //! |---|---|---|
-//! | clock | 72 MHz from an 8 MHz HSE | HSI; SysTick at QEMU's fixed 24 MHz |
-//! | touchscreen | USART1 PA9/PA10, 115200 8N1 | USART1 (emulated, real bytes) |
+//! | clock | 72 MHz from an 8 MHz HSE | QEMU `netduino2`'s fixed 120 MHz (SysTick too) |
+//! | touchscreen | USART1 PA9/PA10, 115200 8N1 | USART1 (emulated at the F205's address, real bytes) |
 //! | Hall sensor | TIM2 CH1 input capture on PA0, 1 MHz | the simulated machine's edges |
 //! | drum PWM | TIM1 CH1 on PA8, 20 kHz | a compare "register" read by the model |
 //! | drum encoder | TIM3 encoder mode, PA6/PA7 | the simulated machine's counter |
@@ -16,6 +16,8 @@
 //! [`drivers_enabled`], [`fatal`] and [`run_limit_ms`].
 
 mod fault;
+mod screen_tx;
+pub use screen_tx::{kick as kick_screen_tx, HmiTx};
 // The run-time memory and division routines of the target (they take the
 // place of compiler_builtins' weak symbols; `unsafe` by their ABI).
 mod mem;

@@ -1,12 +1,20 @@
-//! The QEMU board: `qemu-system-arm -machine stm32vldiscovery` (QEMU 7.2).
+//! The QEMU board: `qemu-system-arm -machine netduino2` (QEMU 7.2).
 //!
-//! QEMU emulates the Cortex-M3 core, SysTick, the NVIC and USART1–3, but not
-//! RCC, GPIO, timers, the flash controller or the watchdog (writes ignored,
-//! reads zero; HSE and PLL never become ready). So this board:
+//! The machine is QEMU's STM32F205 model, chosen for its memory: 128 KB of
+//! SRAM, of which this board takes the real board's 20 KB at 0x2000_0000
+//! (`memory-qemu.x`, the STM32F103RB's layout), so that the statics and the
+//! stack are laid out, and measured, as on the real board. QEMU emulates
+//! the Cortex-M3 core, SysTick, the NVIC and the USARTs (the same USART
+//! model as its STM32F100's), but not RCC, GPIO, timers, the flash
+//! controller or the watchdog of an F103: the F1 addresses of those read
+//! zero and ignore writes. So this board:
 //!
-//! - runs from the HSI (the HAL believes 8 MHz; QEMU's SysTick counts at a
-//!   fixed 24 MHz, which is what the monotonic is started with);
-//! - talks to the touchscreen over the real emulated USART1;
+//! - runs from the HSI as far as the HAL knows (8 MHz); QEMU clocks the
+//!   core and SysTick at the machine's fixed 120 MHz, which is what the
+//!   monotonic is started with;
+//! - talks to the touchscreen over the emulated USART1, at the F205's
+//!   address ([`usart1`]), and to the drum driver over USART2 (the F1's
+//!   address on both);
 //! - replaces the registers the real board reads and writes — TIM1's compare
 //!   value, the driver enable pin, TIM3's encoder counter, TIM2's Hall
 //!   captures and counter — by atomics and a simulated machine
@@ -28,11 +36,11 @@ use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering::Relaxed};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use machine_sim::{Event, Fault, Inputs, Machine};
 use stm32f1xx_hal::{
-    pac::{self, USART1, USART2},
-    prelude::*,
-    rcc,
-    serial::{self, Rx, Tx},
+    pac::{self, USART2},
+    serial::{self, Tx},
 };
+#[cfg(feature = "drive-link")]
+use stm32f1xx_hal::{prelude::*, rcc};
 
 use defmt_semihosting as _;
 
@@ -41,8 +49,11 @@ use super::{
     SETTINGS_FLASH_BYTES, SETTINGS_PAGE_BYTES,
 };
 
-/// Transmit half of the touchscreen UART.
-pub type HmiTx = Tx<USART1>;
+mod stack_guard;
+mod usart1;
+
+/// USART1's transmit half, driven by [`super::HmiTx`].
+pub type ScreenUsartTx = usart1::Tx;
 
 /// Most screen bytes one lock-step period carries (a real line carries
 /// ≈ 115 per 10 ms; the tests send at most this many).
@@ -55,7 +66,7 @@ type GateQueue = heapless::spsc::Queue<u8, { GATE_BYTES + 1 }>;
 /// [`Sensors::sample`]) and are read here first, through the same USART1
 /// interrupt task; otherwise from the emulated USART1.
 pub struct HmiRx {
-    uart: Rx<USART1>,
+    uart: usart1::Rx,
     gate: heapless::spsc::Consumer<'static, u8>,
 }
 
@@ -75,8 +86,9 @@ impl HmiRx {
     }
 }
 
-/// QEMU's `stm32vldiscovery` clocks SysTick at a fixed 24 MHz.
-pub const SYSCLK_HZ: u32 = 24_000_000;
+/// QEMU's `netduino2` clocks the core, and SysTick's processor clock, at a
+/// fixed 120 MHz (its SYSCLK; RCC is not modelled).
+pub const SYSCLK_HZ: u32 = 120_000_000;
 
 /// Stand-in for TIM1's CCR1 register.
 static DRUM_CCR: AtomicU16 = AtomicU16::new(0);
@@ -97,8 +109,7 @@ static WORK_SWITCH_CLOSED: AtomicBool = AtomicBool::new(false);
 static STOP_OPENED_US: AtomicU32 = AtomicU32::new(0);
 static STOP_SAFE_US: AtomicU32 = AtomicU32::new(0);
 
-// The drum driver's line (feature `drive-link`: the QEMU board's 8 KB of
-// RAM hold it only in the images that need it, docs/drive-link.md).
+// The drum driver's line (feature `drive-link`, docs/drive-link.md).
 
 /// Longest frame the virtual driver's gate record carries (a Modbus RTU
 /// reply of this link is at most 9 bytes; a corrupted one the same).
@@ -195,6 +206,20 @@ impl DriveLine {
         Some(n)
     }
 
+    /// Whether a reply is on the line at `now_us`, its frame not yet ended
+    /// by its silence (from its first byte: its end less its time on the
+    /// line and the 3.5-character silence).
+    pub fn receiving(&mut self, now_us: u64) -> bool {
+        let Some(f) = self.rx.peek() else {
+            return false;
+        };
+        let on_line = drive_link::timing::frame_time_us(self.baud, u32::from(f.len)).unwrap_or(0);
+        let silent = drive_link::timing::silent_interval_us(self.baud).unwrap_or(0);
+        let start = f.end_us.wrapping_sub(on_line).wrapping_sub(silent);
+        // Started when `start` is not after now (wrapping 32-bit µs).
+        (now_us as u32).wrapping_sub(start) < 1 << 31
+    }
+
     /// USART2's interrupt: never enabled on this board.
     pub fn on_interrupt(&mut self, _now_us: u64) {}
 }
@@ -202,7 +227,7 @@ impl DriveLine {
 /// Everything the application owns after [`init`].
 pub struct Board {
     /// Touchscreen transmitter.
-    pub hmi_tx: HmiTx,
+    pub hmi_tx: super::HmiTx,
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
     /// The drum driver's RS-485 line (USART2), in a static (the QEMU
@@ -270,10 +295,11 @@ const GATE_PATH_MAX: usize = 32;
 /// (the figures of the control, without the seedlings' fall) and
 /// `slip_noise=0` the random variation of the track and belt slip around
 /// their means (which no sensor of the machine sees). `drive_tau=MS`,
-/// `drive_dead=MS` (0–15) and `drive_nmax=N` (r/min × 100) give the drum
+/// `drive_dead=MS` (0–63) and `drive_nmax=N` (r/min × 100) give the drum
 /// another drive than the default 25 ms / 5 ms / 44.70 r/min (the drive
 /// identification's test); `load=P` sets the seedlings' load droop to P ‰
-/// (`load=0`: an empty belt).
+/// (`load=0`: an empty belt). `stack_overflow=T` runs the control task's
+/// stack off the bottom of RAM at T ms (the stack guard's test).
 #[derive(Default, Clone, Copy)]
 struct Scenario {
     gear: Option<u8>,
@@ -318,6 +344,9 @@ struct Scenario {
     no_scatter: bool,
     /// No slip variation (`slip_noise=0`).
     no_slip_noise: bool,
+    /// Run the stack off the bottom of RAM at this time
+    /// (`stack_overflow=T`, the test of [`stack_guard`]).
+    stack_overflow: Option<u32>,
 }
 
 /// [`Scenario::work`]: the contact closes (unit down).
@@ -330,19 +359,9 @@ const WORK_VALUE: u32 = WORK_GROUND - 1;
 /// Brings up the emulated peripherals. Called once from `init`.
 #[inline(never)]
 pub fn init(dp: pac::Peripherals) -> Board {
-    let mut flash = dp.FLASH.constrain();
-    let mut rcc = dp.RCC.freeze(rcc::Config::hsi(), &mut flash.acr);
-    let mut gpioa = dp.GPIOA.split(&mut rcc);
-    let tx_pin = gpioa.pa9.into_alternate_push_pull(&mut gpioa.crh);
-    let rx_pin = gpioa.pa10;
-    let hmi = dp.USART1.serial(
-        (tx_pin, rx_pin),
-        serial::Config::default()
-            .baudrate(115_200.bps())
-            .parity_none(),
-        &mut rcc,
-    );
-    let (hmi_tx, mut uart_rx) = hmi.split();
+    stack_guard::enable();
+    let (tx, mut uart_rx) = usart1::split(dp.USART1);
+    let hmi_tx = super::HmiTx::new(tx);
     uart_rx.listen();
     // Note: `init` runs once, so the singleton is still free.
     let Some(gate_queue) = cortex_m::singleton!(: GateQueue = GateQueue::new()) else {
@@ -354,7 +373,16 @@ pub fn init(dp: pac::Peripherals) -> Board {
         gate: gate_out,
     };
     // The drum driver's line: USART2 on PA2/PA3 (8N1; QEMU ignores the
-    // rate, the model in `DriveLine` uses the profile's).
+    // rate, the model in `DriveLine` uses the profile's), through the HAL
+    // (the F1's USART2 address is the F205's too; its RCC, AFIO and GPIO
+    // writes land on unmapped addresses, which this machine ignores, and
+    // HSI is the one clock that needs no ready flag).
+    #[cfg(feature = "drive-link")]
+    let mut rcc = dp
+        .RCC
+        .freeze(rcc::Config::hsi(), &mut dp.FLASH.constrain().acr);
+    #[cfg(feature = "drive-link")]
+    let mut gpioa = dp.GPIOA.split(&mut rcc);
     #[cfg(feature = "drive-link")]
     let tx2 = gpioa.pa2.into_alternate_push_pull(&mut gpioa.crl);
     #[cfg(feature = "drive-link")]
@@ -445,7 +473,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         .gear
         .and_then(|g| kinematics::consts::Gear::ALL.get(usize::from(g).wrapping_sub(1)))
         .copied();
-    // The model lives in a static (528 B): moving it through `init`'s
+    // The model lives in a static (592 B): moving it through `init`'s
     // return value would need its size again on the stack.
     let machine = match config.build() {
         Ok(m) => cortex_m::singleton!(: Machine = m),
@@ -813,6 +841,10 @@ impl Sensors {
                 );
             }
         }
+        if due(s.stack_overflow, from, to) {
+            defmt::warn!("sim: stack overflow injected");
+            exhaust_stack(0);
+        }
         if due(s.stall, from, to) {
             self.machine.inject_fault(Fault::DrumStall);
             defmt::warn!("sim: drum stall injected");
@@ -942,6 +974,22 @@ impl Sensors {
             self.machine.hall_edges(),
         )
     }
+}
+
+/// Recurses until the stack runs off the bottom of RAM (`stack_overflow=T`).
+/// Each level writes a frame and reads it back only after the call below
+/// it returns, which it never does: only a fault stops it.
+#[inline(never)]
+fn exhaust_stack(depth: u32) -> u32 {
+    if depth == u32::MAX {
+        return depth;
+    }
+    let mut frame = [depth; 16];
+    core::hint::black_box(&mut frame);
+    let below = exhaust_stack(depth.wrapping_add(1));
+    frame
+        .iter()
+        .fold(below, |sum, &word| sum.wrapping_add(word))
 }
 
 /// Hall capture: edges come from [`Sensors::sample`] on this board.
@@ -1161,6 +1209,7 @@ fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"load" => s.load_permille = parse_u32(value),
             b"scatter" => s.no_scatter = value == b"0",
             b"slip_noise" => s.no_slip_noise = value == b"0",
+            b"stack_overflow" => s.stack_overflow = parse_u32(value),
             b"work_down" | b"work_up" | b"work_down_mm" | b"work_up_mm" => {
                 let flags = if key.starts_with(b"work_down") {
                     WORK_CLOSED

@@ -46,8 +46,8 @@ use super::{
 /// Frequency of the Hall capture timer: one tick is 1 µs.
 const HALL_TIMER_HZ: u32 = 1_000_000;
 
-/// Transmit half of the touchscreen UART.
-pub type HmiTx = Tx<USART1>;
+/// USART1's transmit half, driven by [`super::HmiTx`].
+pub type ScreenUsartTx = Tx<USART1>;
 /// Receive half of the touchscreen UART.
 pub type HmiRx = Rx<USART1>;
 
@@ -59,7 +59,7 @@ const TIMER_CLOCK_HZ: u32 = 72_000_000;
 /// Everything the application owns after [`init`].
 pub struct Board {
     /// Touchscreen transmitter.
-    pub hmi_tx: HmiTx,
+    pub hmi_tx: super::HmiTx,
     /// Touchscreen receiver, with its RX-not-empty interrupt enabled.
     pub hmi_rx: HmiRx,
     /// Drum motor PWM and driver pins.
@@ -207,6 +207,12 @@ impl DriveLine {
         Some(n)
     }
 
+    /// Whether bytes have arrived that no frame has been handed over with
+    /// yet (a frame on the line, not yet ended by its silence).
+    pub fn receiving(&mut self, _now_us: u64) -> bool {
+        self.rx_len > 0
+    }
+
     /// USART2's interrupt.
     pub fn on_interrupt(&mut self, now_us: u64) {
         let r = Self::regs();
@@ -273,6 +279,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
     // (RM0008 §19.4.4, up to `IWDG_UPDATE_POLLS` when it does not run), and
     // until then PA8, PB12 and PA1 would float (reset state, §9.1.1).
     safe_state();
+    align_exception_frames();
     let mut watchdog = Watchdog::start(dp.IWDG);
     // RM0008 §7.3.10 RCC_CSR: IWDGRSTF (bit 29) says the last reset came
     // from the watchdog; RMVF (bit 24) clears the reset flags.
@@ -329,7 +336,8 @@ pub fn init(dp: pac::Peripherals) -> Board {
             .parity_none(),
         &mut rcc,
     );
-    let (hmi_tx, mut hmi_rx) = hmi.split();
+    let (tx, mut hmi_rx) = hmi.split();
+    let hmi_tx = super::HmiTx::new(tx);
     hmi_rx.listen();
 
     // RS-485, USART2 on PA2/PA3, DE on PA1.
@@ -873,8 +881,9 @@ const SETTINGS_OFFSET: u32 = 0xE000;
 /// memory-stm32f103-128k.x.
 #[cfg(feature = "drive-link")]
 const SETTINGS_OFFSET: u32 = 0x1_E000;
-/// The flash the HAL's writer may reach: the C8's 64 KB, or with the drive
-/// link the 128 KB parts'.
+/// The flash the HAL's writer may reach: the settings pages at 0x0800E000
+/// lie in the first 64 KB, those of the image with the drive link in the
+/// 128 KB parts' last 8 KB.
 #[cfg(not(feature = "drive-link"))]
 const FLASH_SIZE: FlashSize = FlashSize::Sz64K;
 /// See above.
@@ -1124,6 +1133,29 @@ fn debug_freeze(dbgmcu: &pac::DBGMCU) {
             .dbg_iwdg_stop()
             .set_bit()
     });
+}
+
+/// SCB_CCR STKALIGN (bit 9, PM0056 §4.4.7).
+const SCB_CCR_STKALIGN: u32 = 1 << 9;
+
+/// Makes exception entry align the stacked frame, and so every handler's
+/// stack, to 8 bytes (SCB_CCR STKALIGN), as the AAPCS the handlers are
+/// compiled to requires. The F103's Cortex-M3 r1p1 (CPUID 0x411FC231)
+/// resets the bit to 0 (Cortex-M3 TRM r1p1; ARM's ABI advisory IHI 0046B
+/// asks startup code to set it), and neither cortex-m-rt nor RTIC sets it:
+/// an interrupt that comes while SP is 4 mod 8 — inside the many functions
+/// that push five registers before the rest of their frame — would run its
+/// handler on a 4-byte aligned stack.
+fn align_exception_frames() {
+    // SAFETY: a read-modify-write of SCB_CCR in `init` (interrupts off, no
+    // exception active): the next exception entry uses the new alignment.
+    unsafe {
+        (*cortex_m::peripheral::SCB::PTR)
+            .ccr
+            .modify(|r| r | SCB_CCR_STKALIGN);
+    }
+    cortex_m::asm::dsb();
+    cortex_m::asm::isb();
 }
 
 /// Switches the HSE on (RM0008 §7.3.1 RCC_CR HSEON, bit 16) and waits for

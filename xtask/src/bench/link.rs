@@ -1,4 +1,4 @@
-//! Section 10: the drum driver's RS-485 link (issue 17): the link's poll
+//! Section 10: the drum driver's RS-485 link: the link's poll
 //! period, reply latency and the control loop's tracking at 9600 and
 //! 115 200 baud, side by side with the encoder feedback.
 //!
@@ -90,9 +90,9 @@ pub fn section(doc: &mut String) -> Result<f64> {
     let started = std::time::Instant::now();
     let _ = write!(
         doc,
-        "## 10. The drum driver's RS-485 link (issue 17)\n\n\
+        "## 10. The drum driver's RS-485 link\n\n\
          Profile A, Speed-Adaptive 7 cm at Low 2, speed-following placement, the driver a \
-         virtual ZLAC8015D (`drive_link::virtual_driver`) behind a 59:1 gearbox \
+         virtual ZLAC8015D (`drive_link::virtual_driver`) behind a 20:1 gearbox \
          (docs/drive-link.md, \"Limits\"), on the host: the product's `Supervisor`, the \
          Modbus master (`drive_link::link::Link`) and the driver on a simulated half-duplex \
          line (50 µs steps, each frame's time on the wire at 11 bits a character, the \
@@ -105,9 +105,9 @@ pub fn section(doc: &mut String) -> Result<f64> {
          feedback the link still runs (the driver's faults are read) and its read-back is not \
          used.\n\n\
          Columns. *Speed poll period*: between the ends of consecutive speed-read requests \
-         (every 4th poll reads the fault word, so the mean is 4/3 of one transaction: request \
-         8 characters + 2 ms + reply 7 characters + two 3.5-character gaps — 36.28 ms at \
-         9600, 9.24 ms at 115 200). *Reply latency*: a speed read's first request bit to its \
+         (every 6th poll reads the fault word, so the mean is 6/5 of one transaction: request \
+         8 characters + 2 ms + reply 7 characters + two 3.5-character gaps — 32.65 ms at \
+         9600, 8.32 ms at 115 200). *Reply latency*: a speed read's first request bit to its \
          reply's last stop bit (hand formula 8 + 7 characters + 2 ms: 19.19 ms at 9600, \
          3.43 ms at 115 200). *Read-back age*: at the control steps that used it, since the \
          driver sampled. These three over the tracking run's measured window (below; \
@@ -178,7 +178,7 @@ pub fn section(doc: &mut String) -> Result<f64> {
          model has no jitter, so every speed read takes the same time; the max poll period is \
          a speed read that waited for a fault read, or with the Modbus command for a command \
          write, which also lengthens the mean). The read-back's age at use is the reply \
-         latency plus up to a poll period plus up to a control period. Issue 17 asks the \
+         latency plus up to a poll period plus up to a control period. The product asks the \
          read-back-only loop to track eq. 7 within 1 % and a 70 m row within ±0.5 % of the \
          plant count at both baud rates, with PWM and with the Modbus command: worst \
          tracking of the four read-back-only cases {:.3} % ({}), largest row error \

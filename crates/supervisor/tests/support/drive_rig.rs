@@ -24,7 +24,7 @@
 
 use std::collections::VecDeque;
 
-use drive_link::link::{ControlAction, Event as LinkEvent, Link, LinkConfig};
+use drive_link::link::{ControlAction, Event as LinkEvent, Link, LossCause};
 use drive_link::timing::frame_time_us;
 use drive_link::virtual_driver::VirtualZlac;
 use hmi_proto::screen::Command;
@@ -42,12 +42,13 @@ pub const HW: Hardware = Hardware::BOARD;
 /// The virtual driver's motor turns per drum turn. Not paper A's 118:1:
 /// behind 118:1 a ZLAC8015D's speed register (0.1 r/min, signed 16 bit)
 /// saturates at 3276.7 / 118 = 27.77 drum r/min, below the 28–29 r/min a
-/// 7 cm spacing needs at Low 2 with the paper's slip (docs/drive-link.md);
-/// 59:1 covers paper A's 44.7 r/min. The profile's scale folds it in:
-/// 100 000 / 59 = 1695 µr/min of the drum per count.
-pub const RATIO: f64 = 59.0;
+/// 7 cm spacing needs at Low 2 with the paper's slip (docs/drive-link.md),
+/// and its motor runs at most 1000 r/min (0x2008): the drum's 44.7 r/min
+/// allows at most 22.37:1. 20:1 covers both. The profile's scale folds it
+/// in: 100 000 / 20 = 5000 µr/min of the drum per count.
+pub const RATIO: f64 = 20.0;
 /// [`RATIO`] in the profile's scale.
-pub const SCALE: i32 = 1695;
+pub const SCALE: i32 = 5000;
 /// The line's time step, µs.
 pub const TICK_US: u64 = 50;
 
@@ -124,12 +125,12 @@ impl Rig {
         };
         settings.drive_link.generic.baud = baud;
         settings.drive_link.generic.micro_rpm_per_count = SCALE;
-        let profile = settings.drive_link.build().unwrap().unwrap();
+        let (profile, link_config) = settings.drive_link.config().unwrap().unwrap();
         Self {
             sup: Supervisor::new(HW, settings).unwrap(),
             m: config.build().unwrap(),
             act: Actuation::OFF,
-            link: Link::new(profile, LinkConfig::for_baud(baud).unwrap()),
+            link: Link::new(profile, link_config),
             drv: VirtualZlac::default(),
             baud,
             t_us: 0,
@@ -212,6 +213,15 @@ impl Rig {
                 self.replies.push_back((due, reply));
             }
         }
+        // A reply on the line (from its first byte until its closing
+        // silence has passed): the board layer tells the master.
+        if let Some((due, frame)) = self.replies.front() {
+            let on_line = frame_time_us(self.baud, frame.len() as u32).unwrap();
+            let silence = drive_link::timing::silent_interval_us(self.baud).unwrap();
+            if t + u64::from(on_line) + u64::from(silence) >= *due {
+                self.link.line_busy(t);
+            }
+        }
         let e = self.link.tick(t);
         self.on_event(e, t);
         if self.request.is_none() && self.replies.is_empty() {
@@ -226,9 +236,9 @@ impl Rig {
     /// The machine's inputs: PB12 and the driver's own enable; the PWM duty
     /// or, in velocity mode with a bus command, the command over n_max.
     fn inputs(&self) -> Inputs {
-        let on = self.act.driver_enabled && self.drv.enabled && self.drv.fault_bits == 0;
+        let on = self.act.driver_enabled && self.drv.running();
         let duty = if self.drv.velocity_mode && self.command_seen {
-            (f64::from(self.drv.command_rpm) / RATIO / f64::from(self.m.config().n_max_rpm)) as f32
+            (self.drv.target_rpm() / RATIO / f64::from(self.m.config().n_max_rpm)) as f32
         } else {
             f32::from(self.act.ccr) / f32::from(HW.pwm_arr + 1)
         };
@@ -266,9 +276,13 @@ impl Rig {
                 age_us: (self.t_us - s.sampled_at_us) as u32,
             }),
             lost: self.link.is_lost(),
+            setup: match self.link.loss_cause() {
+                Some(LossCause::Setup(f)) => Some(f.into()),
+                _ => None,
+            },
             refused: matches!(
                 self.link.loss_cause(),
-                Some(drive_link::link::LossCause::Refused { .. })
+                Some(LossCause::Refused { .. } | LossCause::Unfit { .. })
             ),
             answering: self.link.is_answering(),
             fault_word: self.link.fault_word(),

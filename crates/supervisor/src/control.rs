@@ -564,27 +564,20 @@ impl Predictor {
         let Some((v, center)) = self.last else {
             return m.gear_speed;
         };
-        // v and v0 are U12F20 bits (< 2³²): |dv| < 2³²; the age at most
-        // two periods, each below 2³¹ ticks: |dv·age| < 2⁶⁴ … kept below
-        // 2⁶³ by taking the age to at most 2³⁰ ticks (18 min).
-        let age = now
-            .0
-            .wrapping_sub(center)
-            .min(self.period.saturating_mul(2))
-            .min(1 << 30);
+        let age =
+            i64::from(now.0.wrapping_sub(center)).min(i64::from(self.period).saturating_mul(2));
         let (dv, dt) = self.slope;
         // `max`/`min` rather than `clamp`: the bounds are not constant, and
         // `clamp` would carry a (never taken) panic with formatted values.
-        let bound = v / 10;
+        let bound = v.checked_div(10).unwrap_or(0).max(0);
         let step = dv
-            .wrapping_mul(i64::from(age))
+            .saturating_mul(age)
             .checked_div(dt)
             .unwrap_or(0)
-            .max(bound.wrapping_neg())
+            .max(bound.saturating_neg())
             .min(bound);
-        // 0.9 v … 1.1 v.
-        let bits = v.wrapping_add(step);
-        let predicted = RevPerMin::from_bits(u32::try_from(bits).unwrap_or(u32::MAX));
+        let bits = v.saturating_add(step).clamp(0, i64::from(u32::MAX));
+        let predicted = RevPerMin::from_bits(u32::try_from(bits).unwrap_or(0));
         if m.state == MotionState::Decaying {
             // Overdue edge: the estimator's bound (one gap over the elapsed
             // time) caps the estimate; it is no estimate of its own (above
@@ -2387,17 +2380,13 @@ impl Supervisor {
     pub(crate) fn partitions_x1e6(&self) -> u64 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
-        // Σ Δcounts·k3 (Q30) / counts per turn = turns · k3 in Q30; in Q22
-        // (2⁻²² of a turn: 4 ppm of a partition) × 4 398 230 fits u64 up to
-        // 2²⁰ turns (230 km of belt).
+        // Σ Δcounts·k3 (Q30) / counts per turn = turns · k3 in Q30.
         self.belt_counts_k3
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .map_or(u64::MAX, |turns_k3_q30| {
-                (turns_k3_q30 >> 8)
-                    .min(1 << 42)
-                    .wrapping_mul(PARTITIONS_PER_TURN_X1E6)
-                    >> 22
+            .and_then(|turns_k3_q30| {
+                kinematics::mul_shr(turns_k3_q30, PARTITIONS_PER_TURN_X1E6, 30)
             })
+            .unwrap_or(u64::MAX)
     }
 
     /// The status as the screen shows it.

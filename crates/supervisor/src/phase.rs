@@ -54,9 +54,8 @@
 //! a whole edge of lag in less than a spacing (at 7 cm and Low 2 beyond
 //! `n_max`).
 //!
-//! All arithmetic is integer (nm, u64/i64); the positions in nm wrap after
-//! 1.8·10¹⁰ m, 380 000 working days of 12 h at 4 km/h (so they add without
-//! saturating), and each product is bounded where it is formed.
+//! All arithmetic is integer (nm, u64/i64, saturating); the ground distance
+//! in nm wraps after 1.8·10¹⁰ m, 380 000 working days of 12 h at 4 km/h.
 
 use fuzzy_pid::I16F16;
 
@@ -351,9 +350,9 @@ impl Phase {
         k1k2_q30: Option<u64>,
     ) {
         if let Some(k) = k1k2_q30 {
-            // Q8 nm × Q30 → Q8 nm; k1·k2 < 1.44 (tables hold 0.8 … 1.2; clamped to 2 here): the
-            // product < 1.3·10¹⁹ < 2⁶⁴.
-            self.edge_q8 = EDGE_NM_Q8.wrapping_mul(k.min(2 << 30)) >> 30;
+            // Q8 nm × Q30 → Q8 nm; k1·k2 ≤ 1.44 (tables hold 0.8 … 1.2):
+            // fits, and saturates rather than wraps beyond.
+            self.edge_q8 = kinematics::mul_shr(EDGE_NM_Q8, k, 30).unwrap_or(u64::MAX >> 24);
         }
         let new = edges.wrapping_sub(self.edges_seen);
         self.edges_seen = edges;
@@ -370,11 +369,7 @@ impl Phase {
                 // partition's place is where the matched belt puts it), so
                 // a rolling Start neither stalls nor sprints the drum.
                 let to_boundary = self.ref_belt_nm.saturating_sub(self.belt_nm);
-                // (≤ a partition × X ≤ 500 mm: < 2⁵⁵.)
-                self.ref_ground_nm = to_boundary
-                    .min(PARTITION_NM)
-                    .wrapping_mul(self.x_nm.min(1 << 29))
-                    / PARTITION_NM;
+                self.ref_ground_nm = to_boundary.saturating_mul(self.x_nm) / PARTITION_NM;
             }
         }
         if !self.armed {
@@ -390,7 +385,7 @@ impl Phase {
         // Q16 pitches × Q8 nm per pitch, cut to Q8 once per step.
         self.ground_edges_q8 = self
             .ground_edges_q8
-            .wrapping_add(new_q16.min(1 << 28).wrapping_mul(self.edge_q8) >> 16);
+            .saturating_add(kinematics::mul_shr(new_q16, self.edge_q8, 16).unwrap_or(u64::MAX));
         // From the newest edge (exact) with the time since it: m/s (U8F24)
         // · µs = nm / 1000. The speed clamped to 16 m/s (58 km/h, beyond the
         // Hall switch's 1 kHz) and the time to 16.7 s (beyond any edge at a
@@ -400,12 +395,12 @@ impl Phase {
             .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
             >> 24;
         // Never past the next edge's place: the gap's own learned pitch.
-        // A pitch < 2¹⁸ (Q16, ±4 % of 1) × edge_q8 < 2³⁵: < 2⁵³.
-        let next_q8 = u64::from(next_pitch_q16.min(1 << 18)).wrapping_mul(self.edge_q8) >> 16;
+        let next_q8 =
+            kinematics::mul_shr(u64::from(next_pitch_q16), self.edge_q8, 16).unwrap_or(u64::MAX);
         let edges_nm = self.ground_edges_q8 >> 8;
-        let cap = edges_nm.wrapping_add(next_q8 >> 8);
+        let cap = edges_nm.saturating_add(next_q8 >> 8);
         self.reach_nm = cap;
-        let g = edges_nm.wrapping_add(extra).min(cap);
+        let g = edges_nm.saturating_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
     }
 
@@ -413,19 +408,17 @@ impl Phase {
     /// `k3` (its full U2F30 precision); records the partitions that left.
     #[inline(never)]
     pub fn advance_belt(&mut self, counts: u16, k3: kinematics::units::Coefficient) {
-        // The belt per count at this k3, Q16 nm: the Q16 belt per count
-        // (< 2³² for ≥ 3356 counts a turn; the board's 47 200 give 2²⁸·²)
-        // × k3 (clamped to 2 in Q30) < 2⁶³; then × counts (< 2¹⁶): < 2⁴⁷.
-        let per_count = self
-            .belt_q16_per_count
-            .min(u64::from(u32::MAX))
-            .wrapping_mul(u64::from(k3.to_bits().min(2 << 30)))
-            >> 30;
-        let acc = per_count
-            .wrapping_mul(u64::from(counts))
-            .wrapping_add(self.belt_rem);
+        // counts · k3 (Q30) < 2⁴⁸, × the Q16 belt per count (< 2⁴³), cut
+        // once to Q16 nm (< 2⁶¹: 65 535 counts of 4.7 mm), remainder kept.
+        let acc = kinematics::mul_shr(
+            u64::from(counts).wrapping_mul(u64::from(k3.to_bits())),
+            self.belt_q16_per_count,
+            30,
+        )
+        .unwrap_or(u64::MAX >> 1)
+        .wrapping_add(self.belt_rem);
         let belt_before = self.belt_nm;
-        self.belt_nm = self.belt_nm.wrapping_add(acc >> 16);
+        self.belt_nm = self.belt_nm.saturating_add(acc >> 16);
         self.belt_rem = acc & 0xFFFF;
         // The step's ground, for interpolating when each partition left
         // (at the step's end it is up to 10 ms late: 1.4 mm at Low 2, which
@@ -459,8 +452,8 @@ impl Phase {
                 self.n_events = self.n_events.saturating_add(1);
             }
             if self.belt_nm >= self.ref_belt_nm {
-                self.ref_belt_nm = self.ref_belt_nm.wrapping_add(PARTITION_NM);
-                self.ref_ground_nm = self.ref_ground_nm.wrapping_add(self.x_nm);
+                self.ref_belt_nm = self.ref_belt_nm.saturating_add(PARTITION_NM);
+                self.ref_ground_nm = self.ref_ground_nm.saturating_add(self.x_nm);
                 self.pass_started = true;
             }
         }

@@ -257,8 +257,7 @@ pub struct Quality {
     last_plant_um: u64,
     /// The last plant before the last lift (ground µm + 1; 0: none to
     /// count): the gap to the next pass's first plant may be a hole in the
-    /// row ([`ROW_GAP_MAX_UP_UM`]). (Not [`NONE`]: such words in a row made
-    /// the supervisor's initialisation a `memset` call, 184 B of flash.)
+    /// row ([`ROW_GAP_MAX_UP_UM`]).
     gap_from: u64,
 }
 

@@ -139,10 +139,10 @@ fn smoothness(doc: &mut String) -> Result {
          power-up, Start after 3 s, as on the move), the pass's first 30 m from its first \
          plant, seeds 5, 6, 7: the largest step between two control periods (10 ms) of the \
          drum target, and of the travel-speed estimate the feed-forward follows (the \
-         predicted gear speed) — now, and the estimate before (`bench/legacy.rs`, the \
-         estimator and predictor as they were, on the same Hall edges). The ground's own \
+         predicted gear speed), beside the revolution-centred learner with single-gap windows \
+         (`bench/legacy.rs`: that estimator and predictor on the same Hall edges). The ground's own \
          step is 0. Target: the drum target's largest 10 ms step at most 2 %.\n\n\
-         | gear, spacing | drum target, largest 10 ms step | estimate now | estimate before |\n\
+         | gear, spacing | drum target, largest 10 ms step | estimate | revolution-centred learner |\n\
          |---|---|---|---|\n",
     );
     for gear in [Gear::Low1, Gear::Low2] {
@@ -186,9 +186,9 @@ fn smoothness(doc: &mut String) -> Result {
         "\n**The default terrain** (±3 % over 8 s, ±2 % steps every 5 s on average, slip \
          noise, tooth errors, jitter), 7 cm at Low 2, a 70 m row from rest: the 95th \
          percentile of the 100 ms steps from 20 m into the row, of the drum target, of the \
-         estimate now and before, and of the ground speed itself. Target: the drum target \
+         estimate and of the revolution-centred learner's, and of the ground speed itself. Target: the drum target \
          at most 2.5 %.\n\n\
-         | seed | drum target | estimate now | estimate before | ground |\n|---|---|---|---|---|\n",
+         | seed | drum target | estimate | revolution-centred learner | ground |\n|---|---|---|---|---|\n",
     );
     for seed in TERRAIN_SEEDS {
         let mut rig = Rig::new(
@@ -219,11 +219,11 @@ fn smoothness(doc: &mut String) -> Result {
         ));
     }
     doc.push_str(
-        "\nBefore, each tooth's share was learnt against the revolution centred on it, \
-         behind gates that the default terrain's speed keeps shut most of the time, so the \
-         single-gap windows carried the gear's ±2 % tooth errors for hundreds of seconds, \
-         and the predictor extrapolated the slope between two such windows (up to ±10 %). \
-         Now a share is learnt from the first thirteen gaps on (its gap against a parabola \
+        "\nThe revolution-centred learner learns each tooth's share against the revolution \
+         centred on it, behind gates that the default terrain's speed keeps shut most of the \
+         time, so its single-gap windows carry the gear's ±2 % tooth errors for hundreds of \
+         seconds, and its predictor extrapolates the slope between two such windows (up to \
+         ±10 %). The product learns a share from the first thirteen gaps on (its gap against a parabola \
          through the twelve around it), the window is a steady run of up to eight gaps \
          while the shares are not learnt, no slope is carried between noisy windows, and \
          the phase loop's correction is smoothed over 100 ms meanwhile (docs/kinematics.md, \
@@ -388,10 +388,9 @@ fn noiseless(doc: &mut String) -> Result {
         ));
     }
     doc.push_str(
-        "\nBefore, k1·k2 and k3 reached the control path as thousandths rounded down: at \
-         Low 1 the ground ended 0.17 % short in 70 m (117 mm, more than a plant at 7 cm), \
-         and at 18 cm and Low 2 the belt drifted 6 mm in 35 m. Now each coefficient keeps \
-         its U2F30 precision to the products that use it (docs/placement.md, \
+        "\nCut to thousandths, k1·k2 and k3 would leave the ground 0.17 % short in 70 m \
+         at Low 1 (117 mm, more than a plant at 7 cm) and the belt drifting 6 mm in 35 m \
+         at 18 cm and Low 2; each coefficient keeps its U2F30 precision to the products that use it (docs/placement.md, \
          \"Positions\").\n\n",
     );
     Ok(())

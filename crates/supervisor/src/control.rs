@@ -845,8 +845,7 @@ impl Monitor {
     }
 }
 
-/// One step of a first-order filter: `acc + (x − acc)·alpha`, saturating
-/// (one copy for the control step's five filters).
+/// One step of a first-order filter: `acc + (x − acc)·alpha`, saturating.
 #[inline(never)]
 fn smooth(acc: I16F16, x: I16F16, alpha: I16F16) -> I16F16 {
     acc.saturating_add(x.saturating_sub(acc).saturating_mul(alpha))

@@ -350,9 +350,9 @@ impl Phase {
         k1k2_q30: Option<u64>,
     ) {
         if let Some(k) = k1k2_q30 {
-            // Q8 nm × Q30 → Q8 nm; k1·k2 ≤ 1.44 (tables hold 0.8 … 1.2):
-            // fits, and saturates rather than wraps beyond.
-            self.edge_q8 = kinematics::mul_shr(EDGE_NM_Q8, k, 30).unwrap_or(u64::MAX >> 24);
+            // Q8 nm × Q30 → Q8 nm. k1·k2 is taken to at most 2 (the tables
+            // hold 0.8 … 1.2), so the product stays below 2⁶⁴.
+            self.edge_q8 = EDGE_NM_Q8.wrapping_mul(k.min(2 << 30)) >> 30;
         }
         let new = edges.wrapping_sub(self.edges_seen);
         self.edges_seen = edges;
@@ -382,10 +382,11 @@ impl Phase {
             // T/2) to absorb the lag of the restart (module docs).
             self.pass_started = false;
         }
-        // Q16 pitches × Q8 nm per pitch, cut to Q8 once per step.
+        // Q16 pitches (at most 2¹² teeth a step) × Q8 nm per pitch (below
+        // 2³⁵), cut to Q8 once per step.
         self.ground_edges_q8 = self
             .ground_edges_q8
-            .saturating_add(kinematics::mul_shr(new_q16, self.edge_q8, 16).unwrap_or(u64::MAX));
+            .saturating_add(new_q16.min(1 << 28).wrapping_mul(self.edge_q8) >> 16);
         // From the newest edge (exact) with the time since it: m/s (U8F24)
         // · µs = nm / 1000. The speed clamped to 16 m/s (58 km/h, beyond the
         // Hall switch's 1 kHz) and the time to 16.7 s (beyond any edge at a
@@ -395,8 +396,8 @@ impl Phase {
             .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
             >> 24;
         // Never past the next edge's place: the gap's own learned pitch.
-        let next_q8 =
-            kinematics::mul_shr(u64::from(next_pitch_q16), self.edge_q8, 16).unwrap_or(u64::MAX);
+        // (A pitch below 2¹⁸ in Q16 × edge_q8 below 2³⁵: below 2⁵³.)
+        let next_q8 = u64::from(next_pitch_q16.min(1 << 18)).wrapping_mul(self.edge_q8) >> 16;
         let edges_nm = self.ground_edges_q8 >> 8;
         let cap = edges_nm.saturating_add(next_q8 >> 8);
         self.reach_nm = cap;

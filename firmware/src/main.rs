@@ -353,7 +353,7 @@ mod app {
     // The screen's message when the saved settings name a drum driver on
     // an image without the link.
     #[cfg(not(feature = "drive-link"))]
-    use supervisor::control::NO_DRIVE_LINK;
+    const NO_DRIVE_LINK: &str = "Drive link not in this image";
 
     /// Builds the machine of the saved profile in its static slot; the
     /// notice says why it is not the saved one.

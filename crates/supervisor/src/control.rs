@@ -226,10 +226,6 @@ impl Alarm {
     }
 }
 
-/// The answer to a link setting on an image without the drum driver's link
-/// (feature `drive-link` off): page 10 is read-only there.
-pub const NO_DRIVE_LINK: &str = "Drive link not in this image";
-
 /// The message shown when the drive identification starts.
 pub const IDENTIFY_MESSAGE: &str = "Identifying drive: keep belt empty";
 
@@ -942,13 +938,7 @@ impl Supervisor {
         .map_err(|_| Error::Estimator)?;
         let plan = Self::plan_for(&settings, hw)?;
         let law = DriveLaw::of(&settings.drive, hw.control_period_us);
-        // Without the link in the image: encoder and PWM, the saved link
-        // settings kept for the record.
-        let link_in_force = if cfg!(feature = "drive-link") {
-            crate::drive_link::LinkInForce::from(&settings.drive_link)
-        } else {
-            crate::drive_link::LinkInForce::default()
-        };
+        let link_in_force = crate::drive_link::LinkInForce::from(&settings.drive_link);
         let phase = Phase::new(hw.encoder_counts_per_drum_rev, settings.spacing.raw());
         Ok(Self {
             hw,
@@ -1395,9 +1385,6 @@ impl Supervisor {
             }
             // Into the settings (saved by Save), not into the link in
             // force: the board sets its link up at start (page 10).
-            #[cfg(not(feature = "drive-link"))]
-            Command::SetLinkValue(_) => Effect::Message(NO_DRIVE_LINK),
-            #[cfg(feature = "drive-link")]
             Command::SetLinkValue(v) => {
                 if self.run != RunState::Stopped {
                     return Effect::Message("Stop the drum first");
@@ -2008,8 +1995,7 @@ impl Supervisor {
     /// Whether the link is in use (a driver profile and a feedback or
     /// command that needs it, or a profile at all: its faults are read).
     fn link_in_use(&self) -> bool {
-        cfg!(feature = "drive-link")
-            && self.link_in_force.kind != crate::drive_link::DriverKind::None
+        self.link_in_force.kind != crate::drive_link::DriverKind::None
     }
 
     /// This period's drum counts from the feedback source in force: the
@@ -2584,7 +2570,6 @@ mod tests {
     /// `link_in_force`, the read-back that no link delivers counted 0 and
     /// the stall alarm latched 0.2 s after Start).
     #[test]
-    #[cfg(feature = "drive-link")]
     fn page_10_edits_the_saved_link_settings_not_the_link_in_force() {
         use crate::drive_link::FeedbackSource;
         use hmi_proto::screen::{LinkParameter as P, Mode};
@@ -2665,49 +2650,6 @@ mod tests {
             sup.command(Command::SetLinkValue(1)),
             Effect::Message("Stop the drum first")
         );
-    }
-
-    /// Without the feature `drive-link` (the real board's default image):
-    /// saved settings that name the ZLAC8015D as the only feedback and its
-    /// Modbus command are kept as they are, but the drum runs on its
-    /// encoder and the PWM (20 r/min fixed: 157 counts a period, no stall
-    /// alarm, a PWM compare value); page 10 refuses values.
-    #[test]
-    #[cfg(not(feature = "drive-link"))]
-    fn without_the_link_the_saved_link_settings_are_kept_and_not_used() {
-        use crate::drive_link::{CommandPath, DriveLinkSettings, DriverKind, FeedbackSource};
-        use hmi_proto::screen::Mode;
-        let mut settings = Settings {
-            mode: Mode::Fixed,
-            fixed_drum_speed: DrumSpeed::new(2000).unwrap(),
-            ..Settings::default()
-        };
-        settings.drive_link = DriveLinkSettings {
-            feedback: FeedbackSource::Driver,
-            command: CommandPath::Modbus,
-            kind: DriverKind::Zlac8015d,
-            ..DriveLinkSettings::default()
-        };
-        settings.drive_link.generic.micro_rpm_per_count = 5000;
-        assert!(settings.drive_link.build().is_ok());
-        let saved = settings.drive_link;
-        let mut sup = Supervisor::new(Hardware::BOARD, settings).unwrap();
-        assert_eq!(
-            sup.command(Command::SetLinkValue(1)),
-            Effect::Message(NO_DRIVE_LINK)
-        );
-        assert_eq!(sup.settings().drive_link, saved);
-        sup.command(Command::Start);
-        let mut encoder: u16 = 0;
-        let mut last = Actuation::OFF;
-        for period in 0..50u32 {
-            last = sup.control_step(Ticks(period * 10_000), encoder);
-            encoder = encoder.wrapping_add(157);
-        }
-        assert_eq!(sup.alarm(), None);
-        assert_eq!(sup.run_state(), RunState::Running);
-        assert!(last.ccr > 0 && last.driver_enabled, "{last:?}");
-        assert_eq!(sup.bus_speed_command(), None);
     }
 
     /// A commissioning error: the drum turns (20 r/min fixed: 157 counts a
@@ -2921,7 +2863,6 @@ mod tests {
     /// computed before the link's alarms were checked and was applied with
     /// the driver enabled for that period, the alarm already up.
     #[test]
-    #[cfg(feature = "drive-link")]
     fn a_link_alarm_during_the_identification_switches_the_drum_off_at_once() {
         use crate::drive_link::{DriveLinkSettings, DriverKind, LinkSample};
         for fault in [false, true] {

@@ -360,11 +360,8 @@ impl DriveLinkSettings {
     /// let s = DriveLinkSettings::default();
     /// // Slave id 12: taken.
     /// assert_eq!(s.with(LinkParameter::Slave, 12).unwrap().unwrap().generic.slave, 12);
-    /// // The driver's read-back as the feedback without a driver: refused
-    /// // (by an image with the link; without it page 10 is read-only).
-    /// if cfg!(feature = "drive-link") {
-    ///     assert_eq!(s.with(LinkParameter::Feedback, 1), Some(Err(DriveLinkError::NoDriver)));
-    /// }
+    /// // The driver's read-back as the feedback without a driver: refused.
+    /// assert_eq!(s.with(LinkParameter::Feedback, 1), Some(Err(DriveLinkError::NoDriver)));
     /// // Feedback code 3 does not exist; a register has 16 bits.
     /// assert_eq!(s.with(LinkParameter::Feedback, 3), None);
     /// assert_eq!(s.with(LinkParameter::SpeedRegister, 65_536), None);
@@ -557,19 +554,9 @@ impl DriveLinkSettings {
     }
 
     /// [`Self::build`]'s checks, the profile and timing built and dropped.
-    ///
-    /// In an image without the link (the supervisor's feature `drive-link`
-    /// off) nothing more is checked than [`Self::parse`] did: such an image
-    /// runs the encoder and the PWM whatever the block says, and only keeps
-    /// it as saved (its page 10 is read-only), so the block it holds is one
-    /// an image with the link wrote and checked.
     #[inline(never)]
     pub fn check(&self) -> Result<(), DriveLinkError> {
-        if cfg!(feature = "drive-link") {
-            self.config().map(|_| ())
-        } else {
-            Ok(())
-        }
+        self.config().map(|_| ())
     }
 
     /// Reads [`Self::to_bytes`] without validating more than its bytes
@@ -1038,7 +1025,6 @@ mod tests {
     /// Values page 10 refuses, by name; the settings they were offered to
     /// stay as they were (`with` returns the error, nothing else).
     #[test]
-    #[cfg(feature = "drive-link")]
     fn page_10_refuses_bad_link_timing_and_profiles_by_name() {
         let zlac = DriveLinkSettings {
             kind: DriverKind::Zlac8015d,
@@ -1327,15 +1313,12 @@ mod tests {
         );
         // Its first 31 bytes are the record's.
         assert_eq!(s.to_bytes()[..DRIVE_LINK_V5_BYTES], v5);
-        // A bad format-5 block stays refused (by an image with the link:
-        // without it, `check` is light).
+        // A bad format-5 block stays refused.
         let mut bad = v5;
         bad[3] = 0;
-        if cfg!(feature = "drive-link") {
-            assert_eq!(
-                DriveLinkSettings::from_v5_bytes(&bad),
-                Err(DriveLinkError::Profile(ProfileError::SlaveId(0)))
-            );
-        }
+        assert_eq!(
+            DriveLinkSettings::from_v5_bytes(&bad),
+            Err(DriveLinkError::Profile(ProfileError::SlaveId(0)))
+        );
     }
 }

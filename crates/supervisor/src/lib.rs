@@ -7,9 +7,6 @@
 #[cfg(test)]
 extern crate std;
 
-#[cfg(not(any(feature = "profile-a", feature = "profile-b")))]
-compile_error!("enable at least one machine: feature `profile-a` or `profile-b`");
-
 pub mod control;
 pub mod crc;
 pub mod drive;

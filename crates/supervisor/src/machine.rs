@@ -12,7 +12,6 @@ use kinematics::profile_b::ProfileBSettings;
 use kinematics::units::{Metres, MetresPerSecond};
 
 use crate::control::Effect;
-#[cfg(feature = "profile-a")]
 use crate::control::Supervisor;
 use crate::profile_b::{
     BeltPlanter, Error as BeltError, PlanterState, ProfileBConfig, ProfileBHardware, StepperCommand,
@@ -358,18 +357,11 @@ impl BeltMachine {
 }
 
 /// One of the two machines.
-///
-/// Each variant exists only with its cargo feature (`profile-a`,
-/// `profile-b`; both by default), so a firmware image built for one machine
-/// carries none of the other's code: the real board's images are one per
-/// machine (docs/firmware.md, "One image per machine").
 #[allow(clippy::large_enum_variant)]
 pub enum Machine {
     /// Profile A: the drum-belt transplanter.
-    #[cfg(feature = "profile-a")]
     DrumBelt(Supervisor),
     /// Profile B: the seedling-belt planter.
-    #[cfg(feature = "profile-b")]
     SeedlingBelt(BeltMachine),
 }
 
@@ -377,9 +369,7 @@ impl Machine {
     /// The settings in force.
     pub fn settings(&self) -> &Settings {
         match self {
-            #[cfg(feature = "profile-a")]
             Self::DrumBelt(m) => m.settings(),
-            #[cfg(feature = "profile-b")]
             Self::SeedlingBelt(m) => m.settings(),
         }
     }
@@ -387,9 +377,7 @@ impl Machine {
     /// Applies one operator command.
     pub fn command(&mut self, cmd: Command) -> Effect {
         match self {
-            #[cfg(feature = "profile-a")]
             Self::DrumBelt(m) => m.command(cmd),
-            #[cfg(feature = "profile-b")]
             Self::SeedlingBelt(m) => m.command(cmd),
         }
     }
@@ -397,9 +385,7 @@ impl Machine {
     /// The settings as the screen shows them.
     pub fn screen_settings(&self) -> screen::Settings {
         match self {
-            #[cfg(feature = "profile-a")]
             Self::DrumBelt(m) => m.screen_settings(),
-            #[cfg(feature = "profile-b")]
             Self::SeedlingBelt(m) => m.screen_settings(),
         }
     }
@@ -407,9 +393,7 @@ impl Machine {
     /// The live values as the screen shows them.
     pub fn screen_status(&self) -> screen::Status {
         match self {
-            #[cfg(feature = "profile-a")]
             Self::DrumBelt(m) => m.screen_status(),
-            #[cfg(feature = "profile-b")]
             Self::SeedlingBelt(m) => m.screen_status(),
         }
     }

@@ -145,14 +145,9 @@ pub enum Profile {
 
 impl Default for Profile {
     /// The machine of a first boot (or of defaults after a corrupt store):
-    /// profile A, unless this build carries profile B only — a profile B
-    /// image must not start on the machine it cannot run.
+    /// profile A.
     fn default() -> Self {
-        if cfg!(feature = "profile-a") {
-            Self::DrumBelt
-        } else {
-            Self::SeedlingBelt
-        }
+        Self::DrumBelt
     }
 }
 
@@ -822,12 +817,9 @@ mod tests {
             drive_link::link::LinkTiming::DEFAULT
         );
         assert_eq!(decode(&read.encode()), Ok(s));
-        // A format-5 record whose link block is bad stays refused (by an
-        // image with the link: without it, the block's check is light).
+        // A format-5 record whose link block is bad stays refused.
         v5[255] = 0;
-        if cfg!(feature = "drive-link") {
-            assert!(matches!(decode(&v5), Err(SettingsError::DriveLink(_))));
-        }
+        assert!(matches!(decode(&v5), Err(SettingsError::DriveLink(_))));
         // A version-6 record is 311 bytes long.
         v5[0] = 6;
         assert_eq!(
@@ -840,7 +832,6 @@ mod tests {
     }
 
     #[test]
-    #[cfg(feature = "drive-link")]
     fn rejects_a_drive_link_that_cannot_work() {
         // Driver feedback without a driver (byte 252 = 1, kind byte 254 = 0).
         let mut b = Settings::default().encode();

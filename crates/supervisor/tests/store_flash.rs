@@ -697,10 +697,8 @@ fn a_record_with_valid_crc_but_invalid_field_is_corrupt() {
 /// A record whose drive link block parses but does not pass its checks
 /// (the store checks it after the decode, `decode_into_unchecked_link`):
 /// a ZLAC8015D behind 59:1 needs 2638 motor r/min, beyond its 1000. It
-/// is corrupt: the older valid record (or the defaults) is used. (An image
-/// without the link checks the block no further than its bytes.)
+/// is corrupt: the older valid record (or the defaults) is used.
 #[test]
-#[cfg(feature = "drive-link")]
 fn a_record_whose_drive_link_fails_its_checks_is_corrupt() {
     let mut bad = settings_b();
     bad.drive_link.generic.micro_rpm_per_count = 1695;

@@ -14,10 +14,9 @@ use crate::settings::Settings;
 
 // The paths these items had before the split (the firmware's and the tests'),
 // kept while the firmware moves to the new ones.
-pub use crate::belt::{
-    belt_to_screen, belt_with, BeltMachine, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING,
-};
+pub use crate::belt::{BeltMachine, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING};
 pub use crate::effect::{BELT_MACHINE_ONLY, DRUM_MACHINE_ONLY, PLACEMENT_WHILE_RUNNING};
+pub use crate::settings::belt::{belt_to_screen, belt_with};
 pub use crate::settings::{profile_from_screen, screen_profile};
 
 /// One of the two machines.
@@ -67,7 +66,7 @@ impl Machine {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::belt::planter::ProfileBHardware;
+    use crate::planter::ProfileBHardware;
     use crate::settings::Profile;
     use hmi_proto::screen::MachineProfile;
 

@@ -211,7 +211,7 @@ impl Supervisor {
             | Command::SetRollerRadius(_)
             | Command::SetBeltThickness(_)
             | Command::SetSpeedThreshold(_) => {
-                match crate::belt::belt_with(&self.settings.belt, cmd) {
+                match settings::belt::belt_with(&self.settings.belt, cmd) {
                     Some(Ok(belt)) => {
                         self.settings.belt = belt;
                         Effect::SettingsChanged

@@ -102,7 +102,7 @@ impl Supervisor {
             brightness: settings.brightness,
             calibration_kind: self.calibration_kind,
             profile: settings::screen_profile(settings.profile),
-            belt: crate::belt::belt_to_screen(&settings.belt),
+            belt: settings::belt::belt_to_screen(&settings.belt),
             drum_encoder_reversed: settings.drum_encoder_reversed,
             work_switch_fitted: settings.work_switch_fitted,
             first_plant_distance: settings.first_plant_distance,

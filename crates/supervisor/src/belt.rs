@@ -1,17 +1,14 @@
-//! Profile B: the seedling-belt planter — its steppers' kinematics
-//! ([`planter`]) and the machine the firmware runs ([`BeltMachine`]).
-
-mod params;
-pub mod planter;
-
-use params::belt_error_text;
-pub use params::{belt_to_screen, belt_with};
+//! Profile B: the seedling-belt machine the firmware runs ([`BeltMachine`]),
+//! around its steppers' planter ([`crate::planter`]).
 
 use hmi_proto::screen::{self, Command};
 
 use crate::effect::{Effect, DRUM_MACHINE_ONLY, PLACEMENT_WHILE_RUNNING};
+use crate::planter::{
+    BeltPlanter, Error as BeltError, PlanterState, ProfileBHardware, StepperCommand,
+};
+use crate::settings::belt::{belt_error_text, belt_to_screen, belt_with};
 use crate::settings::{profile_from_screen, screen_profile, Settings};
-use planter::{BeltPlanter, Error as BeltError, PlanterState, ProfileBHardware, StepperCommand};
 
 /// The screen's message after *New roll* (page 7): the roller turn count
 /// starts again.
@@ -235,5 +232,69 @@ impl BeltMachine {
             distance_dm: s.distance_mm.checked_div(100).unwrap_or(0),
             ..screen::Status::default()
         }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::settings::Profile;
+
+    /// The live radius on page 7 (`xrad`, 0.1 mm) is rounded to the
+    /// nearest: r = 25 mm is stored 0.4 µm short (U12F20), and truncated
+    /// the screen showed 24.9 mm on a new roll (measured before: 249).
+    #[test]
+    fn the_screens_roller_radius_is_rounded() {
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let m = BeltMachine::new(settings, ProfileBHardware::BOARD).unwrap();
+        assert_eq!(m.screen_status().roller_radius_dmm, 250);
+    }
+
+    /// Every value page 8 takes (its ranges: docs/hmi.md §4, profile B
+    /// table), set alone from the defaults on a stopped planter, is taken
+    /// by the machine and shown back as typed. Measured before the fix:
+    /// the documented minimums X = 10.0 cm, B = 2.0 cm and r = 5.0 mm were
+    /// refused with "Spacing X: 10-100 cm" (and the like): `from_ratio`
+    /// rounds 0.1 m down to 104 857 µ-bits, the check's `lit("0.10")` to
+    /// the nearest, 104 858. And Y above 0.200 m/s, which the screen took
+    /// (up to 0.500), was refused with "Threshold Y: 0-0.2 m/s".
+    #[test]
+    fn every_value_page_8_takes_the_planter_takes() {
+        use hmi_proto::screen::Field;
+        let settings = Settings {
+            profile: Profile::SeedlingBelt,
+            ..Settings::default()
+        };
+        let fields = [
+            Field::BeltSpacing,
+            Field::SeedlingPitch,
+            Field::ClampAngle,
+            Field::ClampCount,
+            Field::RollerRadius,
+            Field::BeltThickness,
+            Field::SpeedThreshold,
+        ];
+        let mut refused = std::vec::Vec::new();
+        for f in fields {
+            for raw in 0..=1000 {
+                let Ok(cmd) = f.validate(raw) else { continue };
+                let mut m = BeltMachine::new(settings.clone(), ProfileBHardware::BOARD).unwrap();
+                let effect = m.command(cmd);
+                let back = f.current(&m.screen_settings());
+                if effect != Effect::SettingsChanged || back != raw {
+                    refused.push((f, raw, effect, back));
+                }
+            }
+        }
+        assert!(
+            refused.is_empty(),
+            "{} refused, e.g. {:?}",
+            refused.len(),
+            &refused[..refused.len().min(5)]
+        );
     }
 }

@@ -13,7 +13,7 @@
 //! | 10 | 2 | `!n` (guards the length before the CRC is known) |
 //! | 12 | `n` | payload: [`Settings::encode`] |
 //! | 12 + n | 0–3 | zero padding to a multiple of 4 |
-//! | `c` = 12 + ⌈n⌉₄ | 4 | CRC-32 ([`crate::crc`]) of bytes 4 .. `c`: sequence, length, `!n`, payload, padding |
+//! | `c` = 12 + ⌈n⌉₄ | 4 | CRC-32 ([`super::crc`]) of bytes 4 .. `c`: sequence, length, `!n`, payload, padding |
 //! | ⌈c + 4⌉_W | max(4, W) | commit word [`COMMIT`] = `"DONE"` (then zeros up to `W`, the flash's `WRITE_SIZE`) |
 //!
 //! With the STM32F1 (`WRITE_SIZE` = 2) a record of settings format 6 is 332
@@ -88,8 +88,8 @@ use core::fmt;
 
 use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 
-use crate::crc::Crc32;
-use crate::settings::{
+use super::crc::Crc32;
+use super::{
     decode_into_unchecked_link, Settings, SettingsError, SETTINGS_BYTES, SETTINGS_FORMAT_VERSION,
     SETTINGS_V1_BYTES, SETTINGS_V2_BYTES, SETTINGS_V3_BYTES, SETTINGS_V4_BYTES, SETTINGS_V5_BYTES,
 };

@@ -61,6 +61,10 @@
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
 
+pub mod belt;
+pub mod crc;
+pub mod store;
+
 use core::fmt;
 
 use hmi_proto::screen::{
@@ -71,9 +75,9 @@ use kinematics::consts::Gear;
 use kinematics::table::TableError;
 use kinematics::travel::{Calibration, CALIBRATION_BYTES};
 
-use crate::belt::planter::{ProfileBConfig, CONFIG_BYTES};
 use crate::drive::{DriveModel, DriveModelError, DRIVE_MODEL_BYTES};
 use crate::drive_link::{DriveLinkError, DriveLinkSettings, DRIVE_LINK_BYTES, DRIVE_LINK_V5_BYTES};
+use crate::planter::{ProfileBConfig, CONFIG_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
 pub const SETTINGS_FORMAT_VERSION: u8 = 6;

@@ -17,6 +17,33 @@ const REPORT_ALPHA: I16F16 = I16F16::lit("0.0196");
 /// speed's 0.5 s held k3 at its rest value while the drum ran up, 1.3 %).
 const K3_SPEED_ALPHA: I16F16 = I16F16::lit("0.25");
 
+/// What the step sensed of the drum.
+struct Sensed {
+    /// Encoder counts forward since the last step.
+    encoder_delta: u16,
+    /// Counts of the feedback in use (the encoder's, or the driver's
+    /// read-back's).
+    delta: u16,
+    /// The period's length, µs.
+    elapsed_us: u32,
+    /// The drum speed the feedback gives, r/min.
+    measured: I16F16,
+}
+
+/// What the step estimated of the travel.
+struct Estimate {
+    /// The Hall estimator's update.
+    m: kinematics::speed::TravelMeasurement,
+    /// The travel speed (eq. 1–3), if the gear speed gives one.
+    travel: Option<travel::TravelSpeed>,
+    /// The travel speed shown, km/h × 1000.
+    travel_kmh_x1000: u32,
+    /// The travel speed integrated, m/s (U8F24 bits).
+    travel_mps: u32,
+    /// k3 at the drum's speed.
+    k3: kinematics::units::Coefficient,
+}
+
 impl Supervisor {
     /// The time since the last control step, µs, from the Hall timer: the
     /// encoder delta is divided by the time it really took, so a control
@@ -88,6 +115,23 @@ impl Supervisor {
     pub fn control_step(&mut self, now: Ticks, drum_encoder: u16) -> Actuation {
         self.ensure_controller();
         self.snapshot.steps = self.snapshot.steps.wrapping_add(1);
+        let sensed = self.sense(now, drum_encoder);
+        let est = self.estimate(now, &sensed);
+        let (target, too_fast) = self.plan_target(&est);
+        self.warn(now, &est, too_fast);
+        // The work switch up: the target ramps to rest (the pass's ramp).
+        let target = self.work_ramp(target, sensed.elapsed_us);
+        // The link's alarms first: one that latches stops the drum (also
+        // an identification) in this very step.
+        self.link_alarms(sensed.encoder_delta, sensed.elapsed_us);
+        let actuation = self.control(&sensed, &est, target);
+        self.report(now, &sensed, &est, target, actuation);
+        actuation
+    }
+
+    /// Sense: the drum encoder's counts since the last step (forward only),
+    /// the period's length, the feedback in use and the drum speed it gives.
+    fn sense(&mut self, now: Ticks, drum_encoder: u16) -> Sensed {
         let delta = match self.last_encoder {
             // Forward only: a backwards jitter reads as standstill. With the
             // encoder reversed (A/B swapped, `Settings::drum_encoder_reversed`)
@@ -118,8 +162,19 @@ impl Supervisor {
         self.link.bus = false;
         let measured = self.drum_speed_of(delta, elapsed_us);
         self.reported = smooth(self.reported, measured, REPORT_ALPHA);
+        Sensed {
+            encoder_delta,
+            delta,
+            elapsed_us,
+            measured,
+        }
+    }
 
-        // Travel speed (eq. 1–3) and the drum target (eq. 7).
+    /// Estimate: the travel speed (eq. 1–3, predicted across the gap since
+    /// the last Hall edge), k3 at the drum's speed, the ground and belt
+    /// positions of the phase loop.
+    fn estimate(&mut self, now: Ticks, sensed: &Sensed) -> Estimate {
+        // Travel speed (eq. 1–3).
         let m = self.estimator.update(now);
         let gear_speed = self.predictor.predict(&m, now);
         self.snapshot.measured_gear_rpm_x1000 = m.gear_speed.to_milli();
@@ -137,7 +192,7 @@ impl Supervisor {
         // the counts still coasting in keep the k3 of their own speed),
         // smoothed over a few periods ([`K3_SPEED_ALPHA`]), at the
         // coefficient's full precision.
-        self.k3_speed = smooth(self.k3_speed, measured, K3_SPEED_ALPHA);
+        self.k3_speed = smooth(self.k3_speed, sensed.measured, K3_SPEED_ALPHA);
         let k3 = self.settings.calibration.k3_at(fix_to_rpm(self.k3_speed));
         // Positions for the phase loop: the ground while running, the belt
         // always (a coasting drum still moves partitions).
@@ -159,15 +214,30 @@ impl Supervisor {
                 k1k2,
             );
         }
-        self.phase.advance_belt(delta, k3);
+        self.phase.advance_belt(sensed.delta, k3);
+        Estimate {
+            m,
+            travel,
+            travel_kmh_x1000,
+            travel_mps,
+            k3,
+        }
+    }
 
+    /// Plan: the drum target of the mode in force (Fixed, or eq. 7 times
+    /// the motor coefficient plus the phase loop's correction), held at the
+    /// drum's limit, and the *Too fast* warning if it was held.
+    fn plan_target(&mut self, est: &Estimate) -> (I16F16, Option<Alarm>) {
         let mut too_fast = None;
         let target = match self.settings.mode {
             // Capped at the drive's n_max (a drive slower than the screen's
             // 44.70 r/min range cannot do more).
             Mode::Fixed => centi_to_fix(self.settings.fixed_drum_speed.raw()).min(self.law.n_max),
             Mode::SpeedAdaptive => {
-                match travel.map(|t| self.plan.target(&t, &self.settings.calibration)) {
+                match est
+                    .travel
+                    .map(|t| self.plan.target(&t, &self.settings.calibration))
+                {
                     Some(Ok(target)) => {
                         // Eq. 7 as asked (also beyond the plan's n_max)
                         // times the motor coefficient, then held at the
@@ -222,8 +292,8 @@ impl Supervisor {
                         // at rest for it, so that no plant leaves for a place
                         // the ground may never reach (on the decaying speed
                         // the belt crept on and dropped plants anywhere).
-                        if m.state == MotionState::Decaying
-                            && m.since_edge_ticks / 4 > self.predictor.period
+                        if est.m.state == MotionState::Decaying
+                            && est.m.since_edge_ticks / 4 > self.predictor.period
                             && self.settings.placement == Placement::DistanceLocked
                             && self.phase.partitions_left() > 0
                             && self.phase.next_place_beyond_reach()
@@ -237,7 +307,12 @@ impl Supervisor {
                 }
             }
         };
+        (target, too_fast)
+    }
 
+    /// Supervise the travel: the *Too fast* and *No travel pulses*
+    /// warnings, under the latched alarms.
+    fn warn(&mut self, now: Ticks, est: &Estimate, too_fast: Option<Alarm>) {
         // The too-fast warning follows the speed (with the unit down: a
         // lifted unit plants nothing); latched alarms and the instability
         // warning stay.
@@ -255,7 +330,7 @@ impl Supervisor {
         let since_edge = if self.edges == 0 {
             u32::MAX
         } else {
-            m.since_edge_ticks
+            est.m.since_edge_ticks
         };
         let quiet = since_edge.min(now.0.wrapping_sub(self.quiet_from));
         let warning = if watching && quiet > NO_PULSES_US {
@@ -269,22 +344,22 @@ impl Supervisor {
             (Some(Alarm::TooFast { .. } | Alarm::NoTravelPulses), _) => self.alarm = None,
             _ => {}
         }
-        // The work switch up: the target ramps to rest (crate::planting).
-        let target = self.work_ramp(target, elapsed_us);
+    }
 
-        // The link's alarms first: one that latches stops the drum (also
-        // an identification) in this very step.
-        self.link_alarms(encoder_delta, elapsed_us);
+    /// Control: the identification's duty, or, running, the faults that stop
+    /// the drum (stall, lost Hall signal), the reference model, the
+    /// instability supervisor and the controller's output.
+    fn control(&mut self, s: &Sensed, est: &Estimate, target: I16F16) -> Actuation {
         let mut actuation = Actuation::OFF;
         if self.run == RunState::Identifying {
-            actuation = self.identify_step(measured, delta, elapsed_us);
+            actuation = self.identify_step(s.measured, s.delta, s.elapsed_us);
         }
         if self.run == RunState::Running {
             // Fault: drum commanded but not turning (with both feedbacks:
             // neither turning; the encoder alone still is the cross-check's).
             let stalled = self.stall_watch(
-                target >= STALL_MIN_COMMAND && delta == 0 && !self.driver_turning(),
-                elapsed_us,
+                target >= STALL_MIN_COMMAND && s.delta == 0 && !self.driver_turning(),
+                s.elapsed_us,
             );
             // Fault: in Speed-Adaptive mode, the next Hall edge is later
             // than any stop the chassis can make allows. Without such
@@ -293,7 +368,7 @@ impl Supervisor {
             let hall_lost = self.settings.mode == Mode::SpeedAdaptive
                 && self
                     .estimator
-                    .next_edge_overdue(m.since_edge_ticks, &self.hall_silence);
+                    .next_edge_overdue(est.m.since_edge_ticks, &self.hall_silence);
             if let Some(alarm) = stalled {
                 self.latch(alarm);
             } else if hall_lost {
@@ -328,12 +403,12 @@ impl Supervisor {
                 if !self.fallback
                     && self
                         .monitor
-                        .step(expected, measured, target, elapsed_us, saturated)
+                        .step(expected, s.measured, target, s.elapsed_us, saturated)
                 {
                     self.fall_back();
                 }
                 let out = match &mut self.drum {
-                    Drum::Control(c) => c.step(expected, measured, target),
+                    Drum::Control(c) => c.step(expected, s.measured, target),
                     Drum::Unbuilt | Drum::Identify(_) => I16F16::ZERO,
                 };
                 actuation = self.drum_output(out);
@@ -341,16 +416,28 @@ impl Supervisor {
         }
         if self.run != RunState::Running {
             // Restart from the drum's actual speed (it may still coast).
-            self.reference = measured;
-            self.ref_history = [to_i16_x256(measured); REF_HISTORY];
+            self.reference = s.measured;
+            self.ref_history = [to_i16_x256(s.measured); REF_HISTORY];
             self.monitor = Monitor::default();
         }
+        actuation
+    }
 
+    /// Report: the counts, the snapshot for the screen and the log, the
+    /// ground distance and the plants that left.
+    fn report(
+        &mut self,
+        now: Ticks,
+        s: &Sensed,
+        est: &Estimate,
+        target: I16F16,
+        actuation: Actuation,
+    ) {
         self.belt_counts_k3 = self
             .belt_counts_k3
-            .saturating_add(u64::from(delta).wrapping_mul(u64::from(k3.to_bits())));
-        self.drum_counts_total = self.drum_counts_total.saturating_add(u64::from(delta));
-        self.snapshot.travel_speed_kmh_x1000 = travel_kmh_x1000;
+            .saturating_add(u64::from(s.delta).wrapping_mul(u64::from(est.k3.to_bits())));
+        self.drum_counts_total = self.drum_counts_total.saturating_add(u64::from(s.delta));
+        self.snapshot.travel_speed_kmh_x1000 = est.travel_kmh_x1000;
         self.snapshot.target_drum_rpm_x1000 = if self.run == RunState::Running {
             milli(target)
         } else {
@@ -369,8 +456,8 @@ impl Supervisor {
         if self.run == RunState::Running {
             // ∫ V1 dt: m/s (U8F24) · µs = µm · 2²⁴, the fraction (< 2²⁴)
             // carried: < 2⁶⁴. µm since Start wrap after 1.8·10¹³ m.
-            let acc = u64::from(travel_mps)
-                .wrapping_mul(u64::from(elapsed_us))
+            let acc = u64::from(est.travel_mps)
+                .wrapping_mul(u64::from(s.elapsed_us))
                 .wrapping_add(self.distance_frac);
             self.distance_um = self.distance_um.wrapping_add(acc >> 24);
             self.distance_frac = acc & 0xFF_FFFF;
@@ -380,9 +467,8 @@ impl Supervisor {
             partitions_x1e6,
             (self.teeth, self.last_tooth_at),
             now.0,
-            elapsed_us,
+            s.elapsed_us,
         );
-        actuation
     }
 
     /// With both feedbacks: the driver's read-back says the drum turns (at

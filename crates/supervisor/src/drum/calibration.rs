@@ -3,6 +3,50 @@
 use super::*;
 
 impl Supervisor {
+    /// Page 4: chooses the coefficient (k1, k2 or k3) to calibrate.
+    pub(super) fn select_calibration(&mut self, kind: CalibrationKind) -> Effect {
+        self.calibration_kind = kind;
+        self.calibration_run = CalibrationRun::Idle;
+        Effect::SettingsChanged
+    }
+
+    /// Page 4: a calibration run starts counting.
+    pub(super) fn calibration_start(&mut self) -> Effect {
+        self.calibration_run = CalibrationRun::Counting {
+            start_edges: self.edges,
+            start_steps: self.snapshot.steps,
+            start_drum_counts: self.drum_counts_total,
+        };
+        Effect::None
+    }
+
+    /// Page 4: the calibration run stops counting.
+    pub(super) fn calibration_stop(&mut self) -> Effect {
+        if let CalibrationRun::Counting {
+            start_edges,
+            start_steps,
+            start_drum_counts,
+        } = self.calibration_run
+        {
+            self.calibration_run = CalibrationRun::Measured {
+                edges: self.edges.wrapping_sub(start_edges),
+                steps: self.snapshot.steps.wrapping_sub(start_steps),
+                drum_counts: self.drum_counts_total.saturating_sub(start_drum_counts),
+            };
+        }
+        Effect::None
+    }
+
+    /// Page 4: a coefficient typed by hand, at the selected gear's speed.
+    pub(super) fn set_coefficient_by_hand(&mut self, k: screen::CalibrationCoefficient) -> Effect {
+        let k = kinematics::units::Coefficient::from_ratio(u32::from(k.raw()), 1000);
+        let at = self.hand_set_abscissa();
+        match k.map(|k| self.set_table_point(self.calibration_kind, at, k)) {
+            Some(Ok(())) => Effect::SettingsChanged,
+            _ => Effect::Message("Coefficient rejected"),
+        }
+    }
+
     /// Where a coefficient typed by hand goes in its table: at the selected
     /// gear's monitored (k1) or actual (k2) speed, at the Fixed-mode drum
     /// speed (k3).

@@ -55,46 +55,14 @@ impl Supervisor {
                 self.settings.gear = settings::gear_from_screen(gear);
                 Effect::SettingsChanged
             }
-            Command::SelectCalibration(kind) => {
-                self.calibration_kind = kind;
-                self.calibration_run = CalibrationRun::Idle;
-                Effect::SettingsChanged
-            }
-            Command::CalibrationStart => {
-                self.calibration_run = CalibrationRun::Counting {
-                    start_edges: self.edges,
-                    start_steps: self.snapshot.steps,
-                    start_drum_counts: self.drum_counts_total,
-                };
-                Effect::None
-            }
-            Command::CalibrationStop => {
-                if let CalibrationRun::Counting {
-                    start_edges,
-                    start_steps,
-                    start_drum_counts,
-                } = self.calibration_run
-                {
-                    self.calibration_run = CalibrationRun::Measured {
-                        edges: self.edges.wrapping_sub(start_edges),
-                        steps: self.snapshot.steps.wrapping_sub(start_steps),
-                        drum_counts: self.drum_counts_total.saturating_sub(start_drum_counts),
-                    };
-                }
-                Effect::None
-            }
+            Command::SelectCalibration(kind) => self.select_calibration(kind),
+            Command::CalibrationStart => self.calibration_start(),
+            Command::CalibrationStop => self.calibration_stop(),
             Command::CalibrationActualDistance(distance) => {
                 self.compute_coefficient(distance.raw())
             }
             Command::CalibrationAccept => self.accept_coefficient(),
-            Command::SetCalibrationCoefficient(k) => {
-                let k = kinematics::units::Coefficient::from_ratio(u32::from(k.raw()), 1000);
-                let at = self.hand_set_abscissa();
-                match k.map(|k| self.set_table_point(self.calibration_kind, at, k)) {
-                    Some(Ok(())) => Effect::SettingsChanged,
-                    _ => Effect::Message("Coefficient rejected"),
-                }
-            }
+            Command::SetCalibrationCoefficient(k) => self.set_coefficient_by_hand(k),
             Command::AcknowledgeAlarm => {
                 if let Some(effect) = self.acknowledge_link_alarm() {
                     return effect;
@@ -118,44 +86,15 @@ impl Supervisor {
                 self.settings.brightness = b;
                 Effect::SettingsChanged
             }
-            Command::IdentifyDrive => {
-                if self.run != RunState::Stopped {
-                    return Effect::Message("Stop the drum first");
-                }
-                if self.alarm.is_some_and(|a| a.is_latched()) {
-                    return Effect::Message("Acknowledge the alarm first");
-                }
-                if matches!(self.alarm, Some(Alarm::IdentifyFailed(_))) {
-                    self.alarm = None;
-                }
-                let mut id = Identifier::new(self.hw.control_period_us);
-                id.start();
-                self.drum = Drum::Identify(id);
-                self.identified = IdentifyState::Running;
-                self.run = RunState::Identifying;
-                self.stall_us = 0;
-                self.belt_counts_k3 = 0;
-                Effect::Message(IDENTIFY_MESSAGE)
-            }
-            Command::AcceptDriveModel => match self.identify_state() {
-                IdentifyState::Done(model) if self.run == RunState::Stopped => {
-                    self.use_drive(model);
-                    self.identified = IdentifyState::Idle;
-                    if self.alarm == Some(Alarm::DrumUnstable) {
-                        self.alarm = None;
-                    }
-                    // Persisted at once (the drum is stopped).
-                    Effect::Save
-                }
-                _ => Effect::Message("Identify the drive first"),
-            },
+            Command::IdentifyDrive => self.identify_drive(),
+            Command::AcceptDriveModel => self.accept_drive_model(),
             // Applies from the next control step (the counter's raw value
             // is kept, only the sign of its delta changes).
             Command::SetDrumEncoderReversed(reversed) => {
                 self.settings.drum_encoder_reversed = reversed;
                 Effect::SettingsChanged
             }
-            // Apply at once (crate::planting); persisted by Save.
+            // Apply at once (the pass, drum/pass.rs); persisted by Save.
             Command::SetWorkSwitchFitted(fitted) => {
                 self.set_work_switch_fitted(fitted);
                 Effect::SettingsChanged
@@ -185,21 +124,7 @@ impl Supervisor {
                 self.link_parameter = p;
                 Effect::SettingsChanged
             }
-            // Into the settings (saved by Save), not into the link in
-            // force: the board sets its link up at start (page 10).
-            Command::SetLinkValue(v) => {
-                if self.run != RunState::Stopped {
-                    return Effect::Message("Stop the drum first");
-                }
-                match self.settings.drive_link.with(self.link_parameter, v) {
-                    Some(Ok(link)) => {
-                        self.settings.drive_link = link;
-                        Effect::SettingsChanged
-                    }
-                    Some(Err(e)) => Effect::Message(e.text()),
-                    None => Effect::Message("Value out of range"),
-                }
-            }
+            Command::SetLinkValue(v) => self.set_link_value(v),
             // Page 7's *New roll* (the belt roller's turn count).
             Command::NewRoll => Effect::Message(crate::effect::BELT_MACHINE_ONLY),
             // Profile B's parameters are kept (and saved) here too, so that

@@ -4,6 +4,44 @@
 use super::*;
 
 impl Supervisor {
+    /// Page 9: starts the drive identification (drum stopped, no latched
+    /// alarm).
+    pub(super) fn identify_drive(&mut self) -> Effect {
+        if self.run != RunState::Stopped {
+            return Effect::Message("Stop the drum first");
+        }
+        if self.alarm.is_some_and(|a| a.is_latched()) {
+            return Effect::Message("Acknowledge the alarm first");
+        }
+        if matches!(self.alarm, Some(Alarm::IdentifyFailed(_))) {
+            self.alarm = None;
+        }
+        let mut id = Identifier::new(self.hw.control_period_us);
+        id.start();
+        self.drum = Drum::Identify(id);
+        self.identified = IdentifyState::Running;
+        self.run = RunState::Identifying;
+        self.stall_us = 0;
+        self.belt_counts_k3 = 0;
+        Effect::Message(IDENTIFY_MESSAGE)
+    }
+
+    /// Page 9: takes the identified drive model into use and saves it.
+    pub(super) fn accept_drive_model(&mut self) -> Effect {
+        match self.identify_state() {
+            IdentifyState::Done(model) if self.run == RunState::Stopped => {
+                self.use_drive(model);
+                self.identified = IdentifyState::Idle;
+                if self.alarm == Some(Alarm::DrumUnstable) {
+                    self.alarm = None;
+                }
+                // Persisted at once (the drum is stopped).
+                Effect::Save
+            }
+            _ => Effect::Message("Identify the drive first"),
+        }
+    }
+
     /// The instability supervisor fired: the conservative controller takes
     /// over (bumpless from the feed-forward), the warning goes up. Not
     /// inlined: the controller it builds (≈ 0.6 KB with its configuration)

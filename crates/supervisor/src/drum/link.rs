@@ -4,6 +4,22 @@
 use super::*;
 
 impl Supervisor {
+    /// Page 10: a link setting into the saved settings, not into the link in
+    /// force (the board sets its link up at start).
+    pub(super) fn set_link_value(&mut self, v: i32) -> Effect {
+        if self.run != RunState::Stopped {
+            return Effect::Message("Stop the drum first");
+        }
+        match self.settings.drive_link.with(self.link_parameter, v) {
+            Some(Ok(link)) => {
+                self.settings.drive_link = link;
+                Effect::SettingsChanged
+            }
+            Some(Err(e)) => Effect::Message(e.text()),
+            None => Effect::Message("Value out of range"),
+        }
+    }
+
     /// The drum link's newest sample (one more sensor sample, with the
     /// read-back's age): call before [`Supervisor::control_step`].
     pub fn set_link_sample(&mut self, sample: crate::drive_link::LinkSample) {

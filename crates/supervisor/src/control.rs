@@ -105,6 +105,13 @@ pub enum Alarm {
     /// The next Hall edge is later than any stop of the chassis allows
     /// (module docs) while the drum was running. Latched.
     HallLost,
+    /// No Hall edge for [`NO_PULSES_US`] while the drum runs in
+    /// Speed-Adaptive mode with the unit down: the tractor has stopped, or
+    /// the Hall sensor (or its wire) is dead and the machine plants
+    /// nothing while it moves. One sensor cannot tell them apart below
+    /// High 3 (module docs), so this is a warning, not a stop: it clears
+    /// with the next edges.
+    NoTravelPulses,
     /// Travel speed too high for the spacing; the drum is held at `n_max`.
     /// Clears by itself. Carries the allowed maximum, km/h × 100.
     TooFast {
@@ -163,6 +170,7 @@ impl Alarm {
             Self::DrumStall => w.write_str("Drum stalled or encoder lost"),
             Self::DrumBackwards => w.write_str("Drum turns backwards: check direction"),
             Self::HallLost => w.write_str("Hall speed signal lost"),
+            Self::NoTravelPulses => w.write_str(NO_PULSES_TEXT),
             Self::DrumUnstable => w.write_str(DRUM_UNSTABLE_TEXT),
             Self::IdentifyFailed(e) => w.write_str(e.text()),
             Self::DriverFault(f) => {
@@ -224,6 +232,10 @@ pub const NO_DRIVE_LINK: &str = "Drive link not in this image";
 
 /// The message shown when the drive identification starts.
 pub const IDENTIFY_MESSAGE: &str = "Identifying drive: keep belt empty";
+
+/// The warning text of [`Alarm::NoTravelPulses`] (the screen's 40
+/// characters).
+pub const NO_PULSES_TEXT: &str = "No travel pulses: check Hall, or Stop";
 
 /// The warning text of [`Alarm::DrumUnstable`].
 pub const DRUM_UNSTABLE_TEXT: &str = "Drum unstable: safe mode, identify";
@@ -362,6 +374,16 @@ pub const HALL_SILENCE_DECEL_MM_S2: u32 = 10_500;
 /// hard glitch limit (500 µs) and below the shortest real gap (9 ms at
 /// 10 km/h).
 pub const DISTANCE_EDGE_MIN_GAP_US: u32 = 5_000;
+/// No Hall edge for this long (µs), while the drum runs in Speed-Adaptive
+/// mode with the unit down, raises [`Alarm::NoTravelPulses`]: 2.5 s, nine
+/// edge periods of the slowest gear (Low 1, 0.32 km/h at the gear: 283 ms
+/// an edge; 300 ms on the terrain's −5 %), so that no working speed leaves
+/// such a silence, and short enough that the warning is up within 3 s of a
+/// sensor's death (the last edge came before it). A 2 s rest of a
+/// stop-and-go is shorter (at most 2.4 s between edges at Low 1 with a
+/// 0.5 s chassis); a longer one shows the warning, which clears with the
+/// first edges after it.
+pub const NO_PULSES_US: u32 = 2_500_000;
 /// Hall silence: the tolerance on a gap's length, % — pitch errors of
 /// teeth whose share is not learned yet (±2 % of a pitch per tooth, so
 /// ±4 % per gap) and the capture jitter.
@@ -371,6 +393,14 @@ pub const HALL_SILENCE_GAP_TOLERANCE_PCT: u8 = 5;
 /// ripple of about ±1 % that the operator need not watch; the mean, which the
 /// controller holds, is what the screen and the log show.
 const REPORT_ALPHA: I16F16 = I16F16::lit("0.0196");
+
+/// Smoothing of the drum speed k3 is looked up at: `Ts / (Ts + τ)` with
+/// `τ` = 30 ms. One encoder count in 10 ms is 0.13 r/min; across a corner
+/// of the k3 table (20 r/min) that quantisation biased the mean k3 and moved
+/// the belt's phase by 2.2 mm per 300 m of ground (40 cm at High 2,
+/// noiseless). Short enough that the lookup follows a start (the reported
+/// speed's 0.5 s held k3 at its rest value while the drum ran up, 1.3 %).
+const K3_SPEED_ALPHA: I16F16 = I16F16::lit("0.25");
 
 /// The machine's operating logic (profile A).
 pub struct Supervisor {
@@ -407,9 +437,13 @@ pub struct Supervisor {
     encoder_back: u16,
     /// The reported (smoothed) drum speed, r/min.
     reported: I16F16,
+    /// The drum speed k3 is looked up at, r/min ([`K3_SPEED_ALPHA`]).
+    k3_speed: I16F16,
     /// The phase loop's correction, smoothed when the link delays the
     /// control (distance-locked placement, [`PHASE_SMOOTHING`]), r/min.
     phase_smoothed: I16F16,
+    /// The smoothing's factor in force ([`PHASE_SMOOTHING`] … 1).
+    phase_alpha: I16F16,
     /// Hall edges since boot.
     edges: u32,
     /// Hall edges counted for the ground distance since boot (the accepted
@@ -419,16 +453,20 @@ pub struct Supervisor {
     /// The teeth's learned pitches summed, Q16 (wraps; differences only).
     pitches_q16: u32,
     last_tooth_at: Option<u32>,
-    /// Ground distance since Start (∫ V1 dt), µm.
+    /// Ground distance since Start (∫ V1 dt), µm, and its fraction (Q24).
     pub(crate) distance_um: u64,
+    distance_frac: u64,
     /// The chassis's deceleration limit at the Hall gear, for the silence
     /// rule.
     hall_silence: DecelerationBound,
+    /// When the Hall silence began to count for [`Alarm::NoTravelPulses`]
+    /// (Start, a lowering, Speed-Adaptive chosen), Hall timer ticks.
+    quiet_from: u32,
     /// Drum encoder counts since Start, each weighted by the belt slip k3
-    /// (× 1000) at the drum speed measured when it was counted: Σ Δcounts ·
-    /// k3(n) · 1000. The plant count follows from it
-    /// ([`Supervisor::plants_since_start`]).
-    belt_counts_k3_milli: u64,
+    /// (U2F30, its full precision) at the drum speed measured when it was
+    /// counted: Σ Δcounts · k3(n) · 2³⁰. The plant count follows from it
+    /// ([`Supervisor::partitions_x1e6`]).
+    belt_counts_k3: u64,
     /// The drum speed the feed-forward alone should produce by now: the
     /// target through a model of the drum's response (see
     /// [`REFERENCE_ALPHA`]). The PID corrects the measurement towards it.
@@ -481,6 +519,9 @@ struct Predictor {
     slope: (i64, i64),
     /// Mean tooth period of the last window, ticks.
     period: u32,
+    /// The last window's gaps read noisy
+    /// ([`kinematics::speed::TravelMeasurement::noisy`]).
+    noisy: bool,
 }
 
 impl Predictor {
@@ -495,19 +536,46 @@ impl Predictor {
                     .wrapping_sub(m.window_ticks / 2);
                 if let Some((v0, t0)) = self.last {
                     let dt = i64::from(center.wrapping_sub(t0));
-                    self.slope = if dt > 0 {
+                    // A change beyond what unlearnt teeth make (each gap
+                    // ±4 %: two differ by at most 8 %; a start from rest
+                    // changes by tens of %) is the speed's.
+                    let b0 = u32::try_from(v0).unwrap_or(0);
+                    let real = m.gear_speed.to_bits().abs_diff(b0) > b0 / 25;
+                    // The slope only between two windows whose teeth are
+                    // learnt, or for a real change: otherwise it is the
+                    // tooth errors', which the extrapolation multiplied.
+                    let clean = !m.noisy && !self.noisy;
+                    let (trend, trend_ticks) = m.trend;
+                    self.slope = if dt > 0 && (clean || real) {
                         (v.saturating_sub(v0), dt)
+                    } else if trend_ticks > 0 && dt > 0 {
+                        // The speed changes beyond what the teeth make (the
+                        // estimator's change between two adjacent runs of
+                        // gaps): the slope between the windows, kept to the
+                        // trend's sign and at most its size (the trend
+                        // describes the runs' middles, further back).
+                        let (dv, tt) = (v.saturating_sub(v0), i64::from(trend_ticks));
+                        let trend = i64::from(trend);
+                        if dv.signum() != trend.signum() {
+                            (0, 1)
+                        } else if dv.saturating_mul(tt).abs() <= trend.saturating_mul(dt).abs() {
+                            (dv, dt)
+                        } else {
+                            (trend, tt)
+                        }
+                    } else if !m.noisy && self.noisy {
+                        // The first window after the teeth were learnt:
+                        // the last slope goes on.
+                        self.slope
                     } else {
                         (0, 1)
                     };
                 }
+                self.noisy = m.noisy;
                 self.last = Some((v, center));
                 self.period = m.window_ticks.checked_div(m.edges).unwrap_or(0);
             }
-            MotionState::Measured | MotionState::Holding => {}
-            // Overdue edge: the estimator's own bound (one gap over the
-            // elapsed time) is better than any extrapolation.
-            MotionState::Decaying => return m.gear_speed,
+            MotionState::Measured | MotionState::Holding | MotionState::Decaying => {}
             MotionState::Stopped | MotionState::Starting => {
                 *self = Self::default();
                 return m.gear_speed;
@@ -529,7 +597,15 @@ impl Predictor {
             .max(bound.saturating_neg())
             .min(bound);
         let bits = v.saturating_add(step).clamp(0, i64::from(u32::MAX));
-        RevPerMin::from_bits(u32::try_from(bits).unwrap_or(0))
+        let predicted = RevPerMin::from_bits(u32::try_from(bits).unwrap_or(0));
+        if m.state == MotionState::Decaying {
+            // Overdue edge: the estimator's bound (one gap over the elapsed
+            // time) caps the estimate; it is no estimate of its own (above
+            // a smoothed value it would raise it).
+            predicted.min(m.gear_speed)
+        } else {
+            predicted
+        }
     }
 }
 
@@ -675,6 +751,11 @@ pub fn schedule_scale(model: &DriveModel, period_us: u32) -> I16F16 {
 /// 100 ms is the slowest link's delay; against the phase loop's 0.5 s it
 /// costs at most atan(0.2) ≈ 11° of phase margin.
 const PHASE_SMOOTHING: I16F16 = I16F16::lit("0.0952");
+/// How fast the phase correction's smoothing fades out when it is no longer
+/// needed: its factor rises by this much a period, from [`PHASE_SMOOTHING`]
+/// to 1 in 0.5 s, so that the correction does not jump to its unsmoothed
+/// value.
+const PHASE_FADE: I16F16 = I16F16::lit("0.02");
 
 /// The conservative mode after an instability: no proportional or
 /// derivative action, integral only with `Ki` = [`FALLBACK_KI`] per period,
@@ -759,9 +840,7 @@ impl Monitor {
             return false;
         }
         let dev = expected.saturating_sub(measured);
-        self.error = self
-            .error
-            .saturating_add(dev.saturating_sub(self.error).saturating_mul(MONITOR_ALPHA));
+        self.error = smooth(self.error, dev, MONITOR_ALPHA);
         if !saturated && self.error.saturating_abs() > target.saturating_mul(MONITOR_BAND) {
             self.beyond_us = self.beyond_us.saturating_add(elapsed_us);
         } else {
@@ -784,6 +863,23 @@ impl Monitor {
         }
         self.beyond_us > MONITOR_TIME_US || self.swinging >= MONITOR_WINDOWS
     }
+}
+
+/// One step of a first-order filter: `acc + (x − acc)·alpha`, saturating.
+#[inline(never)]
+fn smooth(acc: I16F16, x: I16F16, alpha: I16F16) -> I16F16 {
+    acc.saturating_add(x.saturating_sub(acc).saturating_mul(alpha))
+}
+
+/// A drum speed in r/min as the tables' `RevPerMin` (I16F16 → U12F20: 4
+/// more fractional bits, exact; negative as 0).
+fn fix_to_rpm(n: I16F16) -> RevPerMin {
+    RevPerMin::from_bits(
+        u32::try_from(n.to_bits().max(0))
+            .unwrap_or(0)
+            .min(u32::MAX >> 4)
+            << 4,
+    )
 }
 
 fn rpm_to_fix(n: RevPerMin) -> I16F16 {
@@ -894,14 +990,18 @@ impl Supervisor {
             stall_back_us: 0,
             encoder_back: 0,
             reported: I16F16::ZERO,
+            k3_speed: I16F16::ZERO,
             phase_smoothed: I16F16::ZERO,
+            phase_alpha: I16F16::ONE,
             edges: 0,
             teeth: 0,
             pitches_q16: 0,
             last_tooth_at: None,
             distance_um: 0,
+            distance_frac: 0,
             hall_silence,
-            belt_counts_k3_milli: 0,
+            quiet_from: 0,
+            belt_counts_k3: 0,
             reference: I16F16::ZERO,
             ref_history: [0; REF_HISTORY],
             ref_head: 0,
@@ -1003,27 +1103,31 @@ impl Supervisor {
 
     /// Takes one Hall edge (1 MHz capture ticks, extended to 32 bits).
     pub fn hall_edge(&mut self, t: Ticks) {
+        let before = self.estimator.accepted_edges();
         let verdict = self.estimator.push_edge(t);
-        let accepted = matches!(
-            verdict,
-            kinematics::speed::EdgeVerdict::Accepted | kinematics::speed::EdgeVerdict::Restart
-        );
-        if accepted {
-            self.edges = self.edges.wrapping_add(1);
+        // One edge, or two: a suspect edge confirmed by this one
+        // ([`MtEstimator::push_edge`]); none for a glitch or a suspect.
+        let accepted = self.estimator.accepted_edges().wrapping_sub(before);
+        self.edges = self.edges.wrapping_add(accepted);
+        let mut teeth = accepted;
+        let mut pitches = 0u32;
+        for back in 0..accepted {
+            pitches = pitches.wrapping_add(self.estimator.gap_pitches_q16(back as usize));
         }
-        // The ground distance counts the teeth, also one the estimator
-        // drops for its ¼-period rule when it is a plausible tooth
-        // ([`DISTANCE_EDGE_MIN_GAP_US`]).
+        // The ground distance also counts an edge the estimator drops for
+        // its ¼-period rule when it is a plausible tooth
+        // ([`DISTANCE_EDGE_MIN_GAP_US`]), at a nominal pitch.
         let gap = self.last_tooth_at.map_or(u32::MAX, |l| t.0.wrapping_sub(l));
-        if accepted || gap >= DISTANCE_EDGE_MIN_GAP_US {
-            self.teeth = self.teeth.wrapping_add(1);
-            // A tooth the estimator dropped has no learned pitch: nominal.
-            let pitch = if accepted {
-                self.estimator.newest_gap_pitches_q16()
-            } else {
-                1 << 16
-            };
-            self.pitches_q16 = self.pitches_q16.wrapping_add(pitch);
+        if accepted == 0
+            && verdict == kinematics::speed::EdgeVerdict::Early
+            && gap >= DISTANCE_EDGE_MIN_GAP_US
+        {
+            teeth = 1;
+            pitches = 1 << 16;
+        }
+        if teeth > 0 {
+            self.teeth = self.teeth.wrapping_add(teeth);
+            self.pitches_q16 = self.pitches_q16.wrapping_add(pitches);
             self.last_tooth_at = Some(t.0);
         }
     }
@@ -1079,7 +1183,8 @@ impl Supervisor {
             self.run = RunState::Running;
             self.stall_us = 0;
             self.distance_um = 0;
-            self.belt_counts_k3_milli = 0;
+            self.distance_frac = 0;
+            self.belt_counts_k3 = 0;
             self.phase.start(self.teeth, self.pitches_q16);
             self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
             self.start_planting();
@@ -1106,6 +1211,12 @@ impl Supervisor {
     /// ground distance at that moment.
     pub fn plants_left(&self) -> impl Iterator<Item = PlantEvent> + '_ {
         self.phase.events()
+    }
+
+    /// The belt moved since Start as the firmware measures it, µm (drum
+    /// encoder × belt per count × k3, docs/placement.md "Positions").
+    pub fn belt_distance_um(&self) -> u64 {
+        self.phase.belt_um()
     }
 
     /// The phase error after the last step, µm of ground (positive: the belt
@@ -1251,7 +1362,7 @@ impl Supervisor {
                 self.identified = IdentifyState::Running;
                 self.run = RunState::Identifying;
                 self.stall_us = 0;
-                self.belt_counts_k3_milli = 0;
+                self.belt_counts_k3 = 0;
                 Effect::Message(IDENTIFY_MESSAGE)
             }
             Command::AcceptDriveModel => match self.identify_state() {
@@ -1613,11 +1724,7 @@ impl Supervisor {
         let delta = self.feedback_counts(encoder_delta, elapsed_us);
         self.link.bus = false;
         let measured = self.drum_speed_of(delta, elapsed_us);
-        self.reported = self.reported.saturating_add(
-            measured
-                .saturating_sub(self.reported)
-                .saturating_mul(REPORT_ALPHA),
-        );
+        self.reported = smooth(self.reported, measured, REPORT_ALPHA);
 
         // Travel speed (eq. 1–3) and the drum target (eq. 7).
         let m = self.estimator.update(now);
@@ -1625,42 +1732,41 @@ impl Supervisor {
         self.snapshot.measured_gear_rpm_x1000 = m.gear_speed.to_milli();
         self.snapshot.predicted_gear_rpm_x1000 = gear_speed.to_milli();
         let travel = travel::travel_speed(gear_speed, &self.settings.calibration).ok();
+        // Shown to a person: rounded to m/h. The distance below integrates
+        // the speed itself.
         let travel_kmh_x1000 = travel
             .and_then(|t| t.travel_speed_kmh().ok())
             .map_or(0, |v| v.to_milli());
+        let travel_mps = travel.map_or(0, |t| t.travel_speed.to_bits());
 
-        // k3 at the drum speed these counts were turned at (this period's
-        // measurement, exact over the whole range: `milli`), not at the
-        // target: the belt slips at the speed it turns, and after a Stop
-        // the counts still coasting in keep the k3 of their own speed.
-        let k3_x1000 = self
-            .settings
-            .calibration
-            .k3_at(RevPerMin::from_ratio(milli(measured), 1000).unwrap_or(RevPerMin::ZERO))
-            .to_milli();
+        // k3 at the drum speed these counts were turned at (measured, not
+        // the target: the belt slips at the speed it turns, and after a Stop
+        // the counts still coasting in keep the k3 of their own speed),
+        // smoothed over a few periods ([`K3_SPEED_ALPHA`]), at the
+        // coefficient's full precision.
+        self.k3_speed = smooth(self.k3_speed, measured, K3_SPEED_ALPHA);
+        let k3 = self.settings.calibration.k3_at(fix_to_rpm(self.k3_speed));
         // Positions for the phase loop: the ground while running, the belt
         // always (a coasting drum still moves partitions).
         if self.run == RunState::Running {
-            let k1k2 = travel
-                .map(|t| u64::from(t.k1.to_milli()).saturating_mul(u64::from(t.k2.to_milli())));
+            let k1k2 = travel.map(|t| crate::phase::k1k2_q30(t.k1, t.k2));
             // The ground moves on between edges at the M/T speed (the last
             // tooth gap's), not at the predictor's: the slope between two
             // single-gap estimates is mostly the gear's ±2 % tooth errors,
             // which the feed-forward can average but a position cannot
             // (docs/placement.md, "Positions").
-            let raw_mh = travel::travel_speed(m.gear_speed, &self.settings.calibration)
-                .ok()
-                .and_then(|t| t.travel_speed_kmh().ok())
-                .map_or(0, |v| v.to_milli());
+            let raw = travel::travel_speed(m.gear_speed, &self.settings.calibration)
+                .map_or(0, |t| t.travel_speed.to_bits());
             self.phase.advance_ground(
                 self.teeth,
                 self.pitches_q16,
+                self.estimator.next_gap_pitches_q16(),
                 m.since_edge_ticks,
-                raw_mh,
+                raw,
                 k1k2,
             );
         }
-        self.phase.advance_belt(delta, k3_x1000);
+        self.phase.advance_belt(delta, k3);
 
         let mut too_fast = None;
         let target = match self.settings.mode {
@@ -1695,21 +1801,44 @@ impl Supervisor {
                             && self.run == RunState::Running
                         {
                             let c = self.phase.correction(n);
-                            if self.link_in_force.delays_control() {
-                                self.phase_smoothed = self.phase_smoothed.saturating_add(
-                                    c.saturating_sub(self.phase_smoothed)
-                                        .saturating_mul(PHASE_SMOOTHING),
-                                );
-                                self.phase_smoothed
+                            // Smoothed through the link, and while the Hall
+                            // gaps read noisy (teeth not learnt yet): an
+                            // unlearnt edge is up to ±2 % of a pitch off its
+                            // place, and the ground's step there moved the
+                            // drum by up to 3 % in one period (not before a
+                            // pass's first plant: the drum catches up with
+                            // it at up to +100 %, late if smoothed). Leaving
+                            // it, the smoothing fades out over 0.5 s.
+                            self.phase_alpha = if self.link_in_force.delays_control()
+                                || (self.estimator.is_noisy() && self.phase.pass_started())
+                            {
+                                PHASE_SMOOTHING
                             } else {
-                                c
-                            }
+                                self.phase_alpha.saturating_add(PHASE_FADE).min(I16F16::ONE)
+                            };
+                            self.phase_smoothed = smooth(self.phase_smoothed, c, self.phase_alpha);
+                            self.phase_smoothed
                         } else {
                             self.phase.update_error();
                             self.phase_smoothed = I16F16::ZERO;
                             I16F16::ZERO
                         };
-                        n.saturating_add(correction).max(I16F16::ZERO).min(cap)
+                        // The next edge is long overdue (four gaps: the tractor
+                        // has come to rest, or the sensor died) and the next
+                        // plant's place lies beyond that edge: the drum waits
+                        // at rest for it, so that no plant leaves for a place
+                        // the ground may never reach (on the decaying speed
+                        // the belt crept on and dropped plants anywhere).
+                        if m.state == MotionState::Decaying
+                            && m.since_edge_ticks / 4 > self.predictor.period
+                            && self.settings.placement == Placement::DistanceLocked
+                            && self.phase.partitions_left() > 0
+                            && self.phase.next_place_beyond_reach()
+                        {
+                            I16F16::ZERO
+                        } else {
+                            n.saturating_add(correction).max(I16F16::ZERO).min(cap)
+                        }
                     }
                     _ => I16F16::ZERO,
                 }
@@ -1720,10 +1849,31 @@ impl Supervisor {
         // lifted unit plants nothing); latched alarms and the instability
         // warning stay.
         let too_fast = too_fast.filter(|_| self.unit_down());
-        match (self.alarm, too_fast) {
+        // No travel pulses: the Hall silent for NO_PULSES_US since the last
+        // edge, or since the watch began (Start, a lowering,
+        // Speed-Adaptive chosen), with the drum running in Speed-Adaptive
+        // and the unit down. Before it (and otherwise) the watch restarts.
+        let watching = self.run == RunState::Running
+            && self.settings.mode == Mode::SpeedAdaptive
+            && self.unit_down();
+        if !watching {
+            self.quiet_from = now.0;
+        }
+        let since_edge = if self.edges == 0 {
+            u32::MAX
+        } else {
+            m.since_edge_ticks
+        };
+        let quiet = since_edge.min(now.0.wrapping_sub(self.quiet_from));
+        let warning = if watching && quiet > NO_PULSES_US {
+            Some(Alarm::NoTravelPulses)
+        } else {
+            too_fast
+        };
+        match (self.alarm, warning) {
             (Some(a), _) if a.is_latched() || a == Alarm::DrumUnstable => {}
             (_, Some(w)) if self.run == RunState::Running => self.alarm = Some(w),
-            (Some(Alarm::TooFast { .. }), _) => self.alarm = None,
+            (Some(Alarm::TooFast { .. } | Alarm::NoTravelPulses), _) => self.alarm = None,
             _ => {}
         }
         // The work switch up: the target ramps to rest (crate::planting).
@@ -1778,11 +1928,7 @@ impl Supervisor {
                             .unwrap_or(0),
                     )
                     .map_or(target, |&v| I16F16::from_bits(i32::from(v) << 8));
-                self.reference = self.reference.saturating_add(
-                    delayed
-                        .saturating_sub(self.reference)
-                        .saturating_mul(self.law.ref_alpha),
-                );
+                self.reference = smooth(self.reference, delayed, self.law.ref_alpha);
                 self.push_reference_input(target);
                 let saturated = self.snapshot.ccr == 0
                     || u32::from(self.snapshot.ccr) > u32::from(self.hw.pwm_arr);
@@ -1807,9 +1953,9 @@ impl Supervisor {
             self.monitor = Monitor::default();
         }
 
-        self.belt_counts_k3_milli = self
-            .belt_counts_k3_milli
-            .saturating_add(u64::from(delta).saturating_mul(u64::from(k3_x1000)));
+        self.belt_counts_k3 = self
+            .belt_counts_k3
+            .saturating_add(u64::from(delta).wrapping_mul(u64::from(k3.to_bits())));
         self.drum_counts_total = self.drum_counts_total.saturating_add(u64::from(delta));
         self.snapshot.travel_speed_kmh_x1000 = travel_kmh_x1000;
         self.snapshot.target_drum_rpm_x1000 = if self.run == RunState::Running {
@@ -1828,10 +1974,13 @@ impl Supervisor {
         let partitions_x1e6 = self.partitions_x1e6();
         self.snapshot.plants = u32::try_from(partitions_x1e6 / 1_000_000).unwrap_or(u32::MAX);
         if self.run == RunState::Running {
-            // ∫ V1 dt: (m/h)·µs / 3600 = µm.
-            self.distance_um = self.distance_um.saturating_add(
-                u64::from(travel_kmh_x1000).saturating_mul(u64::from(elapsed_us)) / 3600,
-            );
+            // ∫ V1 dt: m/s (U8F24) · µs = µm · 2²⁴, the fraction (< 2²⁴)
+            // carried: < 2⁶⁴. µm since Start wrap after 1.8·10¹³ m.
+            let acc = u64::from(travel_mps)
+                .wrapping_mul(u64::from(elapsed_us))
+                .wrapping_add(self.distance_frac);
+            self.distance_um = self.distance_um.wrapping_add(acc >> 24);
+            self.distance_frac = acc & 0xFF_FFFF;
         }
         self.snapshot.distance_mm = u32::try_from(self.distance_um / 1000).unwrap_or(u32::MAX);
         self.count_plants(
@@ -2246,22 +2395,25 @@ impl Supervisor {
     /// Belt partitions passed since Start × 10⁶ (the plant count is its
     /// integer part): Σ drum turns · k3(n) · π·(D2+2H2) / Lclap, each turn
     /// with the belt slip k3 at the drum speed it was turned at.
+    #[inline(never)]
     pub(crate) fn partitions_x1e6(&self) -> u64 {
         // Partitions per drum turn · 1e6 = π·0.070/0.050 · 1e6 = 4 398 230.
         const PARTITIONS_PER_TURN_X1E6: u64 = 4_398_230;
-        // Σ Δcounts·k3·1000 / counts per turn = turns · k3 · 1000.
-        self.belt_counts_k3_milli
+        // Σ Δcounts·k3 (Q30) / counts per turn = turns · k3 in Q30.
+        self.belt_counts_k3
             .checked_div(u64::from(self.hw.encoder_counts_per_drum_rev))
-            .map_or(u64::MAX, |turns_k3_x1000| {
-                turns_k3_x1000.saturating_mul(PARTITIONS_PER_TURN_X1E6) / 1000
+            .and_then(|turns_k3_q30| {
+                kinematics::mul_shr(turns_k3_q30, PARTITIONS_PER_TURN_X1E6, 30)
             })
+            .unwrap_or(u64::MAX)
     }
 
     /// The status as the screen shows it.
     #[inline(never)]
     pub fn screen_status(&self) -> screen::Status {
         let s = self.snapshot;
-        let x100 = |v: u32| u16::try_from(v / 10).unwrap_or(u16::MAX);
+        // Thousandths to hundredths for a person: rounded.
+        let x100 = |v: u32| u16::try_from(v.saturating_add(5) / 10).unwrap_or(u16::MAX);
         let (measured_distance_cm, calibration_result_x1000) = match self.calibration_run {
             CalibrationRun::Measured {
                 edges, drum_counts, ..

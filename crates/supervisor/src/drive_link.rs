@@ -1124,11 +1124,12 @@ mod tests {
             refused(LinkParameter::CommandScale, 0),
             "Command scale must be nonzero"
         );
-        // The drum's top speed (N_MAX, 44.699 r/min in its fixed point) at
-        // 1364 µr/min per count is 32 771 counts: beyond the register.
+        // The drum's top speed (N_MAX, 44.700 r/min to the nearest
+        // thousandth) at 1364 µr/min per count is 32 771.3 counts, rounded
+        // up to 32 772: beyond the register.
         assert_eq!(
             generic.with(LinkParameter::CommandScale, 1364).unwrap(),
-            Err(DriveLinkError::CommandRange { needed: 32_771 })
+            Err(DriveLinkError::CommandRange { needed: 32_772 })
         );
     }
 

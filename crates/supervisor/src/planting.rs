@@ -164,20 +164,17 @@ impl Supervisor {
         let ground = self.ground_distance_um();
         if now {
             self.quality.begin_pass(ground);
-            // The contact closed one debounce time (30 ms) before the
-            // switch reads down; the drum answers a start one lag later
-            // (its 25 ms time constant and 5 ms dead time): both ≈ 30 ms of
-            // travel, 8.33 µm per m/h.
-            // (u32: 100 km/h, beyond the Hall sensor's 90, is 833 333 µm.)
-            let lag_um = u64::from(
-                self.snapshot()
-                    .travel_speed_kmh_x1000
-                    .min(100_000)
-                    .wrapping_mul(25)
-                    / 3,
-            );
+            // The contact closed 30–40 ms before the switch reads down (the
+            // debounce counts from the first sample that saw it closed, up
+            // to a period after the closing): 35 ms of travel, 9.72 µm per
+            // m/h. The drum answers a start one lag later (its 25 ms time
+            // constant and 5 ms dead time): 30 ms, 8.33 µm per m/h.
+            // (u32: 100 km/h, beyond the Hall sensor's 90, is 972 222 µm.)
+            let mh = self.snapshot().travel_speed_kmh_x1000.min(100_000);
+            let close_um = u64::from(mh.wrapping_mul(35) / 3600);
+            let lag_um = u64::from(mh.wrapping_mul(25) / 3);
             let first = u64::from(self.settings().first_plant_distance.raw()).saturating_mul(1000);
-            let at = ground.saturating_sub(lag_um).saturating_add(first);
+            let at = ground.saturating_sub(close_um).saturating_add(first);
             self.realign_next_plant(at);
             // The belt rests with the next partition `1 − frac` of a pitch
             // from leaving: at the spacing's ratio that is `(1 − frac)·X` of

@@ -7,8 +7,11 @@
 //!
 //! Used by the integration tests in `tests/tests/` and by `cargo xtask qemu`.
 
+pub mod browser;
 pub mod drive;
 pub mod images;
+pub mod screen_shots;
+pub mod screen_web;
 pub mod thumb;
 
 use std::io::{self, BufRead, BufReader, Read, Write};
@@ -637,6 +640,52 @@ impl Firmware {
             self.allow(1)?;
         }
         Ok(())
+    }
+
+    /// Real time, paced by the wall clock: the lock-step gate is handed
+    /// to a thread that allows one control period every 10 ms of host
+    /// time, and the screen's bytes go straight to the emulated USART1
+    /// (as on a real line, whenever they come; do not use [`Bench`]'s
+    /// pumping after this). When the host keeps up, firmware time is real
+    /// time; when it does not (a busy machine), the firmware runs slower,
+    /// every control period whole, never a period late or a burst of
+    /// periods to catch up. (QEMU without instruction counting follows the
+    /// host's clock instead, and a descheduled QEMU delivers SysTick late:
+    /// under load the firmware's control periods overran and its planting
+    /// figures drifted from the simulator's — precision CV 7.1 % against
+    /// 0.57 % in a browser test.) Needs a board booted in lock-step (the
+    /// default); the pacing ends when QEMU exits.
+    pub fn pace_in_real_time(&mut self) -> io::Result<()> {
+        let Some(gate) = self.gate.take() else {
+            return Err(io::Error::other("pacing needs a board booted in lock-step"));
+        };
+        let exited = self.exited.clone();
+        thread::spawn(move || {
+            let start = Instant::now();
+            let mut allowed: u128 = 0;
+            while !exited.load(std::sync::atomic::Ordering::Relaxed) {
+                let due = start.elapsed().as_millis() / LOCKSTEP_PERIOD.as_millis();
+                // At most two periods waiting: a board behind the clock
+                // runs on at its own pace, it is not sent a backlog.
+                while allowed < due && gate.pending() < 2 {
+                    if (&gate.fifo).write_all(&[0]).is_err() {
+                        return;
+                    }
+                    allowed += 1;
+                }
+                allowed = allowed.max(due);
+                thread::sleep(Duration::from_millis(2));
+            }
+        });
+        Ok(())
+    }
+
+    /// A second handle on the socket of the firmware's USART1, for a
+    /// screen served elsewhere (the browser screen's server,
+    /// [`screen_web::ScreenServer`]). Whoever holds it reads the firmware's
+    /// bytes: do not also call the `read_serial_*` methods.
+    pub fn serial_stream(&self) -> io::Result<TcpStream> {
+        self.serial.try_clone()
     }
 
     /// Sends bytes into the firmware's USART1 (the touchscreen's TX line);

@@ -3,6 +3,10 @@
 //! ```text
 //! cargo xtask qemu [--seconds N]   the firmware in QEMU against the simulated machine, with its logs
 //!                                  and a run report (target/report/qemu-run.html)
+//! cargo xtask qemu --screen [--port P] [--seconds N]
+//!                                  the same in real time, driven by a person from the browser screen
+//! cargo xtask screen               build the browser screen (one HTML file) and print its path
+//! cargo xtask screenshots          every page of the browser screen into docs/img
 //! cargo xtask report CAPTURE.txt   a field capture (probe-rs run's decoded defmt) into a run report
 //! cargo xtask test                 all host tests, then the firmware in QEMU driven from tests/
 //! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
@@ -23,6 +27,7 @@ use qemu_tests::{images, workspace_root, BootOptions};
 mod bench;
 mod plan;
 mod report;
+mod screen;
 mod stack;
 
 type Result<T = ()> = std::result::Result<T, String>;
@@ -51,6 +56,8 @@ fn main() -> ExitCode {
         "flash" => flash(),
         "plan" => plan::run(rest),
         "report" => report::run(rest),
+        "screen" => screen::build().map(|p| println!("{}", p.display())),
+        "screenshots" => screen::screenshots(),
         "bench" => bench::run(rest),
         "help" | "--help" | "-h" => {
             println!("{}", include_str!("usage.txt"));
@@ -70,7 +77,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn root() -> PathBuf {
+pub(crate) fn root() -> PathBuf {
     workspace_root()
 }
 
@@ -191,7 +198,7 @@ impl Board {
     }
 }
 
-fn have(tool: &str) -> bool {
+pub(crate) fn have(tool: &str) -> bool {
     Command::new(tool)
         .arg("--version")
         .stdout(Stdio::null())
@@ -214,6 +221,7 @@ fn ensure_tools() -> Result {
         )?;
     }
     ensure_twin_tools()?;
+    screen::ensure_browser()?;
     ensure_peer_tools()?;
     ensure_linker()
 }
@@ -318,7 +326,7 @@ fn ensure_twin_tools() -> Result {
 }
 
 /// Installs Debian packages (as root; otherwise says what to run).
-fn apt_install(packages: &[&str], what: &str) -> Result {
+pub(crate) fn apt_install(packages: &[&str], what: &str) -> Result {
     let root = Command::new("id")
         .arg("-u")
         .output()
@@ -381,21 +389,35 @@ fn ensure_linker() -> Result {
 /// `cargo xtask qemu`: the main job.
 fn qemu(args: &[String]) -> Result {
     ensure_tools()?;
-    let mut seconds: u32 = 20;
+    let mut seconds: Option<u32> = None;
+    let mut with_screen = false;
+    let mut port: u16 = 8080;
     let mut it = args.iter();
     while let Some(arg) = it.next() {
         match arg.as_str() {
             "--seconds" => {
-                seconds = it
+                seconds = Some(
+                    it.next()
+                        .and_then(|s| s.parse().ok())
+                        .filter(|&s| s >= 3)
+                        .ok_or("--seconds takes a whole number ≥ 3")?,
+                );
+            }
+            "--screen" => with_screen = true,
+            "--port" => {
+                port = it
                     .next()
                     .and_then(|s| s.parse().ok())
-                    .filter(|&s| s >= 3)
-                    .ok_or("--seconds takes a whole number ≥ 3")?;
+                    .ok_or("--port takes a port number (0: any free port)")?;
             }
             other => return Err(format!("qemu: unknown argument `{other}`")),
         }
     }
     let elf = Board::Qemu.build()?;
+    if with_screen {
+        return screen::qemu_screen(&elf, seconds, port);
+    }
+    let seconds = seconds.unwrap_or(20);
     std::env::set_var("FIRMWARE_QEMU_ELF", &elf);
     eprintln!(
         "xtask: the firmware in qemu-system-arm -machine netduino2 for {seconds} s of \
@@ -745,6 +767,11 @@ fn ci() -> Result {
         ]),
     )?;
     let totals = test()?;
+    // The operator's web screen for a real board (its tests ran above).
+    eprintln!(
+        "xtask: the operator's web screen: {}",
+        screen::build()?.display()
+    );
     size()?;
     eprintln!("xtask: QEMU smoke run (the main job, 6 s)");
     qemu(&["--seconds".into(), "6".into()])?;

@@ -6,7 +6,9 @@
 //! * [`screen`]: the machine's page/component contract, typed [`screen::Command`]s
 //!   with validated parameters, and the status values written to the screen;
 //! * [`hmi`]: the sans-IO application layer ([`hmi::Hmi`]) joining the two;
-//! * `virtual_screen` (feature `std`): a host-side simulated touchscreen.
+//! * `virtual_screen` (feature `std`): a host-side simulated touchscreen;
+//! * `export` (feature `std`): the contract as JSON for screens built
+//!   outside the firmware (the browser screen, docs/screen-web.md).
 //!
 //! `no_std`, no heap, and no reachable panic: every parse and emit returns a
 //! typed error instead. See `docs/hmi.md` for the screen file a user builds.
@@ -22,6 +24,8 @@ extern crate std;
 mod cursor;
 pub mod decoder;
 pub mod encoder;
+#[cfg(feature = "std")]
+pub mod export;
 pub mod frame;
 pub mod hmi;
 pub mod screen;

@@ -693,6 +693,12 @@ impl Field {
         })
     }
 
+    /// The field's accepted raw range, inclusive: what [`Field::validate`]
+    /// takes (for screens built from the contract, `crate::export`).
+    pub const fn range(self) -> (i32, i32) {
+        self.bounds()
+    }
+
     /// The field's accepted raw range (its type's `MIN` and `MAX`; for
     /// [`Field::LinkValue`] ±[`LINK_VALUE_MAX`]).
     const fn bounds(self) -> (i32, i32) {

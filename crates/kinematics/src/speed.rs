@@ -40,7 +40,11 @@
 //! revolutions after power-up), the window is a steady run of up to eight
 //! gaps: the gaps since the last window and those before them, as long as
 //! none is more than 4 % off the run's speed (a change of speed starts the
-//! run again, and a run is used once three gaps in a row agreed). It
+//! run again, and a run is used once three gaps in a row agreed). While the
+//! run's mean and the mean of as many gaps before it differ by more than
+//! the teeth can make (±4 %/k each for k gaps, plus 2 %), the speed changes
+//! along it and the run would lag: the window is the new gaps, and the
+//! change is reported ([`TravelMeasurement::trend`]). It
 //! assumes no real edge is lost (a lost edge shifts the tooth index; the
 //! table is then dropped and re-learnt). [`MtEstimator::gap_pitches_q16`]
 //! gives the same shares to the ground distance.
@@ -131,6 +135,10 @@ const STEADY_BREAK: u64 = 25;
 /// half of it (a ±10 % change through a 2.5 s chassis: 0.7 % a gap at
 /// Low 2), so a whole revolution lagged by 3 %.
 const STEADY_RUN_MAX: u32 = 8;
+/// Beyond the teeth's bound, the change between two adjacent runs that
+/// counts as the speed's ([`MtEstimator::steady_window`]), percent: room
+/// for the ground's slip noise and the capture jitter.
+const TREND_MARGIN_PCT: u64 = 2;
 /// The learning's mean deviation above which the single gaps read noisy
 /// ([`MtEstimator::is_noisy`]): 0.75 %, Q16.
 pub const NOISY_LIMIT_Q16: u32 = 328;
@@ -413,6 +421,7 @@ impl EstimatorSettings {
             pending: None,
             steady: 0,
             calm: 0,
+            trend: (0, 0),
             rough: NOISY_START_Q16,
         })
     }
@@ -555,8 +564,13 @@ pub struct TravelMeasurement {
     /// shares are not learnt (yet), and the window may be a steady run of
     /// them reaching back beyond the previous window (see
     /// `MtEstimator::steady_window`), whose speed does not change: no slope
-    /// between two such windows means anything.
+    /// between two such windows means anything but [`Self::trend`].
     pub noisy: bool,
+    /// While the gaps read noisy and the speed changes beyond what their
+    /// teeth can make: that change (U12F20 bits of `gear_speed`) over
+    /// ticks, measured between two adjacent runs of gaps (their tooth
+    /// errors cancel but for ±8 %/run length); `(0, 0)` otherwise.
+    pub trend: (i32, u32),
 }
 
 /// Verdict on one pushed edge.
@@ -648,6 +662,9 @@ pub struct MtEstimator {
     /// the gaps in a row that kept to it.
     steady: u32,
     calm: u8,
+    /// The speed's change along the steady run beyond the teeth's (set by
+    /// [`MtEstimator::steady_window`] for the window it chose).
+    trend: (i32, u32),
     /// The running mean of the learning's deviations, Q16
     /// ([`MtEstimator::is_noisy`]).
     rough: u32,
@@ -1110,11 +1127,15 @@ impl MtEstimator {
 
     /// Sum of the weights of the `m` gaps ending at the newest edge (Q16).
     fn window_weight(&self, m: u32) -> u64 {
+        self.window_weight_from(self.tooth, m)
+    }
+
+    /// Sum of the weights of the `m` gaps ending with tooth `idx`'s (Q16).
+    fn window_weight_from(&self, mut idx: usize, m: u32) -> u64 {
         let z = u32::try_from(self.z).unwrap_or(1).max(1);
         let full = u64::from(m.checked_div(z).unwrap_or(0));
         let rem = usize::try_from(m.checked_rem(z).unwrap_or(0)).unwrap_or(0);
         let mut sum = full.saturating_mul(u64::from(self.weight_sum));
-        let mut idx = self.tooth;
         for _ in 0..rem {
             sum = sum.saturating_add(u64::from(self.weight(idx)));
             idx = if idx == 0 {
@@ -1144,6 +1165,7 @@ impl MtEstimator {
             .min(STEADY_RUN_MAX)
             .min(self.valid_run.saturating_sub(1))
             .min(u32::try_from(RING).unwrap_or(1).saturating_sub(1));
+        self.trend = (0, 0);
         if long <= new {
             self.steady = new;
             return (new, self.ref_stamp);
@@ -1154,6 +1176,14 @@ impl MtEstimator {
             .copied()
             .unwrap_or(self.ref_stamp);
         let run = self.rpm_bits(self.window_weight(long), newest.wrapping_sub(start));
+        if let Some(trend) = self.run_trend(long, start, run) {
+            // The speed changes along the run: its mean lags; the window is
+            // the new gaps, the run goes on growing to see the trend.
+            self.trend = trend;
+            self.calm = 0;
+            self.steady = long;
+            return (new, self.ref_stamp);
+        }
         let broke = u64::from(single.abs_diff(run)).saturating_mul(STEADY_BREAK) > u64::from(run);
         let calm_before = self.calm;
         self.calm = if broke {
@@ -1168,6 +1198,43 @@ impl MtEstimator {
             self.steady = long;
             (long, start)
         }
+    }
+
+    /// Whether the speed changes along the run (`run` over the `long` gaps
+    /// since `start`): its mean against the mean of the `k` gaps before it
+    /// (as many as the run holds, or as are known; at least
+    /// [`STEADY_SETTLE`]) differs by more than unlearnt teeth can make plus
+    /// [`TREND_MARGIN_PCT`]. Each tooth's edge lies within ±2 % of a pitch
+    /// of its place, so a mean over k gaps is off by at most ±4 %/k. Beyond
+    /// that the run's mean lags the speed by half the run (a pull-away
+    /// through a 2.5 s chassis, 1–2 % a gap at Low 2: 3 % and more). Returns
+    /// the change (U12F20 bits) over the ticks between the two means'
+    /// middles, or `None`.
+    fn run_trend(&self, long: u32, start: u32, run: u32) -> Option<(i32, u32)> {
+        // As many gaps before the run as it holds, or as are known.
+        let k = long.min(self.valid_run.saturating_sub(long.saturating_add(1)));
+        let back = usize::try_from(long.saturating_add(k)).ok()?;
+        if k < u32::from(STEADY_SETTLE) || back >= RING {
+            return None;
+        }
+        let first = self.stamps.get(ring_prev(self.head, back)).copied()?;
+        let tooth = self.tooth_back(usize::try_from(long).ok()?, self.z.max(1));
+        let before = self.rpm_bits(self.window_weight_from(tooth, k), start.wrapping_sub(first));
+        // |run − before| > (4/long + 4/k + TREND_MARGIN_PCT) % of the run.
+        let (long, k) = (u64::from(long), u64::from(k));
+        let bound = long
+            .saturating_mul(k)
+            .saturating_mul(TREND_MARGIN_PCT)
+            .saturating_add(long.saturating_add(k).saturating_mul(4));
+        let trends = u64::from(run.abs_diff(before))
+            .saturating_mul(long)
+            .saturating_mul(k)
+            .saturating_mul(100)
+            > u64::from(run).saturating_mul(bound);
+        let change = i64::from(run).wrapping_sub(i64::from(before));
+        // The two means' middles lie half of each segment apart.
+        let ticks = self.newest().wrapping_sub(first) / 2;
+        (trends && ticks > 0).then(|| (i32::try_from(change).unwrap_or(0), ticks))
     }
 
     /// 60·f·2²⁰ (< 2⁵⁸): r/min in U12F20 per share over ticks.
@@ -1336,6 +1403,7 @@ impl MtEstimator {
             since_edge_ticks,
             glitches: self.glitches,
             noisy: false,
+            trend: (0, 0),
         };
         if !self.has_last {
             return out;
@@ -1353,7 +1421,9 @@ impl MtEstimator {
             let (m, start) = if self.ref_valid && new < self.valid_run {
                 out.noisy = self.is_noisy();
                 if self.cfg.pitch_compensation && out.noisy {
-                    self.steady_window(new)
+                    let w = self.steady_window(new);
+                    out.trend = self.trend;
+                    w
                 } else {
                     self.steady = 0;
                     (new, self.ref_stamp)

@@ -225,7 +225,8 @@ fn smoothness(doc: &mut String) -> Result {
          seconds, and its predictor extrapolates the slope between two such windows (up to \
          ±10 %). The product learns a share from the first thirteen gaps on (its gap against a parabola \
          through the twelve around it), the window is a steady run of up to eight gaps \
-         while the shares are not learnt, no slope is carried between noisy windows, and \
+         while the shares are not learnt (unless the speed changes along it beyond what the \
+         teeth make), no slope is carried between noisy windows beyond that change, and \
          the phase loop's correction is smoothed over 100 ms meanwhile (docs/kinematics.md, \
          docs/placement.md).\n\n",
     );

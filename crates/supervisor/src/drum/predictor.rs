@@ -50,8 +50,28 @@ impl Predictor {
                     // learnt, or for a real change: otherwise it is the
                     // tooth errors', which the extrapolation multiplied.
                     let clean = !m.noisy && !self.noisy;
+                    let (trend, trend_ticks) = m.trend;
                     self.slope = if dt > 0 && (clean || real) {
                         (v.saturating_sub(v0), dt)
+                    } else if trend_ticks > 0 && dt > 0 {
+                        // The speed changes beyond what the teeth make (the
+                        // estimator's change between two adjacent runs of
+                        // gaps): the slope between the windows, kept to the
+                        // trend's sign and at most its size (the trend
+                        // describes the runs' middles, further back).
+                        let (dv, tt) = (v.saturating_sub(v0), i64::from(trend_ticks));
+                        let trend = i64::from(trend);
+                        if dv.signum() != trend.signum() {
+                            (0, 1)
+                        } else if dv.saturating_mul(tt).abs() <= trend.saturating_mul(dt).abs() {
+                            (dv, dt)
+                        } else {
+                            (trend, tt)
+                        }
+                    } else if !m.noisy && self.noisy {
+                        // The first window after the teeth were learnt:
+                        // the last slope goes on.
+                        self.slope
                     } else {
                         (0, 1)
                     };

@@ -6,8 +6,10 @@ use std::process::Command;
 mod belt;
 mod drum;
 mod field;
+mod legacy;
 mod link;
 mod placement;
+mod row;
 mod speed;
 pub(crate) mod svg;
 mod tables;
@@ -150,7 +152,7 @@ fn twin_section(doc: &mut String) -> Result {
     Ok(())
 }
 
-/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`, `link`) alone, printed
+/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`, `link`, `row`) alone, printed
 /// and written to target/bench-NAME.md (its plots to target/img/);
 /// docs/PERFORMANCE.md and docs/img/ are left as they are.
 fn only(name: &str) -> Result {
@@ -166,9 +168,12 @@ fn only(name: &str) -> Result {
         "link" => {
             link::section(&mut doc)?;
         }
+        "row" => {
+            row::section(&mut doc)?;
+        }
         other => {
             return Err(format!(
-                "bench --only: unknown section `{other}` (known: tables, placement, link)"
+                "bench --only: unknown section `{other}` (known: tables, placement, link, row)"
             ))
         }
     }
@@ -191,7 +196,7 @@ pub fn run(args: &[String]) -> Result {
         [flag, name] if flag == "--only" => return only(name),
         _ => {
             return Err(format!(
-                "bench: unexpected arguments {args:?} (usage: bench [--only tables|placement|link])"
+                "bench: unexpected arguments {args:?} (usage: bench [--only tables|placement|link|row])"
             ))
         }
     }
@@ -300,7 +305,7 @@ pub fn run(args: &[String]) -> Result {
          size costs nothing and the inference is a fraction of a millisecond.\n\n",
     );
     doc.push_str(&reading);
-    doc.push_str("## 6. Flash and RAM\n\n`cargo xtask size` (release, `opt-level = \"z\"` with the control arithmetic at `\"s\"`, fat LTO):\n\n| board | flash | static RAM (data + bss) |\n|---|---|---|\n");
+    doc.push_str("## 6. Flash and RAM\n\n`cargo xtask size` (release, `opt-level = \"z\"` with the fuzzy PID at `\"s\"`, fat LTO):\n\n| board | flash | static RAM (data + bss) |\n|---|---|---|\n");
     for board in Board::ALL {
         let (flash, ram) = footprint(&board.build()?)?;
         doc.push_str(&format!("| {} | {flash} B | {ram} B |\n", board.name()));
@@ -314,6 +319,9 @@ pub fn run(args: &[String]) -> Result {
     eprintln!("xtask: bench 10 drive link");
     let secs = link::section(&mut doc)?;
     eprintln!("xtask: bench 10 took {secs:.1} s");
+    eprintln!("xtask: bench 11 a row's checks");
+    let secs = row::section(&mut doc)?;
+    eprintln!("xtask: bench 11 took {secs:.0} s");
     let path = root().join("docs").join("PERFORMANCE.md");
     write_file(&path, &doc)?;
     eprintln!(

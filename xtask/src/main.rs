@@ -12,7 +12,8 @@
 //! cargo xtask ci                   fmt, clippy (host and thumbv7m), test, release builds, size, QEMU smoke run
 //! cargo xtask size                 flash, RAM and the static stack worst case of every image
 //! cargo xtask flash                build and flash a real board with probe-rs
-//! cargo xtask bench [--only tables] regenerate docs/PERFORMANCE.md (QEMU instruction counts, sizes)
+//! cargo xtask bench [--only NAME]  regenerate docs/PERFORMANCE.md (QEMU instruction counts, sizes);
+//!                                  NAME: tables, placement, link, row (one section, into target/)
 //! cargo xtask plan --spacing 7cm --speed 0.51km/h [--gear low2] [--arr N]
 //! ```
 

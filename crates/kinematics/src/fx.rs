@@ -123,6 +123,11 @@ pub(crate) fn mul_div(a: u64, b: u64, c: u64) -> Option<u64> {
     div_wide(hi, lo, c)
 }
 
+/// Whether `a·b < c·d`, from the exact 128-bit products.
+pub(crate) fn mul_lt(a: u64, b: u64, c: u64, d: u64) -> bool {
+    wide_mul(a, b) < wide_mul(c, d)
+}
+
 /// Q32 product, [`Error::Overflow`] if it does not fit.
 #[inline(never)]
 pub(crate) fn mul(a: W, b: W) -> Result<W, Error> {
@@ -210,6 +215,10 @@ mod tests {
                 .checked_div(u128::from(c))
                 .and_then(|q| u64::try_from(q).ok());
             prop_assert_eq!(mul_div(a, b, c), want);
+            prop_assert_eq!(
+                mul_lt(a, b, c, s.into()),
+                u128::from(a) * u128::from(b) < u128::from(c) * u128::from(s)
+            );
         }
     }
 }

@@ -29,6 +29,23 @@ pub mod table;
 pub mod travel;
 pub mod units;
 
+/// `⌊a·b / 2^shift⌋` from the exact 128-bit product (four 32 × 32-bit
+/// multiplies, no `u128` arithmetic on the MCU), or `None` when it does not
+/// fit in 64 bits; `shift` < 64. For callers that carry a coefficient's
+/// full U2F30 precision through a product wider than 64 bits.
+///
+/// ```
+/// // 25 132 741.23 nm (one Hall pitch, Q8) × k1·k2 = 1.001 809 (Q30).
+/// let q30 = (1.001_809_f64 * (1u64 << 30) as f64) as u64;
+/// let nm_q8 = kinematics::mul_shr(6_433_981_755, q30, 30).unwrap();
+/// assert_eq!(nm_q8 >> 8, 25_178_206);
+/// assert_eq!(kinematics::mul_shr(u64::MAX, u64::MAX, 63), None);
+/// ```
+#[must_use]
+pub fn mul_shr(a: u64, b: u64, shift: u32) -> Option<u64> {
+    fx::mul_q(a, b, shift)
+}
+
 /// Errors of the kinematic computations.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -25,23 +25,28 @@
 //!
 //! *Tooth-pitch compensation*: a gear with ±1 % pitch errors makes single
 //! gaps ±1 % (and more) wrong, which at low speed (one gap per window) is the
-//! dominant error. The estimator learns each gap's share of a revolution
-//! against the revolution centred on it (`share = gap·Z / T_rev`: exact at a
-//! steady speed and under a steady acceleration, which the centring cancels),
-//! as a running mean of each tooth's samples (one not taken at a steady
-//! speed weighed against the nominal share) and after 15 an IIR of 1/16,
-//! with a ±4 % plausibility guard, and weighs every gap by its learned
-//! share. A sample is taken only when the speed around it is smooth enough
-//! for the centring to hold: the rolling revolution times a quarter
-//! revolution before and after the centred one in line with it within 1/400
-//! of a revolution (a share biased by at most 0.17 %) and within 2.5 % of
-//! each other. So the shares are learnt on terrain whose speed wanders (±3 %
-//! over 8 s: to 0.1 % RMS in 400 s, tests/estimator.rs), which the earlier
-//! rule (learn only while the revolution time held within 0.2 %) never did on
-//! the machine model's default terrain; a chassis' answer to a speed step is
-//! mostly kept out. Until a tooth has a sample its gap counts as 1/Z. It
+//! dominant error. The estimator learns each gap's share from the first
+//! thirteen gaps on: the gap six edges back against the parabola through
+//! its twelve neighbours' times per pitch (a least-squares fit, the centre
+//! left out: a steady acceleration and a steady change of it cancel), when
+//! those neighbours lie within 10 % of each other (no stop, restart or
+//! speed step inside the window) and the sample within ±4 % of a pitch. A
+//! tooth's share is the running mean of its samples, after 16 an IIR of
+//! 1/16, each step clipped to 0.25 % once the tooth has three samples (one
+//! bump of the terrain cannot undo what the others taught); the shares'
+//! mean is kept at 1 (the reference cannot see a common scale). Until a
+//! tooth has a sample its gap counts as 1/Z. While the learning's mean
+//! deviation is above 0.5 % of a pitch ([`MtEstimator::is_noisy`]: the first
+//! revolutions after power-up), the window is a steady run of up to eight
+//! gaps: the gaps since the last window and those before them, as long as
+//! none is more than 4 % off the run's speed (a change of speed starts the
+//! run again, and a run is used once three gaps in a row agreed). While the
+//! run's mean and the mean of as many gaps before it differ by more than
+//! the teeth can make (±4 %/k each for k gaps, plus 2 %), the speed changes
+//! along it and the run would lag: the window is the new gaps, and the
+//! change is reported ([`TravelMeasurement::trend`]). It
 //! assumes no real edge is lost (a lost edge shifts the tooth index; the
-//! table is then dropped and re-learnt). [`MtEstimator::newest_gap_pitches_q16`]
+//! table is then dropped and re-learnt). [`MtEstimator::gap_pitches_q16`]
 //! gives the same shares to the ground distance.
 //!
 //! *Zero speed*: when no edge came for longer than the next gap should take,
@@ -54,7 +59,16 @@
 //! of the last period (default ¼) is dropped and counted. That reference
 //! period grows by at most 2× an edge, so the gap that spans a pause shorter
 //! than `stop_timeout` (stop-and-go) does not turn the next full-speed edges
-//! into glitches (each dropped real edge is a tooth of distance lost).
+//! into glitches (each dropped real edge is a tooth of distance lost). At a
+//! steady working speed an edge that closes a gap shorter than ¾ of the
+//! reference is held until the next edge confirms it
+//! ([`MtEstimator::push_edge`]): one noise pulse, or a sensor whose line
+//! sticks low part-way through a gap, raises no speed.
+//!
+//! *Zero speed, a tooth not learnt*: the decay's gap gets 5 % more while
+//! its tooth has fewer than three samples (an unlearnt tooth may be up to
+//! 4 % long, plus the capture jitter), so that a long tooth does not read as
+//! a slowing machine.
 //!
 //! # Hall silence: a stop or a lost signal?
 //!
@@ -84,31 +98,60 @@ pub const MAX_TEETH: usize = 32;
 /// Edge stamps kept: a revolution and a half of the largest gear and a few
 /// (tooth learning reaches a revolution and half a revolution back).
 const RING: usize = MAX_TEETH + MAX_TEETH / 2 + 4;
-/// Tooth learning's gate on a change of acceleration: the second difference
-/// of the rolling revolution times a quarter revolution apart within 1/400
-/// of a revolution. A centred revolution's share is biased by about a sixth
-/// of the second difference half a revolution apart (four times this one):
-/// at most 0.17 %.
-const CURVATURE_GATE: u64 = 400;
-/// Tooth learning's gate on the acceleration: the rolling revolutions a
-/// quarter revolution before and after the centred one within 1/40 (2.5 %)
-/// of it. A centred revolution cancels a steady acceleration but not a step
-/// of speed at the learnt gap, which the second difference cannot see (the
-/// three revolutions stay in line across it): a chassis' answer to a step
-/// (the hills profile; tests/estimator.rs, a 10 % rise through 0.5 s) mostly
-/// exceeds this, the default terrain's wandering speed mostly does not
-/// (chosen on the machine model: docs/kinematics.md).
-const SLOPE_GATE: u64 = 40;
-/// A tooth-learning sample whose revolutions a quarter revolution apart agree
-/// within 1/1000 (0.1 %) is taken at a steady speed and counts in full (the
-/// first one sets the share, as a steady revolution did before 2026-11-23:
-/// learnt within a revolution, bench §2); any other is weighed against the
-/// nominal share.
-const STEADY_GATE: u64 = 1000;
-/// A tooth's share is the running mean of its samples (one not taken at a
-/// steady speed weighed against the nominal share), up to this many
-/// samples; then an IIR of 1/16.
-const SHARE_SAMPLES: u8 = 14;
+/// Tooth learning: the gaps on either side of a learnt gap that give its
+/// reference (module docs, "Tooth-pitch compensation").
+const LEARN_HALF: usize = 6;
+/// The reference's weights for the gaps 1 … 6 away on each side, over
+/// [`LEARN_DIVISOR`]: the value at the centre of a least-squares parabola
+/// through the twelve neighbours' per-pitch times (the centre left out),
+/// `(Σx⁴ − Σx²·x²) / (n·Σx⁴ − (Σx²)²)` with x = ±1 … ±6: 4550 − 182·x².
+const LEARN_WEIGHTS: [i16; LEARN_HALF] = [4368, 3822, 2912, 1638, 0, -2002];
+/// The sum of the weights over both sides (n·Σx⁴ − (Σx²)² = 21 476).
+const LEARN_DIVISOR: u64 = 21_476;
+/// Tooth learning's gate: the neighbours' per-pitch times within 10 % of
+/// the reference (max − min). A stop, a restart or a speed step inside the
+/// thirteen gaps leaves no usable parabola.
+const SPREAD_GATE: u64 = 10;
+/// After this many samples a tooth's share moves by at most
+/// [`SHARE_CLIP_Q16`] a sample (before the running mean's 1/n): a sample
+/// taken while the speed changes faster than a parabola follows (a
+/// chassis's 0.5 s answer to a throttle step) is biased by up to 1 %, which
+/// a running mean would keep as tooth error; the teeth's true shares do not
+/// move.
+const SHARE_CLIP_FROM: u8 = 3;
+/// The largest step of a learnt share per sample, Q16 (0.25 %).
+const SHARE_CLIP_Q16: i32 = 164;
+/// A tooth's share is the running mean of its samples up to this many, then
+/// an IIR of the same weight (1/16).
+const SHARE_SAMPLES: u8 = 16;
+/// Samples from which a tooth's share counts as learnt: before, its gap is
+/// given 5 % of slack before the edge counts as late.
+const LEARNT_SAMPLES: u8 = 3;
+/// A gap whose speed differs from the steady run's by more than 1/25 (4 %)
+/// ends the run: unlearnt teeth make at most ±4 % a gap (the machine
+/// model's ±2 % of a pitch per tooth), so the speed changed.
+const STEADY_BREAK: u64 = 25;
+/// The longest steady run, gaps: its mean lags a slowly changing speed by
+/// half of it (a ±10 % change through a 2.5 s chassis: 0.7 % a gap at
+/// Low 2), so a whole revolution lagged by 3 %.
+const STEADY_RUN_MAX: u32 = 8;
+/// Beyond the teeth's bound, the change between two adjacent runs that
+/// counts as the speed's ([`MtEstimator::steady_window`]), percent: room
+/// for the ground's slip noise and the capture jitter.
+const TREND_MARGIN_PCT: u64 = 2;
+/// The learning's mean deviation above which the single gaps read noisy
+/// ([`MtEstimator::is_noisy`]): 0.75 %, Q16.
+pub const NOISY_LIMIT_Q16: u32 = 328;
+/// The learning's mean deviation at power-up (and after lost edges): 2 %.
+const NOISY_START_Q16: u32 = 1311;
+/// Gaps in a row within [`STEADY_BREAK`] of the run before the run is used:
+/// a tractor pulling away from rest settles its speed in a few gaps, and a
+/// run averaging the last of its rise would lag it.
+const STEADY_SETTLE: u8 = 3;
+/// The suspect-edge rule ([`MtEstimator::push_edge`]) holds at working
+/// speeds only: gaps up to 0.6 s, half the slowest gear's speed (Low 1,
+/// 0.32 km/h at the gear: 0.28 s a gap).
+const SUSPECT_MAX_GAP_MS: u32 = 600;
 /// Q16 unity for the learned tooth shares.
 const ONE_Q16: u32 = 1 << 16;
 
@@ -353,6 +396,7 @@ impl EstimatorSettings {
             cfg: self,
             z: usize::from(self.teeth),
             stamps: [0; RING],
+            last: 0,
             head: 0,
             tooth: 0,
             has_last: false,
@@ -374,6 +418,11 @@ impl EstimatorSettings {
             glitches: 0,
             lost: false,
             from_rest: false,
+            pending: None,
+            steady: 0,
+            calm: 0,
+            trend: (0, 0),
+            rough: NOISY_START_Q16,
         })
     }
 }
@@ -511,6 +560,17 @@ pub struct TravelMeasurement {
     pub since_edge_ticks: u32,
     /// Glitches dropped since start (wrapping).
     pub glitches: u32,
+    /// The single gaps read noisy ([`MtEstimator::is_noisy`]): their tooth
+    /// shares are not learnt (yet), and the window may be a steady run of
+    /// them reaching back beyond the previous window (see
+    /// `MtEstimator::steady_window`), whose speed does not change: no slope
+    /// between two such windows means anything but [`Self::trend`].
+    pub noisy: bool,
+    /// While the gaps read noisy and the speed changes beyond what their
+    /// teeth can make: that change (U12F20 bits of `gear_speed`) over
+    /// ticks, measured between two adjacent runs of gaps (their tooth
+    /// errors cancel but for ±8 %/run length); `(0, 0)` otherwise.
+    pub trend: (i32, u32),
 }
 
 /// Verdict on one pushed edge.
@@ -523,6 +583,14 @@ pub enum EdgeVerdict {
     Restart,
     /// Dropped as a glitch.
     Glitch,
+    /// Held until the next edge: at a steady working speed, the gap it
+    /// closes is shorter than ¾ of the glitch reference (see
+    /// [`MtEstimator::push_edge`]).
+    Suspect,
+    /// Dropped for the ¼-period rule while the speed was changing (a
+    /// tractor pulling away from a crawl): it may be a real tooth, which
+    /// the ground distance can count.
+    Early,
 }
 
 /// M/T speed estimator on 32-bit edge timestamps (wrapping arithmetic).
@@ -538,10 +606,11 @@ pub enum EdgeVerdict {
 /// let m = est.update(Ticks(1_000 + 5 * 240_000 + 50_000));
 /// assert_eq!(m.state, MotionState::Measured);
 /// assert!((m.gear_speed.to_f64() - 10.0).abs() < 1e-4);
-/// // 1.2 s after the last edge (5 gaps' worth) the speed is at most 1/25 rev over 1.2 s = 2 r/min.
+/// // 1.2 s after the last edge (5 gaps' worth) the speed is at most one gap
+/// // over 1.2 s; a tooth not learnt yet gets 5 % more: 1.05/25 rev = 2.1 r/min.
 /// let m = est.update(Ticks(1_000 + 5 * 240_000 + 1_200_000));
 /// assert_eq!(m.state, MotionState::Decaying);
-/// assert!((m.gear_speed.to_f64() - 2.0).abs() < 1e-4);
+/// assert!((m.gear_speed.to_f64() - 2.1).abs() < 1e-4);
 /// # Ok::<(), kinematics::speed::EstimatorConfigError>(())
 /// ```
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -550,6 +619,8 @@ pub struct MtEstimator {
     z: usize,
     /// Ring of the last accepted edge stamps; `head` is the newest.
     stamps: [u32; RING],
+    /// The newest stamp (`stamps[head]`).
+    last: u32,
     head: usize,
     /// Tooth index (0 … z−1) of the gap that ended at the newest edge.
     tooth: usize,
@@ -585,6 +656,18 @@ pub struct MtEstimator {
     glitches: u32,
     /// Edges were lost before the next one (see [`MtEstimator::edges_lost`]).
     lost: bool,
+    /// A suspect edge waiting for the next one ([`MtEstimator::push_edge`]).
+    pending: Option<u32>,
+    /// Gaps in the current steady run ([`MtEstimator::steady_window`]), and
+    /// the gaps in a row that kept to it.
+    steady: u32,
+    calm: u8,
+    /// The speed's change along the steady run beyond the teeth's (set by
+    /// [`MtEstimator::steady_window`] for the window it chose).
+    trend: (i32, u32),
+    /// The running mean of the learning's deviations, Q16
+    /// ([`MtEstimator::is_noisy`]).
+    rough: u32,
 }
 
 #[cfg(feature = "defmt")]
@@ -662,9 +745,28 @@ impl MtEstimator {
     /// ```
     #[must_use]
     pub fn newest_gap_pitches_q16(&self) -> u32 {
+        self.pitches_q16_of(self.tooth)
+    }
+
+    /// The gap after the newest edge (the one the gear is in now) in
+    /// pitches, Q16, as [`MtEstimator::newest_gap_pitches_q16`]: the ground
+    /// between the newest edge and the next one.
+    #[must_use]
+    pub fn next_gap_pitches_q16(&self) -> u32 {
+        let next = self
+            .tooth
+            .checked_add(1)
+            .filter(|&i| i < self.z)
+            .unwrap_or(0);
+        self.pitches_q16_of(next)
+    }
+
+    /// Gap `idx`'s learned share in pitches, Q16 (a revolution's gaps add
+    /// up to Z pitches).
+    fn pitches_q16_of(&self, idx: usize) -> u32 {
         // w · Z · 2¹⁶ ≤ 2¹⁷ · 32 · 2¹⁶ = 2³⁸.
         let z = u64::try_from(self.z).unwrap_or(0);
-        u64::from(self.weight(self.tooth))
+        u64::from(self.weight(idx))
             .wrapping_mul(z)
             .wrapping_mul(u64::from(ONE_Q16))
             .checked_div(u64::from(self.weight_sum))
@@ -750,24 +852,29 @@ impl MtEstimator {
         else {
             return false;
         };
-        // r = τ/T, Q16 (τ < 2^32, so τ·2^16 < 2^48).
+        // r = τ/T, Q16 (τ < 2^32, so τ·2^16 < 2^48), taken to at most 2^38
+        // (2^22 gaps: overdue either way, see below). The terms are below
+        // 2^18 (e, s′ < 2^17 as Q16 gaps of at most 1.05 nominal; a ≤
+        // e²/2s′ since the discriminant is not negative), so no product
+        // below reaches 2^64.
         let Some(r) = (u64::from(since_edge_ticks) << 16).checked_div(t) else {
             return false;
         };
+        let r = r.min(1 << 38);
+        let (e, a) = (e.min(1 << 18), a.min(1 << 18));
         // Past the moment the machine can be at rest (a·τ ≥ v_e, i.e.
         // a·T²·r ≥ v_e·T·2^16): it has covered v_e²/2a ≥ s′ (there is a
         // deadline), so the edge is overdue.
-        let e_q32 = e.saturating_mul(1 << 16);
-        let a_r = a.saturating_mul(r);
-        if a_r >= e_q32 {
+        let a_r = a.wrapping_mul(r);
+        if a_r >= e << 16 {
             return true;
         }
         // Least distance covered, Q32 gaps: (v_e·T)·r − (a·T²)·r²/2, with
-        // a·T²·r < v_e·T·2^16 < 2^33 here, so every product fits.
+        // a·T²·r < v_e·T·2^16 < 2^34 here.
         let covered = e
-            .saturating_mul(r)
-            .saturating_sub(((a_r >> 16).saturating_mul(r)) >> 1);
-        covered > s_next.saturating_mul(1 << 16)
+            .wrapping_mul(r)
+            .saturating_sub(((a_r >> 16).wrapping_mul(r)) >> 1);
+        covered > s_next.min(1 << 18) << 16
     }
 
     /// The terms of the silence rule (module docs), when the silence can
@@ -831,12 +938,34 @@ impl MtEstimator {
     }
 
     /// Records one Hall edge (call from the capture interrupt). O(1), no division.
+    ///
+    /// At a steady working speed (the last two gaps within a quarter of each
+    /// other, none longer than 0.6 s), an edge that closes a gap shorter
+    /// than ¾ of the glitch reference (a third faster within one tooth,
+    /// beyond the ±4 % of unlearnt teeth and any chassis) is held as
+    /// [`EdgeVerdict::Suspect`] until the next edge: if the gap after it is
+    /// no longer than 1¼ times its own, the speed really rose and both are
+    /// taken (the count of accepted edges, [`MtEstimator::accepted_edges`],
+    /// grows by two); otherwise it was a spurious edge — one noise pulse,
+    /// or the line of a sensor that sticks low falling part-way through a
+    /// gap — and is dropped as a glitch. Without a next edge it is never
+    /// taken: a sensor stuck after one spurious edge does not read as a
+    /// sprint. An edge inside the ¼-period glitch rule is dropped
+    /// ([`EdgeVerdict::Glitch`]) at a steady speed, and reported as
+    /// [`EdgeVerdict::Early`] while the speed changes.
     pub fn push_edge(&mut self, t: Ticks) -> EdgeVerdict {
         let t = t.0;
-        let mut verdict = EdgeVerdict::Accepted;
+        if let Some(p) = self.pending.take() {
+            let g1 = p.wrapping_sub(self.newest());
+            let g2 = t.wrapping_sub(p);
+            if !self.lost && g2 <= g1.saturating_add(g1 / 4) {
+                let _ = self.take(p);
+            } else {
+                self.glitches = self.glitches.wrapping_add(1);
+            }
+        }
         if self.has_last {
-            let last = self.stamps.get(self.head).copied().unwrap_or(0);
-            let dt = t.wrapping_sub(last);
+            let dt = t.wrapping_sub(self.newest());
             let expected_min = if self.glitch_ref == 0 {
                 if self.from_rest {
                     self.cfg.from_rest_min_gap_ticks
@@ -846,10 +975,69 @@ impl MtEstimator {
             } else {
                 self.glitch_ref >> self.cfg.glitch_shift
             };
+            // At a steady working speed: the last two gaps within a quarter
+            // of each other, and not from a crawl (gaps longer than
+            // [`SUSPECT_MAX_GAP_MS`]: a tractor pulling away doubles its
+            // speed within a tooth). A start from rest shortens every gap by
+            // more than half at first, and a pull-away after a slow-down
+            // follows gaps that grew.
+            let [g0, g1, _] = self.gaps;
+            let steady = g1 != 0
+                && g0.abs_diff(g1) <= g1 / 4
+                && u64::from(g0).wrapping_mul(1000)
+                    <= u64::from(self.cfg.timer_hz).wrapping_mul(u64::from(SUSPECT_MAX_GAP_MS));
             if dt < self.cfg.min_edge_gap_ticks || dt < expected_min {
                 self.glitches = self.glitches.wrapping_add(1);
-                return EdgeVerdict::Glitch;
+                // Under a changing speed a real tooth may come this early
+                // (the ground distance may count it); at a steady speed it is
+                // noise, or the line of a sensor sticking low.
+                return if steady || self.glitch_ref == 0 || dt < self.cfg.min_edge_gap_ticks {
+                    EdgeVerdict::Glitch
+                } else {
+                    EdgeVerdict::Early
+                };
             }
+            if !self.lost && steady && dt < self.glitch_ref.wrapping_sub(self.glitch_ref >> 2) {
+                self.pending = Some(t);
+                return EdgeVerdict::Suspect;
+            }
+        }
+        self.take(t)
+    }
+
+    /// Whether the single gaps read noisy: the teeth's shares are not learnt
+    /// well yet. The measure is the learning's own: the running mean (1/8 a
+    /// sample) of how far each sample lies from the share it updates, above
+    /// [`NOISY_LIMIT_Q16`]. It starts at 2 % (`NOISY_START_Q16`: nothing is
+    /// known of the gear at power-up). Unlearnt teeth (±2 % of a pitch) put
+    /// it at 1.5–2 %; learnt ones below 0.5 % on the default terrain. While
+    /// it holds, the window may be a steady run and the supervisor smooths
+    /// the phase loop's correction.
+    #[must_use]
+    pub fn is_noisy(&self) -> bool {
+        self.rough != 0
+    }
+
+    /// Edges accepted since start (wrapping): a confirmed suspect edge
+    /// counts when it is confirmed, together with the edge that confirms it.
+    #[must_use]
+    pub const fn accepted_edges(&self) -> u32 {
+        self.edges_total
+    }
+
+    /// The gap that ended `back` accepted edges before the newest one in
+    /// pitches, Q16 (`back` = 0: [`MtEstimator::newest_gap_pitches_q16`]).
+    #[must_use]
+    pub fn gap_pitches_q16(&self, back: usize) -> u32 {
+        self.pitches_q16_of(self.tooth_back(back, self.z.max(1)))
+    }
+
+    /// Accepts edge `t` (the glitch rules passed): a new gap, or a restart
+    /// after a stop.
+    fn take(&mut self, t: u32) -> EdgeVerdict {
+        let mut verdict = EdgeVerdict::Accepted;
+        if self.has_last {
+            let dt = t.wrapping_sub(self.newest());
             if dt > self.cfg.stop_timeout_ticks {
                 self.restart();
                 verdict = EdgeVerdict::Restart;
@@ -874,6 +1062,7 @@ impl MtEstimator {
         if let Some(s) = self.stamps.get_mut(self.head) {
             *s = t;
         }
+        self.last = t;
         if self.has_last {
             self.tooth = self
                 .tooth
@@ -914,9 +1103,14 @@ impl MtEstimator {
         self.weight_sum = u32::try_from(self.z).unwrap_or(0).saturating_mul(ONE_Q16);
         self.samples = [0; MAX_TEETH];
         self.learned_upto = self.edges_total;
+        self.steady = 0;
+        self.rough = NOISY_START_Q16;
     }
 
     fn restart(&mut self) {
+        self.pending = None;
+        self.steady = 0;
+        self.calm = 0;
         self.from_rest = true;
         self.valid_run = 0;
         self.last_gap = 0;
@@ -928,16 +1122,20 @@ impl MtEstimator {
     }
 
     fn newest(&self) -> u32 {
-        self.stamps.get(self.head).copied().unwrap_or(0)
+        self.last
     }
 
     /// Sum of the weights of the `m` gaps ending at the newest edge (Q16).
     fn window_weight(&self, m: u32) -> u64 {
+        self.window_weight_from(self.tooth, m)
+    }
+
+    /// Sum of the weights of the `m` gaps ending with tooth `idx`'s (Q16).
+    fn window_weight_from(&self, mut idx: usize, m: u32) -> u64 {
         let z = u32::try_from(self.z).unwrap_or(1).max(1);
         let full = u64::from(m.checked_div(z).unwrap_or(0));
         let rem = usize::try_from(m.checked_rem(z).unwrap_or(0)).unwrap_or(0);
         let mut sum = full.saturating_mul(u64::from(self.weight_sum));
-        let mut idx = self.tooth;
         for _ in 0..rem {
             sum = sum.saturating_add(u64::from(self.weight(idx)));
             idx = if idx == 0 {
@@ -949,6 +1147,101 @@ impl MtEstimator {
         sum
     }
 
+    /// The window while the newest gap's tooth is not learnt: the `new`
+    /// gaps since the last window, or, at a steady speed, the steady run
+    /// they extend, up to a revolution (a whole revolution has no tooth
+    /// error at all; k gaps carry at most ±4 %/k of it). A gap whose speed
+    /// is more than [`STEADY_BREAK`] off the run's is a change of speed:
+    /// the run starts again there. Returns the gap count and the start
+    /// stamp.
+    fn steady_window(&mut self, new: u32) -> (u32, u32) {
+        let newest = self.newest();
+        let single = self.rpm_bits(self.window_weight(new), newest.wrapping_sub(self.ref_stamp));
+        let z = u32::try_from(self.z).unwrap_or(1);
+        let long = self
+            .steady
+            .saturating_add(new)
+            .min(z)
+            .min(STEADY_RUN_MAX)
+            .min(self.valid_run.saturating_sub(1))
+            .min(u32::try_from(RING).unwrap_or(1).saturating_sub(1));
+        self.trend = (0, 0);
+        if long <= new {
+            self.steady = new;
+            return (new, self.ref_stamp);
+        }
+        let start = self
+            .stamps
+            .get(ring_prev(self.head, usize::try_from(long).unwrap_or(0)))
+            .copied()
+            .unwrap_or(self.ref_stamp);
+        let run = self.rpm_bits(self.window_weight(long), newest.wrapping_sub(start));
+        if let Some(trend) = self.run_trend(long, start, run) {
+            // The speed changes along the run: its mean lags; the window is
+            // the new gaps, the run goes on growing to see the trend.
+            self.trend = trend;
+            self.calm = 0;
+            self.steady = long;
+            return (new, self.ref_stamp);
+        }
+        let broke = u64::from(single.abs_diff(run)).saturating_mul(STEADY_BREAK) > u64::from(run);
+        let calm_before = self.calm;
+        self.calm = if broke {
+            0
+        } else {
+            self.calm.saturating_add(1)
+        };
+        if broke || calm_before < STEADY_SETTLE {
+            self.steady = if broke { new } else { long };
+            (new, self.ref_stamp)
+        } else {
+            self.steady = long;
+            (long, start)
+        }
+    }
+
+    /// Whether the speed changes along the run (`run` over the `long` gaps
+    /// since `start`): its mean against the mean of the `k` gaps before it
+    /// (as many as the run holds, or as are known; at least
+    /// [`STEADY_SETTLE`]) differs by more than unlearnt teeth can make plus
+    /// [`TREND_MARGIN_PCT`]. Each tooth's edge lies within ±2 % of a pitch
+    /// of its place, so a mean over k gaps is off by at most ±4 %/k. Beyond
+    /// that the run's mean lags the speed by half the run (a pull-away
+    /// through a 2.5 s chassis, 1–2 % a gap at Low 2: 3 % and more). Returns
+    /// the change (U12F20 bits) over the ticks between the two means'
+    /// middles, or `None`.
+    fn run_trend(&self, long: u32, start: u32, run: u32) -> Option<(i32, u32)> {
+        // As many gaps before the run as it holds, or as are known.
+        let k = long.min(self.valid_run.saturating_sub(long.saturating_add(1)));
+        let back = usize::try_from(long.saturating_add(k)).ok()?;
+        if k < u32::from(STEADY_SETTLE) || back >= RING {
+            return None;
+        }
+        let first = self.stamps.get(ring_prev(self.head, back)).copied()?;
+        let tooth = self.tooth_back(usize::try_from(long).ok()?, self.z.max(1));
+        let before = self.rpm_bits(self.window_weight_from(tooth, k), start.wrapping_sub(first));
+        // |run − before| > (4/long + 4/k + TREND_MARGIN_PCT) % of the run.
+        let (long, k) = (u64::from(long), u64::from(k));
+        let bound = long
+            .saturating_mul(k)
+            .saturating_mul(TREND_MARGIN_PCT)
+            .saturating_add(long.saturating_add(k).saturating_mul(4));
+        let trends = u64::from(run.abs_diff(before))
+            .saturating_mul(long)
+            .saturating_mul(k)
+            .saturating_mul(100)
+            > u64::from(run).saturating_mul(bound);
+        let change = i64::from(run).wrapping_sub(i64::from(before));
+        // The two means' middles lie half of each segment apart.
+        let ticks = self.newest().wrapping_sub(first) / 2;
+        (trends && ticks > 0).then(|| (i32::try_from(change).unwrap_or(0), ticks))
+    }
+
+    /// 60·f·2²⁰ (< 2⁵⁸): r/min in U12F20 per share over ticks.
+    fn rpm_scale(&self) -> u64 {
+        u64::from(self.cfg.timer_hz).wrapping_mul(60) << 20
+    }
+
     /// r/min (U12F20 bits, saturating) for an angle `w` (Q16 shares) over `ticks`.
     fn rpm_bits(&self, w: u64, ticks: u32) -> u32 {
         // S < 2^22 and T < 2^32: the product is exact.
@@ -957,115 +1250,140 @@ impl MtEstimator {
             return u32::MAX;
         }
         // n = 60·f·(w/S)/T r/min; ·2^20 for U12F20; the weights carry z·2^16 per rev in S.
-        // 60·f·2^20 < 2^58; w·60·f·2^20 is formed exactly in 128 bits.
-        let scale = (u64::from(self.cfg.timer_hz).wrapping_mul(60)) << 20;
-        fx::mul_div(w, scale, den)
+        // w·60·f·2^20 is formed exactly in 128 bits.
+        fx::mul_div(w, self.rpm_scale(), den)
             .and_then(|q| u32::try_from(q).ok())
             .unwrap_or(u32::MAX)
     }
 
+    /// Learns the share of the gap [`LEARN_HALF`] gaps behind each fresh
+    /// edge (module docs, "Tooth-pitch compensation").
     fn learn(&mut self) {
-        let z = self.z;
-        let half = z / 2;
-        // Each new edge lets one gap be learnt: the gap p = half + q edges
-        // before it (offsets count back from the newest edge; q a quarter
-        // revolution), at the centre of the revolution R(e), e = p − half,
-        // whose z gaps run from p − half to p + half. A revolution's time is
-        // free of tooth errors, and centred on the gap it cancels a steady
-        // acceleration (the gaps before the centre lengthen as much as those
-        // after shorten). Two gates keep out most of what it cannot cancel
-        // (module docs): a change of acceleration (the second difference of
-        // R(e + q), R(e), R(e − q): CURVATURE_GATE) and a strong acceleration
-        // (R(e + q) against R(e − q): SLOPE_GATE).
         let fresh = self.edges_total.wrapping_sub(self.learned_upto);
         self.learned_upto = self.edges_total;
-        let tol = ONE_Q16 / 25; // ±4 %
-        let q = half / 2;
-        let mut learnt = false;
+        let z = self.z;
         for b in 0..usize::try_from(fresh.min(4)).unwrap_or(0) {
-            let p = b.saturating_add(half).saturating_add(q);
-            // R(e + q) reaches back to e + q + z = b + 2q + z.
-            let reach = b.saturating_add(z).saturating_add(q.saturating_mul(2));
+            // The centre gap ends `b + LEARN_HALF` edges back; its farthest
+            // neighbour starts `b + 2·LEARN_HALF + 1` back.
+            let reach = b.saturating_add(2 * LEARN_HALF + 1);
             if reach >= RING || u32::try_from(reach).map_or(true, |r| r >= self.valid_run) {
                 break;
             }
-            let stamp = |back: usize| {
-                self.stamps
-                    .get(ring_prev(self.head, back))
-                    .copied()
-                    .unwrap_or(0)
-            };
-            let rev = |end: usize| stamp(end).wrapping_sub(stamp(end.saturating_add(z)));
-            let gap = |end: usize| stamp(end).wrapping_sub(stamp(end.saturating_add(1)));
-            let second = |a: u32, c: u32, n: u32| {
-                i64::from(a)
-                    .wrapping_add(i64::from(n))
-                    .wrapping_sub(i64::from(c).wrapping_mul(2))
-                    .unsigned_abs()
-            };
-            let e = p.saturating_sub(half);
-            let (r_before, r_centre, r_after) =
-                (rev(e.saturating_add(q)), rev(e), rev(e.saturating_sub(q)));
-            let g = gap(p);
-            let slope = u64::from(r_before.abs_diff(r_after));
-            if r_centre == 0
-                || second(r_before, r_centre, r_after).saturating_mul(CURVATURE_GATE)
-                    > u64::from(r_centre)
-                || slope.saturating_mul(SLOPE_GATE) > u64::from(r_centre)
-            {
-                continue;
-            }
-            // gap · z · 2¹⁶ / R: gap < R < 2³², z ≤ 32: < 2⁵³.
-            let w_new = u64::from(g)
-                .wrapping_mul(u64::try_from(z).unwrap_or(0))
-                .wrapping_mul(u64::from(ONE_Q16))
-                .checked_div(u64::from(r_centre))
-                .and_then(|w| u32::try_from(w).ok())
-                .unwrap_or(u32::MAX);
-            if w_new.abs_diff(ONE_Q16) > tol {
-                continue;
-            }
-            // The gap `p` edges back has tooth index `tooth − p` (mod z).
-            let tooth = self
-                .tooth
-                .wrapping_add(z.saturating_mul(2))
-                .wrapping_sub(p.checked_rem(z).unwrap_or(0))
-                .checked_rem(z)
-                .unwrap_or(0);
-            // A running mean over SHARE_SAMPLES, then an IIR of the same
-            // weight (1/16): the wandering speed's residual biases average
-            // out. A sample taken at a steady speed (the revolutions a
-            // quarter revolution apart within STEADY_GATE) counts in full;
-            // any other as if the nominal share were a sample before it, so
-            // that no single early sample from a changing speed sets a
-            // share.
-            let n = self.samples.get(tooth).copied().unwrap_or(0);
-            let steady = slope.saturating_mul(STEADY_GATE) <= u64::from(r_centre);
-            let k = u32::from(n).saturating_add(if steady { 1 } else { 2 });
-            let w = self.weight(tooth);
-            let w = if w_new >= w {
-                w.saturating_add(w_new.saturating_sub(w).checked_div(k).unwrap_or(0))
-            } else {
-                w.saturating_sub(w.saturating_sub(w_new).checked_div(k).unwrap_or(0))
-            };
-            if let Some(slot) = self.weights.get_mut(tooth) {
-                // Between the old share and `w_new`, both within ±4 %.
-                *slot = weight_to_offset(w);
-            }
-            if let Some(c) = self.samples.get_mut(tooth) {
-                *c = n.saturating_add(1).min(SHARE_SAMPLES);
-            }
-            learnt = true;
+            self.learn_gap(b.saturating_add(LEARN_HALF), z);
         }
-        if !learnt {
+    }
+
+    /// One sample for the gap ending `c` edges back: its time against the
+    /// parabola through its neighbours' per-pitch times.
+    fn learn_gap(&mut self, c: usize, z: usize) {
+        let (mut sum, mut lo, mut hi) = (0i64, i32::MAX, 0i32);
+        for back in c.saturating_sub(LEARN_HALF)..=c.saturating_add(LEARN_HALF) {
+            let Some(&w) = LEARN_WEIGHTS.get(back.abs_diff(c).wrapping_sub(1)) else {
+                continue; // the centre itself
+            };
+            let u = self.per_pitch(back, z);
+            sum = sum.wrapping_add(i64::from(w).wrapping_mul(i64::from(u)));
+            lo = lo.min(u);
+            hi = hi.max(u);
+        }
+        // sum = reference · LEARN_DIVISOR (< 2⁴⁷: 12 · 2¹³ · 2³¹).
+        let Ok(reference) = u64::try_from(sum) else {
+            return;
+        };
+        // (< 2³¹: × SPREAD_GATE × LEARN_DIVISOR < 2⁴⁹.)
+        let spread = u64::from(hi.wrapping_sub(lo).unsigned_abs());
+        // The sample: gap / reference, Q16 (< 2³³ · 2¹⁶ · 2¹⁵).
+        let sample = u64::from(self.gap_back(c))
+            .wrapping_mul(u64::from(ONE_Q16))
+            .wrapping_mul(LEARN_DIVISOR)
+            .checked_div(reference)
+            .and_then(|v| i32::try_from(v).ok())
+            .unwrap_or(0);
+        let one = i32::try_from(ONE_Q16).unwrap_or(0);
+        // ±4 % at most; the neighbours within SPREAD_GATE.
+        if sample.abs_diff(one) > ONE_Q16 / 25
+            || spread.wrapping_mul(SPREAD_GATE * LEARN_DIVISOR) > reference
+        {
             return;
         }
-        self.weight_sum = self
-            .weights
-            .get(..z)
-            .unwrap_or(&[])
-            .iter()
-            .fold(0u32, |a, &d| a.saturating_add(weight_from_offset(d)));
+        let tooth = self.tooth_back(c, z);
+        let n = self.samples.get(tooth).copied().unwrap_or(0);
+        let w = i32::try_from(self.weight(tooth)).unwrap_or(one);
+        let mut step = sample.wrapping_sub(w);
+        if self.rough != 0 {
+            // The learning's mean deviation (1/8 a sample); learnt once it
+            // is below the limit: noisy no more (until the table is dropped).
+            let rough = i32::try_from(self.rough).unwrap_or(i32::MAX);
+            let r = rough.wrapping_add(step.abs().wrapping_sub(rough) / 8);
+            self.rough = if r <= i32::try_from(NOISY_LIMIT_Q16).unwrap_or(0) {
+                0
+            } else {
+                r.unsigned_abs()
+            };
+        }
+        if n >= SHARE_CLIP_FROM {
+            step = step.clamp(-SHARE_CLIP_Q16, SHARE_CLIP_Q16);
+        }
+        let n = n.saturating_add(1).min(SHARE_SAMPLES);
+        let w = w.wrapping_add(step.checked_div(i32::from(n)).unwrap_or(0));
+        if let Some(slot) = self.weights.get_mut(tooth) {
+            *slot = weight_to_offset(w.unsigned_abs());
+        }
+        if let Some(cnt) = self.samples.get_mut(tooth) {
+            *cnt = n;
+        }
+        // The shares' mean back to 1 (the reference cannot see a common
+        // scale, so it would wander); then their sum.
+        let teeth = self.weights.get_mut(..z).unwrap_or(&mut []);
+        let total: i32 = teeth.iter().map(|&d| i32::from(d)).sum();
+        let mean = total
+            .checked_div(i32::try_from(z).unwrap_or(1))
+            .unwrap_or(0);
+        let mut sum_w = 0u32;
+        for d in teeth.iter_mut() {
+            *d = i16::try_from(i32::from(*d).wrapping_sub(mean)).unwrap_or(0);
+            sum_w = sum_w.saturating_add(weight_from_offset(*d));
+        }
+        self.weight_sum = sum_w;
+    }
+
+    /// The gap that ended `back` accepted edges before the newest one, ticks.
+    fn gap_back(&self, back: usize) -> u32 {
+        let i = ring_prev(self.head, back);
+        let before = i.checked_sub(1).unwrap_or(RING - 1);
+        let stamp = |j: usize| self.stamps.get(j).copied().unwrap_or(0);
+        stamp(i).wrapping_sub(stamp(before))
+    }
+
+    /// The tooth index of the gap that ended `back` edges before the newest.
+    #[inline(never)]
+    fn tooth_back(&self, back: usize, z: usize) -> usize {
+        self.tooth
+            .wrapping_add(z.saturating_mul(2))
+            .wrapping_sub(back.checked_rem(z).unwrap_or(0))
+            .checked_rem(z)
+            .unwrap_or(0)
+    }
+
+    /// That gap's time per nominal pitch: gap / share, the share 1 + d (Q16
+    /// offset d within ±4 %) as 1 − d + d² (error d³ < 7·10⁻⁵): no division.
+    fn per_pitch(&self, back: usize, z: usize) -> i32 {
+        let d = i32::from(
+            self.weights
+                .get(self.tooth_back(back, z))
+                .copied()
+                .unwrap_or(0),
+        );
+        // |d| < 2¹⁵: 0 < inv < 2¹⁸.
+        let inv = i32::try_from(ONE_Q16)
+            .unwrap_or(0)
+            .wrapping_sub(d)
+            .wrapping_add(d.wrapping_mul(d) >> 16)
+            .unsigned_abs();
+        // gap < 2³² ticks, inv < 2¹⁸: the product < 2⁵⁰; a real gap (below
+        // the stop timeout, < 2³¹) gives < 2³¹ after the shift.
+        let t = u64::from(self.gap_back(back)).wrapping_mul(u64::from(inv)) >> 16;
+        i32::try_from(t).unwrap_or(i32::MAX)
     }
 
     /// Computes the speed at `now` (call periodically from the control task).
@@ -1084,6 +1402,8 @@ impl MtEstimator {
             window_ticks: 0,
             since_edge_ticks,
             glitches: self.glitches,
+            noisy: false,
+            trend: (0, 0),
         };
         if !self.has_last {
             return out;
@@ -1094,9 +1414,20 @@ impl MtEstimator {
                 self.learn();
             }
             // Window start: the previous window's last edge, or after a
-            // restart the oldest edge still in the ring.
+            // restart the oldest edge still in the ring. While the single
+            // gaps read noisy (their teeth not learnt yet), at a steady speed
+            // the window reaches back over the steady run
+            // ([`MtEstimator::steady_window`]).
             let (m, start) = if self.ref_valid && new < self.valid_run {
-                (new, self.ref_stamp)
+                out.noisy = self.is_noisy();
+                if self.cfg.pitch_compensation && out.noisy {
+                    let w = self.steady_window(new);
+                    out.trend = self.trend;
+                    w
+                } else {
+                    self.steady = 0;
+                    (new, self.ref_stamp)
+                }
             } else {
                 let back = self
                     .valid_run
@@ -1107,6 +1438,7 @@ impl MtEstimator {
                     .get(ring_prev(self.head, usize::try_from(back).unwrap_or(0)))
                     .copied()
                     .unwrap_or(newest);
+                self.steady = back;
                 (back, start)
             };
             self.ref_stamp = newest;
@@ -1148,10 +1480,22 @@ impl MtEstimator {
             .checked_add(1)
             .filter(|&t| t < self.z)
             .unwrap_or(0);
+        // A tooth not learnt yet may be up to 4 % of a pitch long (and the
+        // capture jitter): its gap gets 5 % more before it counts as late,
+        // so that a long tooth does not read as a slowing machine.
         let w_next = u64::from(self.weight(next));
-        let cap = self.rpm_bits(w_next, since_edge_ticks);
-        if cap < self.held {
+        let w_next = if self.samples.get(next).copied().unwrap_or(0) < LEARNT_SAMPLES {
+            w_next.saturating_add(w_next / 20)
+        } else {
+            w_next
+        };
+        // cap < held ⇔ ⌊w·scale / (S·since)⌋ < held ⇔ w·scale < held·S·since:
+        // the products compared, the division only once it decays (most
+        // control periods hold: 300 instructions a period saved).
+        let den = u64::from(self.weight_sum).saturating_mul(u64::from(since_edge_ticks));
+        if fx::mul_lt(w_next, self.rpm_scale(), u64::from(self.held), den) {
             out.state = MotionState::Decaying;
+            let cap = self.rpm_bits(w_next, since_edge_ticks);
             out.gear_speed = RevPerMin::from_fixed(U12F20::from_bits(cap));
         } else {
             out.state = MotionState::Holding;

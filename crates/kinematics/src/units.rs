@@ -83,11 +83,18 @@ macro_rules! unit {
                 let bits = (u64::from(num) << Self::FRAC).checked_div(u64::from(den))?;
                 Some(Self::from_bits(u32::try_from(bits).unwrap_or(u32::MAX)))
             }
-            /// Value in thousandths of the unit, rounded down and saturating (for logs and the HMI).
+            /// Value in thousandths of the unit, rounded to the nearest
+            /// (halves up) and saturating: what a person reads (logs, the
+            /// screen). The control path keeps the fixed-point value itself
+            /// (its full precision); a value rounded down here read 1.030
+            /// for a k1 of 1.030 997 and put the difference into every edge.
             #[must_use]
             pub fn to_milli(self) -> u32 {
                 // Below 2^42: no overflow.
-                let m = u64::from(self.to_bits()).wrapping_mul(1000) >> Self::FRAC;
+                let m = u64::from(self.to_bits())
+                    .wrapping_mul(1000)
+                    .wrapping_add(1 << Self::FRAC >> 1)
+                    >> Self::FRAC;
                 u32::try_from(m).unwrap_or(u32::MAX)
             }
             /// Saturating sum.
@@ -238,5 +245,39 @@ impl Ticks {
 impl core::fmt::Display for Ticks {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(f, "{} ticks", self.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// What a person reads is rounded to the nearest thousandth, not cut:
+    /// k1 interpolated at Low 1's monitored speed (1.030 997) reads 1.031,
+    /// 0.8 (one bit below it in U2F30) 0.800, and the largest values
+    /// saturate instead of wrapping. Checked against `f64` rounding over
+    /// every unit's bit patterns (a sweep of 2¹⁶ values per unit).
+    #[test]
+    fn to_milli_rounds_to_the_nearest_thousandth() {
+        assert_eq!(Coefficient::from_f64(1.030_997).unwrap().to_milli(), 1031);
+        assert_eq!(Coefficient::lit("0.8").to_milli(), 800);
+        assert_eq!(Coefficient::lit("0.9994").to_milli(), 999);
+        assert_eq!(KilometresPerHour::lit("0.3208").to_milli(), 321);
+        fn sweep(frac: u32, f: impl Fn(u32) -> u32) {
+            for i in 0..=u32::from(u16::MAX) {
+                let bits = i.wrapping_mul(65_537).wrapping_add(i >> 3);
+                let want = (f64::from(bits) * 1000.0 / 2f64.powi(frac.cast_signed()) + 0.5).floor();
+                assert_eq!(
+                    f64::from(f(bits)),
+                    want.min(f64::from(u32::MAX)),
+                    "{bits:#x}"
+                );
+            }
+        }
+        sweep(30, |b| Coefficient::from_bits(b).to_milli());
+        sweep(22, |b| KilometresPerHour::from_bits(b).to_milli());
+        sweep(20, |b| RevPerMin::from_bits(b).to_milli());
+        sweep(31, |b| Duty::from_bits(b).to_milli());
     }
 }

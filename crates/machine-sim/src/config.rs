@@ -3,8 +3,6 @@
 
 use kinematics::consts::{self, Gear};
 
-use crate::machine::Machine;
-
 /// Longest transport delay the delay line holds, milliseconds: enough for
 /// drives with their own speed loop, ramp or RS-485 read-back (20–60 ms).
 pub const MAX_TRANSPORT_DELAY_MS: u8 = 63;
@@ -287,12 +285,6 @@ impl Config {
             hall_jitter_us: 0,
             ..Self::default()
         }
-    }
-
-    /// Checks every field and builds the machine at rest at t = 0.
-    pub fn build(self) -> Result<Machine, Error> {
-        self.validate()?;
-        Ok(Machine::new(self))
     }
 
     /// Checks every field against its documented range.

@@ -71,7 +71,7 @@ mod rng;
 pub mod tables;
 
 pub use config::{Config, Error, Profile, MAX_TRANSPORT_DELAY_MS};
-pub use machine::{Event, Fault, Inputs, Machine};
+pub use machine::{Event, Fault, Inputs, Machine, HALL_TOOTH_SHARE};
 pub use metrics::{FieldMetrics, MetricsError, SpacingAccumulator};
 #[cfg(feature = "std")]
 pub use recorder::Recorder;

@@ -2,15 +2,15 @@
 
 use kinematics::consts::{self, Gear};
 
-use crate::config::{Config, Profile};
+use crate::config::{Config, Error, Profile};
 use crate::metrics::{FieldMetrics, MetricsError, SpacingAccumulator};
 use crate::rng::{hash_signed_unit, splitmix64, Rng};
 use crate::tables;
 
 /// Slots of the transport-delay line (one per millisecond): up to
-/// [`crate::MAX_TRANSPORT_DELAY_MS`]. Each slot holds the duty in `u16`
+/// [`crate::config::MAX_TRANSPORT_DELAY_MS`]. Each slot holds the duty in `u16`
 /// fractions of 1 (1/65 535, far finer than the PWM's 1/3600).
-const RING: usize = crate::MAX_TRANSPORT_DELAY_MS as usize + 1;
+const RING: usize = crate::config::MAX_TRANSPORT_DELAY_MS as usize + 1;
 /// Scale of a delay-line slot (see [`RING`]).
 const DUTY_SCALE: f32 = 65_535.0;
 /// The model's internal grid: sub-steps never cross a millisecond boundary.
@@ -65,6 +65,18 @@ pub enum Fault {
     EncoderLoss,
     /// Profile B: the ground-wheel encoder stops counting.
     GroundEncoderLoss,
+    /// The Hall sensor's output sticks high (a broken wire or a dead
+    /// sensor: the pull-up holds the line). The falling edges the firmware
+    /// captures stop; if a tooth was in front of the sensor (the line low),
+    /// the line rises, which is no captured edge. Cleared while a tooth is
+    /// in front, the line falls: one edge at that moment.
+    HallStuckHigh,
+    /// The Hall sensor's output sticks low (its transistor shorted, or
+    /// the cable shorted to ground). If the line was high (no tooth in
+    /// front) it falls at that moment: **one spurious edge** part-way
+    /// through a gap, then none. Cleared, the line follows the teeth again
+    /// (the next falling edge is the next tooth's).
+    HallStuckLow,
 }
 
 impl Fault {
@@ -74,9 +86,20 @@ impl Fault {
             Fault::HallLoss => 2,
             Fault::EncoderLoss => 4,
             Fault::GroundEncoderLoss => 8,
+            Fault::HallStuckHigh => 16,
+            Fault::HallStuckLow => 32,
         }
     }
 }
+
+/// `Machine::faults` bit: a Hall edge to deliver at the start of the next
+/// sub-step (the line fell when a stuck-low fault came or a stuck-high one
+/// went).
+const PENDING_EDGE: u8 = 64;
+
+/// Share of a pitch the Hall sensor's output is low (a tooth in front of
+/// it), from the tooth's falling edge: teeth and gaps of equal width.
+pub const HALL_TOOTH_SHARE: f64 = 0.5;
 
 /// A first-order low-pass noise process with unit stationary SD.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
@@ -181,6 +204,14 @@ fn event_time_us(rng: &mut Rng, mean_s: f32, now_us: u64) -> u64 {
         now_us.saturating_add(dt as u64)
     } else {
         u64::MAX
+    }
+}
+
+impl Config {
+    /// Checks every field and builds the machine at rest at t = 0.
+    pub fn build(self) -> Result<Machine, Error> {
+        self.validate()?;
+        Ok(Machine::new(self))
     }
 }
 
@@ -468,6 +499,14 @@ impl Machine {
         self.hall_turns = h1;
         let z = f64::from(self.cfg.hall_teeth);
         let (p0, p1) = (h0 * z, h1 * z);
+        if self.faults & PENDING_EDGE != 0 {
+            // The line fell at the fault's change, at the start of this sub-step.
+            self.faults &= !PENDING_EDGE;
+            self.hall_edges = self.hall_edges.wrapping_add(1);
+            sink(Event::HallEdge(
+                self.cfg.timer_start_ticks.wrapping_add(t0 as u32),
+            ));
+        }
         if p1 > p0 {
             loop {
                 let thr = self.next_edge as f64 + self.pitch_error(self.next_edge);
@@ -475,7 +514,7 @@ impl Machine {
                     break;
                 }
                 self.next_edge += 1;
-                if self.fault_active(Fault::HallLoss) {
+                if self.hall_silent() {
                     continue;
                 }
                 self.hall_edges = self.hall_edges.wrapping_add(1);
@@ -649,12 +688,39 @@ impl Machine {
 
     /// Activates a fault.
     pub fn inject_fault(&mut self, fault: Fault) {
+        let was_silent = self.hall_silent();
+        if fault == Fault::HallStuckLow && !was_silent && !self.hall_line_low() {
+            // The line falls now: a spurious edge part-way through a gap.
+            self.faults |= PENDING_EDGE;
+        }
         self.faults |= fault.bit();
     }
 
     /// Clears a fault.
     pub fn clear_fault(&mut self, fault: Fault) {
+        let high = self.fault_active(Fault::HallStuckHigh);
         self.faults &= !fault.bit();
+        if fault == Fault::HallStuckHigh && high && !self.hall_silent() && self.hall_line_low() {
+            // Released while a tooth is in front: the line falls now.
+            self.faults |= PENDING_EDGE;
+        }
+    }
+
+    /// No Hall edges are delivered (a lost signal or a stuck output).
+    fn hall_silent(&self) -> bool {
+        self.faults
+            & (Fault::HallLoss.bit() | Fault::HallStuckHigh.bit() | Fault::HallStuckLow.bit())
+            != 0
+    }
+
+    /// Whether a working sensor's output would be low now: a tooth is in
+    /// front of it ([`HALL_TOOTH_SHARE`] of a pitch from its falling edge).
+    #[must_use]
+    pub fn hall_line_low(&self) -> bool {
+        let last = self.next_edge.saturating_sub(1);
+        let edge = last as f64 + self.pitch_error(last);
+        let p = self.hall_turns * f64::from(self.cfg.hall_teeth);
+        p >= edge && p - edge < HALL_TOOTH_SHARE
     }
 
     /// Whether a fault is active.

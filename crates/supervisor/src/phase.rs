@@ -65,6 +65,18 @@ pub const EDGE_NM: u64 = 25_132_741;
 pub const PARTITION_NM: u64 = 50_000_000;
 /// Belt per drum turn: π·(D2 + 2·H2) = π·0.070 m = 219 911 486 nm.
 pub const BELT_PER_TURN_NM: u64 = 219_911_486;
+/// One Hall pitch at k1 = k2 = 1 in Q8 nm: 25 132 741.229 nm × 256,
+/// rounded (π·0.20 m / 25 in f64).
+pub const EDGE_NM_Q8: u64 = 6_433_981_755;
+/// Belt per drum turn in Q16 nm: 219 911 485.751 nm × 65 536, rounded.
+const BELT_PER_TURN_NM_Q16: u64 = 14_412_119_130_196;
+/// The k1·k2 product in Q30 (U2F30 × U2F30, kept to the type's
+/// precision: the tables hold k to 2⁻³⁰, and the product is cut once, at
+/// 2⁻³⁰ ≈ 10⁻⁹).
+pub fn k1k2_q30(k1: kinematics::units::Coefficient, k2: kinematics::units::Coefficient) -> u64 {
+    // Each < 2³² (U2F30 bits): the product < 2⁶⁴.
+    u64::from(k1.to_bits()).wrapping_mul(u64::from(k2.to_bits())) >> 30
+}
 /// Time constant of the phase loop, ms: a phase error decays as
 /// `e^(−t/T)` while the correction is within its bounds. 0.5 s: five times
 /// the speed loop's settling (bench §1, 0.10 s), so the two loops do not
@@ -128,8 +140,8 @@ pub fn first_plant_place_um(spacing_mm: u16) -> u64 {
 /// The phase loop's state (module docs).
 #[derive(Clone, Copy, Debug)]
 pub struct Phase {
-    /// Belt nm per (count · k3 × 1000), × 2¹⁶ / 1000: precomputed per
-    /// hardware ([`Phase::new`]).
+    /// Belt per encoder count at k3 = 1, Q16 nm: precomputed per hardware
+    /// ([`Phase::new`]).
     belt_q16_per_count: u64,
     /// Plant spacing, nm, and `Lclap / X` × 2²⁴ (per setting).
     x_nm: u64,
@@ -140,11 +152,13 @@ pub struct Phase {
     /// step.
     edges_seen: u32,
     pitches_seen_q16: u32,
-    /// Distance of one edge at the last known speed, nm.
-    edge_nm: u64,
-    /// Ground at the last edge, and now (extrapolated), nm.
-    ground_edges_nm: u64,
+    /// One nominal pitch of ground at the last known speed (× k1·k2), Q8 nm.
+    edge_q8: u64,
+    /// Ground at the last edge (Q8 nm), and now (extrapolated, nm).
+    ground_edges_q8: u64,
     ground_nm: u64,
+    /// The next edge's place: as far as the ground can be known, nm.
+    reach_nm: u64,
     /// The ground at the end of the last [`Phase::advance_belt`] (the start
     /// of this step), nm: a partition's ground is interpolated in the step.
     step_ground_nm: u64,
@@ -169,10 +183,9 @@ impl Phase {
     /// A phase loop for `counts_per_turn` encoder counts per drum turn and a
     /// spacing of `spacing_mm`.
     pub fn new(counts_per_turn: u32, spacing_mm: u16) -> Self {
-        // 219 911 486 · 65 536 / 1000 / counts: ≤ 10¹⁰ for ≥ 2 counts.
-        let q16 = BELT_PER_TURN_NM
-            .saturating_mul(1 << 16)
-            .checked_div(u64::from(counts_per_turn.max(2)).saturating_mul(1000))
+        // ≤ 7.3·10¹² (< 2⁴³) for ≥ 2 counts per turn.
+        let q16 = BELT_PER_TURN_NM_Q16
+            .checked_div(u64::from(counts_per_turn.max(2)))
             .unwrap_or(0);
         let mut p = Self {
             belt_q16_per_count: q16,
@@ -181,9 +194,10 @@ impl Phase {
             armed: false,
             edges_seen: 0,
             pitches_seen_q16: 0,
-            edge_nm: EDGE_NM,
-            ground_edges_nm: 0,
+            edge_q8: EDGE_NM_Q8,
+            ground_edges_q8: 0,
             ground_nm: 0,
+            reach_nm: 0,
             step_ground_nm: 0,
             belt_nm: 0,
             belt_rem: 0,
@@ -223,9 +237,10 @@ impl Phase {
             armed: false,
             edges_seen: 0,
             pitches_seen_q16: 0,
-            edge_nm: EDGE_NM,
-            ground_edges_nm: 0,
+            edge_q8: EDGE_NM_Q8,
+            ground_edges_q8: 0,
             ground_nm: 0,
+            reach_nm: 0,
             step_ground_nm: 0,
             belt_nm: 0,
             belt_rem: 0,
@@ -253,14 +268,21 @@ impl Phase {
     }
 
     /// Ground distance since Start, µm.
+    #[inline(never)]
     pub fn ground_um(&self) -> u64 {
         self.ground_nm / 1000
+    }
+
+    /// Belt since Start, µm: the drum encoder's counts × belt per count ×
+    /// k3 at the speed they were turned.
+    pub fn belt_um(&self) -> u64 {
+        self.belt_nm / 1000
     }
 
     /// Ground distance since Start at the newest Hall edge counted, nm
     /// (edge-locked, without the extrapolation since that edge).
     pub fn ground_at_edge_nm(&self) -> u64 {
-        self.ground_edges_nm
+        self.ground_edges_q8 >> 8
     }
 
     /// The last phase error in ground µm (positive: the belt is ahead of the
@@ -272,6 +294,18 @@ impl Phase {
             .clamp(-(1 << 40), 1 << 40)
             .saturating_mul(x_per_l)
             / 50_000_000
+    }
+
+    /// A partition left since the last realignment (a Start, a lowering, a
+    /// rest): the pass's first plant is down.
+    pub fn pass_started(&self) -> bool {
+        self.pass_started
+    }
+
+    /// The next partition's place lies beyond the next Hall edge's: the
+    /// ground cannot be known there before that edge comes.
+    pub fn next_place_beyond_reach(&self) -> bool {
+        self.armed && self.ref_ground_nm > self.reach_nm
     }
 
     /// Partitions that left since Start.
@@ -299,23 +333,26 @@ impl Phase {
     /// nominal pitch; the Hall gear's teeth are not evenly spaced, and the
     /// speed estimator learns each gap's share of a revolution,
     /// [`kinematics::speed::MtEstimator::newest_gap_pitches_q16`]),
-    /// `since_edge_us` the time since the newest edge, `travel_mh` the
-    /// travel speed of the last M/T window (m/h, 0 at rest) and `k1k2_x1e6`
-    /// the product of k1 and k2 × 10⁶ at it (`None` when no speed is known:
-    /// the last is kept).
+    /// `next_pitch_q16` the learned pitch of the gap the gear is in now (the
+    /// extrapolation stops at its end, the next edge's place),
+    /// `since_edge_us` the time since the newest edge, `travel` the travel
+    /// speed of the last M/T window (`MetresPerSecond` bits, U8F24; 0 at
+    /// rest) and `k1k2_q30` the product of k1 and k2 at it in Q30
+    /// ([`k1k2_q30`]; `None` when no speed is known: the last is kept).
     #[inline(never)]
     pub fn advance_ground(
         &mut self,
         edges: u32,
         pitches_q16: u32,
+        next_pitch_q16: u32,
         since_edge_us: u32,
-        travel_mh: u32,
-        k1k2_x1e6: Option<u64>,
+        travel: u32,
+        k1k2_q30: Option<u64>,
     ) {
-        if let Some(k) = k1k2_x1e6 {
-            // EDGE_NM / 10⁶ = 25.132 741 ≈ 1 647 095 / 2¹⁶ (error 2·10⁻⁷);
-            // k1·k2 ≤ 4·10⁶ after the clamp: the product < 2⁴³.
-            self.edge_nm = k.min(4_000_000).wrapping_mul(1_647_095) >> 16;
+        if let Some(k) = k1k2_q30 {
+            // Q8 nm × Q30 → Q8 nm. k1·k2 is taken to at most 2 (the tables
+            // hold 0.8 … 1.2), so the product stays below 2⁶⁴.
+            self.edge_q8 = EDGE_NM_Q8.wrapping_mul(k.min(2 << 30)) >> 30;
         }
         let new = edges.wrapping_sub(self.edges_seen);
         self.edges_seen = edges;
@@ -338,41 +375,49 @@ impl Phase {
         if !self.armed {
             return;
         }
-        if travel_mh == 0 || since_edge_us > REST_US {
+        if travel == 0 || since_edge_us > REST_US {
             // At rest ([`REST_US`]; or the first edge after it, speed not
             // known yet): the plant before the rest lies behind, so the first plant
             // after the restart gets the first plant's allowance (+100 %,
             // T/2) to absorb the lag of the restart (module docs).
             self.pass_started = false;
         }
-        // new_q16 < 2³², edge_nm < 2²⁷: the product < 2⁵⁹; the shift drops
-        // < 1 nm a step.
-        self.ground_edges_nm = self
-            .ground_edges_nm
-            .saturating_add(new_q16.wrapping_mul(self.edge_nm) >> 16);
-        // From the newest edge (exact) with the time since it. m/h · µs =
-        // nm · 3.6: × 5/18 ≈ 72 818 / 2¹⁸ (error 4·10⁻⁶). The time clamped
-        // to 16.7 s (beyond any edge at any speed that moves the ground)
-        // and the speed to 1000 km/h keep the product < 2⁶¹.
-        let extra = u64::from(travel_mh.min(1 << 20))
+        // Q16 pitches (at most 2¹² teeth a step) × Q8 nm per pitch (below
+        // 2³⁵), cut to Q8 once per step.
+        self.ground_edges_q8 = self
+            .ground_edges_q8
+            .saturating_add(new_q16.min(1 << 28).wrapping_mul(self.edge_q8) >> 16);
+        // From the newest edge (exact) with the time since it: m/s (U8F24)
+        // · µs = nm / 1000. The speed clamped to 16 m/s (58 km/h, beyond the
+        // Hall switch's 1 kHz) and the time to 16.7 s (beyond any edge at a
+        // speed that moves the ground) keep the product < 2⁶².
+        let extra = u64::from(travel.min(1 << 28))
+            .wrapping_mul(1000)
             .wrapping_mul(u64::from(since_edge_us.min(1 << 24)))
-            .wrapping_mul(72_818)
-            >> 18;
-        let cap = self.ground_edges_nm.saturating_add(self.edge_nm);
-        let g = self.ground_edges_nm.saturating_add(extra).min(cap);
+            >> 24;
+        // Never past the next edge's place: the gap's own learned pitch.
+        // (A pitch below 2¹⁸ in Q16 × edge_q8 below 2³⁵: below 2⁵³.)
+        let next_q8 = u64::from(next_pitch_q16.min(1 << 18)).wrapping_mul(self.edge_q8) >> 16;
+        let edges_nm = self.ground_edges_q8 >> 8;
+        let cap = edges_nm.saturating_add(next_q8 >> 8);
+        self.reach_nm = cap;
+        let g = edges_nm.saturating_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
     }
 
     /// Advances the belt by `counts` encoder counts turned at belt slip
-    /// `k3_milli`; records the partitions that left.
+    /// `k3` (its full U2F30 precision); records the partitions that left.
     #[inline(never)]
-    pub fn advance_belt(&mut self, counts: u16, k3_milli: u32) {
-        // counts · k3 · q16 ≤ 65 535 · 2000 · 10¹⁰ < 2⁶⁴ (k3 clamped to
-        // 2; a table holds 0.8 … 1.2; q16 ≤ 10¹⁰ for ≥ 2 counts per turn).
-        let acc = u64::from(counts)
-            .wrapping_mul(u64::from(k3_milli.min(2000)))
-            .wrapping_mul(self.belt_q16_per_count)
-            .wrapping_add(self.belt_rem);
+    pub fn advance_belt(&mut self, counts: u16, k3: kinematics::units::Coefficient) {
+        // counts · k3 (Q30) < 2⁴⁸, × the Q16 belt per count (< 2⁴³), cut
+        // once to Q16 nm (< 2⁶¹: 65 535 counts of 4.7 mm), remainder kept.
+        let acc = kinematics::mul_shr(
+            u64::from(counts).wrapping_mul(u64::from(k3.to_bits())),
+            self.belt_q16_per_count,
+            30,
+        )
+        .unwrap_or(u64::MAX >> 1)
+        .wrapping_add(self.belt_rem);
         let belt_before = self.belt_nm;
         self.belt_nm = self.belt_nm.saturating_add(acc >> 16);
         self.belt_rem = acc & 0xFFFF;
@@ -382,9 +427,10 @@ impl Phase {
         let (g0, g1) = (self.step_ground_nm.min(self.ground_nm), self.ground_nm);
         self.step_ground_nm = g1;
         for _ in 0..MAX_EVENTS {
+            // (2³² partitions of 50 mm < 2⁵⁸ nm.)
             let boundary = u64::from(self.left)
-                .saturating_add(1)
-                .saturating_mul(PARTITION_NM);
+                .wrapping_add(1)
+                .wrapping_mul(PARTITION_NM);
             if self.belt_nm < boundary {
                 break;
             }
@@ -393,10 +439,10 @@ impl Phase {
             // ground < 2²⁶ nm (67 m/s) and the belt < 2³² nm, so the
             // product < 2⁵⁸.
             let g = g0
-                .saturating_add(
+                .wrapping_add(
                     g1.saturating_sub(g0)
                         .min(1 << 26)
-                        .saturating_mul(boundary.saturating_sub(belt_before).min(1 << 32))
+                        .wrapping_mul(boundary.saturating_sub(belt_before).min(1 << 32))
                         .checked_div(self.belt_nm.saturating_sub(belt_before))
                         .unwrap_or(0),
                 )
@@ -463,9 +509,26 @@ impl Phase {
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used, clippy::cast_precision_loss)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::cast_precision_loss,
+    clippy::arithmetic_side_effects,
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss
+)]
 mod tests {
     use super::*;
+    use kinematics::units::Coefficient;
+
+    /// A travel speed in m/h as `MetresPerSecond` bits (U8F24), rounded.
+    fn mps(mh: u32) -> u32 {
+        u32::try_from(((u64::from(mh) << 24) + 1800) / 3600).unwrap()
+    }
+
+    /// A coefficient product in Q30.
+    fn q30(k: f64) -> u64 {
+        (k * f64::from(1u32 << 30)) as u64
+    }
 
     #[test]
     fn the_gain_is_the_documented_time_constant() {
@@ -516,16 +579,16 @@ mod tests {
         p.start(7, 7 << 16);
         p.realign(first_plant_place_um(70));
         // First edge: the origin.
-        p.advance_ground(8, 8 << 16, 0, 500, Some(1_000_000));
+        p.advance_ground(8, 8 << 16, 1 << 16, 0, mps(500), Some(1 << 30));
         assert_eq!(p.ground_um(), 0);
         // 0.5 km/h = 500 m/h for 100 ms = 13 888.9 µm.
-        p.advance_ground(8, 8 << 16, 100_000, 500, Some(1_000_000));
+        p.advance_ground(8, 8 << 16, 1 << 16, 100_000, mps(500), Some(1 << 30));
         assert_eq!(p.ground_um(), 13_888);
         // A second without an edge: capped at one edge (25 132 µm).
-        p.advance_ground(8, 8 << 16, 1_000_000, 500, Some(1_000_000));
+        p.advance_ground(8, 8 << 16, 1 << 16, 1_000_000, mps(500), Some(1 << 30));
         assert_eq!(p.ground_um(), 25_132);
         // Two edges at k1·k2 = 0.98: 2 · 25 132 741 · 0.98 = 49 260 172 nm.
-        p.advance_ground(10, 10 << 16, 0, 500, Some(980_000));
+        p.advance_ground(10, 10 << 16, 1 << 16, 0, mps(500), Some(q30(0.98)));
         assert_eq!(p.ground_um(), 49_260);
     }
 
@@ -537,22 +600,19 @@ mod tests {
         p.start(0, 0);
         p.realign(first_plant_place_um(70));
         // The origin (its own pitch, 1.03, counts nothing).
-        p.advance_ground(1, 67_502, 0, 0, Some(1_000_000));
+        p.advance_ground(1, 67_502, 1 << 16, 0, 0, Some(1 << 30));
         assert_eq!(p.ground_um(), 0);
         // Two edges of 0.98 and 1.01 pitches (64 225 + 66 191 = 130 416 Q16
         // = 1.989 99 pitches) × 25 132 675 nm (the pitch at k1·k2 = 1 in
         // advance_ground's Q16 form) = 50 013 778 nm.
-        p.advance_ground(3, 67_502 + 64_225 + 66_191, 0, 0, Some(1_000_000));
+        p.advance_ground(3, 67_502 + 64_225 + 66_191, 1 << 16, 0, 0, Some(1 << 30));
         assert_eq!(p.ground_at_edge_nm() / 1000, 50_013);
         // Nominal pitches give the edge count × the pitch, as before.
         let mut n = Phase::new(47_200, 70);
         n.start(0, 0);
-        n.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000));
-        n.advance_ground(3, 3 << 16, 0, 0, Some(1_000_000));
-        assert_eq!(
-            n.ground_at_edge_nm(),
-            2 * ((1_000_000u64 * 1_647_095) >> 16)
-        );
+        n.advance_ground(1, 1 << 16, 1 << 16, 0, 0, Some(1 << 30));
+        n.advance_ground(3, 3 << 16, 1 << 16, 0, 0, Some(1 << 30));
+        assert_eq!(n.ground_at_edge_nm(), (2 * EDGE_NM_Q8) >> 8);
     }
 
     /// A phase past its origin whose next partition is one partition
@@ -561,7 +621,7 @@ mod tests {
     fn running_a_partition_behind() -> Phase {
         let mut p = Phase::new(47_200, 70);
         p.start(0, 0);
-        p.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000)); // the origin
+        p.advance_ground(1, 1 << 16, 1 << 16, 0, 0, Some(1 << 30)); // the origin
         p.pass_started = true;
         p.belt_nm = 0;
         p.ref_belt_nm = PARTITION_NM;
@@ -575,14 +635,14 @@ mod tests {
         // wants 2 · 0.05/0.5 · 60/0.219 911 = 27.3 r/min, capped at +10 %
         // of 20 r/min = 2 r/min (as `the_correction_is_bounded_...`).
         let mut p = running_a_partition_behind();
-        p.advance_ground(1, 1 << 16, 10_000, 500, Some(1_000_000));
+        p.advance_ground(1, 1 << 16, 1 << 16, 10_000, mps(500), Some(1 << 30));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
         // The tractor came to rest (travel 0), then moves again: the
         // first plant after the rest may be reached at up to +100 %
         // (20 r/min) with twice the gain: 2 · 27.3 → capped at 20.
-        p.advance_ground(1, 1 << 16, 2_000_000, 0, Some(1_000_000));
-        p.advance_ground(2, 2 << 16, 10_000, 500, Some(1_000_000));
+        p.advance_ground(1, 1 << 16, 1 << 16, 2_000_000, 0, Some(1 << 30));
+        p.advance_ground(2, 2 << 16, 1 << 16, 10_000, mps(500), Some(1 << 30));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!((19.999..=20.0).contains(&c), "{c}");
     }
@@ -594,20 +654,20 @@ mod tests {
         // 1.2 s > REST_US counts as a rest, so the first plant after it may
         // be reached at +100 % (20 r/min). Before: the +10 % bound, 2 r/min.
         let mut p = running_a_partition_behind();
-        p.advance_ground(1, 1 << 16, 1_200_000, 75, Some(1_000_000));
-        p.advance_ground(2, 2 << 16, 10_000, 500, Some(1_000_000));
+        p.advance_ground(1, 1 << 16, 1 << 16, 1_200_000, mps(75), Some(1 << 30));
+        p.advance_ground(2, 2 << 16, 1 << 16, 10_000, mps(500), Some(1 << 30));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!((19.999..=20.0).contains(&c), "{c}");
         // 0.9 s without an edge is not a rest: +10 %.
         let mut p = Phase::new(47_200, 70);
         p.start(0, 0);
-        p.advance_ground(1, 1 << 16, 0, 0, Some(1_000_000));
+        p.advance_ground(1, 1 << 16, 1 << 16, 0, 0, Some(1 << 30));
         p.pass_started = true;
         p.belt_nm = 0;
         p.ref_belt_nm = PARTITION_NM;
         p.ref_ground_nm = 0;
-        p.advance_ground(1, 1 << 16, 900_000, 100, Some(1_000_000));
-        p.advance_ground(2, 2 << 16, 10_000, 500, Some(1_000_000));
+        p.advance_ground(1, 1 << 16, 1 << 16, 900_000, mps(100), Some(1 << 30));
+        p.advance_ground(2, 2 << 16, 1 << 16, 10_000, mps(500), Some(1 << 30));
         let c = p.correction(I16F16::from_num(20)).to_num::<f64>();
         assert!(c <= 2.0 && 2.0 - c < 5e-4, "{c}");
     }
@@ -619,12 +679,12 @@ mod tests {
         let mut p = Phase::new(47_200, 70);
         p.start(0, 0);
         p.realign(first_plant_place_um(70));
-        p.advance_ground(1, 1 << 16, 0, 0, None);
-        p.advance_ground(2, 2 << 16, 0, 0, Some(1_000_000));
+        p.advance_ground(1, 1 << 16, 1 << 16, 0, 0, None);
+        p.advance_ground(2, 2 << 16, 1 << 16, 0, 0, Some(1 << 30));
         p.clear_events();
-        p.advance_belt(10_731, 1000);
+        p.advance_belt(10_731, Coefficient::ONE);
         assert_eq!(p.events().count(), 0);
-        p.advance_belt(1, 1000);
+        p.advance_belt(1, Coefficient::ONE);
         let ev: std::vec::Vec<_> = p.events().collect();
         assert_eq!(
             ev,

@@ -51,6 +51,17 @@
 //! assert_eq!(i.plants_per_m_x100, 1000); // 5 plants in 0.5 m
 //! ```
 
+/// A lowering less than this much ground (µm) after the last plant before
+/// the lift closes a gap in the row, not a headland: 3 m. A stone, a ditch or a correction of the operator's is
+/// crossed within a metre or two; a tracked transplanter's turn at the row's
+/// end covers more (half a turn around the next ridge, and the track moves
+/// while it pivots). The spacing across such a gap, from the last plant
+/// before the lift to the first after the lowering, counts in the figures
+/// since Start when it is a miss (more than 1.5 X): the row has a hole
+/// there. A shorter one is left out: the first plant after a lowering is
+/// placed by its own setting, not at X.
+pub const ROW_GAP_MAX_UP_UM: u64 = 3_000_000;
+
 /// "No ground distance" in [`Quality`]'s positions (2⁶⁴ − 1 µm is never
 /// reached: 18 million km).
 const NONE: u64 = u64::MAX;
@@ -244,6 +255,10 @@ pub struct Quality {
     pass_from_um: u64,
     /// The last plant of this pass, ground distance µm, or [`NONE`].
     last_plant_um: u64,
+    /// The last plant before the last lift (ground µm + 1; 0: none to
+    /// count): the gap to the next pass's first plant may be a hole in the
+    /// row ([`ROW_GAP_MAX_UP_UM`]).
+    gap_from: u64,
 }
 
 impl Quality {
@@ -255,6 +270,7 @@ impl Quality {
             pass: Tally::ZERO,
             pass_from_um: NONE,
             last_plant_um: NONE,
+            gap_from: 0,
         }
     }
 
@@ -285,6 +301,7 @@ impl Quality {
         let d = at_um.saturating_sub(from);
         self.pass.distance_um = d;
         self.total.distance_um = self.total.distance_um.saturating_add(d);
+        self.gap_from = self.last_plant_um.wrapping_add(1); // NONE → 0
         true
     }
 
@@ -305,8 +322,21 @@ impl Quality {
             let s = at_um.saturating_sub(last);
             self.pass.add_spacing(s, self.x_um);
             self.total.add_spacing(s, self.x_um);
+        } else if self.gap_from != 0 {
+            // The pass's first plant after a gap in the row (lowered within
+            // [`ROW_GAP_MAX_UP_UM`] of the last plant before the lift): a
+            // miss since Start if the hole is more than 1.5 X.
+            let from = self.gap_from.wrapping_sub(1);
+            let s = at_um.saturating_sub(from);
+            if self.pass_from_um.saturating_sub(from) < ROW_GAP_MAX_UP_UM
+                && s > u64::from(self.x_um).wrapping_mul(3) / 2
+            {
+                self.total.add_spacing(s, self.x_um);
+            }
         }
-        self.last_plant_um = at_um.min(NONE - 1);
+        self.gap_from = 0;
+        // (A position is never [`NONE`].)
+        self.last_plant_um = at_um;
     }
 
     /// The pass in progress up to `now_um` (or the last one ended).
@@ -373,12 +403,22 @@ mod tests {
         let mut spacings = Vec::new();
         let mut plants = 0;
         let mut distance = 0.0;
+        // The last plant of the pass before.
+        let mut before: Option<f64> = None;
         for (from, plants_at, to) in passes {
             plants += plants_at.len();
             distance += to - from;
+            // Lowered within 3 m of the last plant before the lift: a gap in
+            // the row, the spacing across it counts when it is a miss.
+            if let (Some(last), Some(first)) = (before, plants_at.first()) {
+                if from - last < 3e6 && (first - last) / x > 1.5 {
+                    spacings.push(first - last);
+                }
+            }
             for w in plants_at.windows(2) {
                 spacings.push(w[1] - w[0]);
             }
+            before = plants_at.last().copied();
         }
         let n = spacings.len();
         let share = |f: &dyn Fn(f64) -> bool| {
@@ -424,7 +464,7 @@ mod tests {
             30_000u32..=500_000,
             proptest::collection::vec(
                 (
-                    0u64..2_000_000,
+                    0u64..4_000_000,
                     proptest::collection::vec((0u32..100, -300i32..300), 0..120),
                     0u64..500_000,
                 ),
@@ -515,7 +555,7 @@ mod tests {
     }
 
     #[test]
-    fn plants_outside_a_pass_and_the_lifted_gap_do_not_count() {
+    fn plants_outside_a_pass_do_not_count_and_a_hole_in_the_row_is_a_miss() {
         let mut q = Quality::new();
         q.start(70_000);
         q.plant(10_000); // before any pass: ignored
@@ -523,17 +563,33 @@ mod tests {
         q.plant(70_000);
         q.plant(140_000);
         q.end_pass(150_000);
-        q.plant(200_000); // lifted: ignored
+        // Lifted: ignored.
+        q.plant(200_000);
+        // Lowered 860 mm after the last plant (within the row: under 3 m):
+        // the hole from the plant at 140 mm to the next at 1070 mm (13.3 X)
+        // is a miss.
         q.begin_pass(1_000_000);
         q.plant(1_070_000);
         q.plant(1_140_000);
+        q.end_pass(1_200_000);
         let i = q.since_start(1_200_000);
-        // Two spacings per pass, none across the gap.
-        assert_eq!((i.plants, i.spacings), (4, 2));
-        assert_eq!(i.within_10_pct_x10, 1000);
+        assert_eq!((i.plants, i.spacings), (4, 3));
+        // 1 of 3.
+        assert_eq!(i.misses_x10, 333);
         // Distance with the unit down: 150 mm + 200 mm.
         assert_eq!(i.distance_mm, 350);
+        // The pass's own figures: its own spacing only.
         let p = q.pass_at(1_200_000);
         assert_eq!((p.plants, p.spacings, p.distance_mm), (2, 1, 200));
+        // Lowered over 3 m after the last plant (a headland): no hole in the
+        // row; nor is a gap
+        // of at most 1.5 X (the first plant is placed by its own setting).
+        q.begin_pass(4_300_000);
+        q.plant(4_400_000);
+        q.end_pass(4_420_000);
+        q.begin_pass(4_430_000);
+        q.plant(4_500_000); // 100 mm after the last: 1.43 X
+        let i = q.since_start(4_700_000);
+        assert_eq!((i.plants, i.spacings, i.misses_x10), (6, 3, 333));
     }
 }

@@ -8,35 +8,57 @@
 //! the drum rests instead of planting into the air.
 //!
 //! The contact is sampled by the control task every period (it is not an
-//! emergency input: no interrupt) and debounced here in both directions: a
-//! new level is taken only after it has read the same for
-//! [`WORK_SWITCH_DEBOUNCE_US`]. At power-on the switch reads up until the
-//! contact has proven closed.
+//! emergency input: no interrupt) and debounced here: a new level is taken
+//! only once it has read the same on every sample for
+//! [`WORK_SWITCH_DEBOUNCE_US`] (closing, the unit lowered) or
+//! [`WORK_LIFT_CONFIRM_US`] (opening, the unit lifted), counted from the
+//! first sample that saw it: the contact may have changed at any time in
+//! the period before, so that sample proves nothing yet. A contact that
+//! opens for less than the lift time is the frame's vibration (a bump
+//! lifts the frame for tens of milliseconds; a hitch lifts the unit for
+//! seconds): the unit stays down and keeps planting. At power-on the switch
+//! reads up until the contact has proven closed.
 //!
 //! ```
-//! use supervisor::work_switch::{WorkChange, WorkSwitch, WORK_SWITCH_DEBOUNCE_US};
+//! use supervisor::work_switch::{WorkChange, WorkSwitch, WORK_LIFT_CONFIRM_US};
 //!
 //! let mut ws = WorkSwitch::new();
 //! assert!(!ws.is_down());
-//! // Closed for 20 ms: not yet (30 ms debounce); 30 ms: down.
-//! assert_eq!(ws.sample(true, 10_000), None);
-//! assert_eq!(ws.sample(true, 10_000), None);
+//! // Seen closed at 0, 10, 20 ms: not yet (30 ms debounce); at 30 ms: down.
+//! for _ in 0..3 {
+//!     assert_eq!(ws.sample(true, 10_000), None);
+//! }
 //! assert_eq!(ws.sample(true, 10_000), Some(WorkChange::Lowered));
 //! assert!(ws.is_down());
-//! // A 10 ms bounce open changes nothing.
-//! assert_eq!(ws.sample(false, 10_000), None);
+//! // An 80 ms opening (a bump) changes nothing.
+//! for _ in 0..8 {
+//!     assert_eq!(ws.sample(false, 10_000), None);
+//! }
 //! assert_eq!(ws.sample(true, 10_000), None);
 //! assert!(ws.is_down());
-//! // Open for the debounce time: up.
-//! assert_eq!(ws.sample(false, WORK_SWITCH_DEBOUNCE_US), Some(WorkChange::Lifted));
+//! // Open for the lift time (from the first sample that saw it open): up.
+//! assert_eq!(ws.sample(false, 10_000), None);
+//! assert_eq!(ws.sample(false, WORK_LIFT_CONFIRM_US), Some(WorkChange::Lifted));
 //! ```
 
-/// How long a new level must hold before it is taken, µs. A lever or
-/// proximity switch on the planting unit's frame bounces for a few ms; the
-/// unit takes about a second to go up or down, so 30 ms (three control
-/// periods) cost nothing in placement (4 mm at 0.5 km/h) and filter the
-/// bounce and the frame's vibration.
+/// How long a closed contact must hold before the unit counts as down, µs.
+/// A lever or proximity switch on the planting unit's frame bounces for a
+/// few ms; 30 ms (three control periods after the first sample that saw it
+/// closed) cost 4 mm of ground at 0.5 km/h, which the first plant's
+/// placement takes off (`crate::planting`).
 pub const WORK_SWITCH_DEBOUNCE_US: u32 = 30_000;
+
+/// How long an open contact must hold before the unit counts as lifted, µs:
+/// the frame's vibration limit. A bump or a clod lifts the frame and opens
+/// the contact for tens of milliseconds (80 ms measured on the machine
+/// model's terms); a three-point hitch raises the unit at 0.1–0.3 m/s, so
+/// a real lift keeps the contact open for seconds, and in its first 0.2 s
+/// the planting shoe has risen 20–60 mm, still in the furrow of a 50–100 mm
+/// deep planting. While the lift is being confirmed the drum plants on: at
+/// the fastest the drum can follow (0.81 km/h at 7 cm, 2.08 km/h at 18 cm)
+/// that is 45 mm or 116 mm of ground, at most one plant (docs/firmware.md,
+/// "Work switch").
+pub const WORK_LIFT_CONFIRM_US: u32 = 200_000;
 
 /// A debounced change of the work switch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,7 +75,10 @@ pub enum WorkChange {
 pub struct WorkSwitch {
     /// The debounced state: the unit is down.
     down: bool,
-    /// How long the raw level has differed from `down`, µs (saturating).
+    /// Whether the last sample read the other level.
+    differs: bool,
+    /// How long the other level has read since the first sample that saw
+    /// it, µs (saturating).
     differs_for_us: u32,
 }
 
@@ -62,23 +87,35 @@ impl WorkSwitch {
     pub const fn new() -> Self {
         Self {
             down: false,
+            differs: false,
             differs_for_us: 0,
         }
     }
 
     /// One look at the contact (`closed`: the pin reads low), `elapsed_us`
-    /// after the previous one; the change, once the new level has held for
-    /// [`WORK_SWITCH_DEBOUNCE_US`].
+    /// after the previous one; the change, once the new level has read on
+    /// every sample for [`WORK_SWITCH_DEBOUNCE_US`] (closed) or
+    /// [`WORK_LIFT_CONFIRM_US`] (open) since the first sample that saw it.
     pub fn sample(&mut self, closed: bool, elapsed_us: u32) -> Option<WorkChange> {
         if closed == self.down {
+            self.differs = false;
             self.differs_for_us = 0;
             return None;
         }
-        self.differs_for_us = self.differs_for_us.saturating_add(elapsed_us);
-        if self.differs_for_us < WORK_SWITCH_DEBOUNCE_US {
+        if self.differs {
+            self.differs_for_us = self.differs_for_us.saturating_add(elapsed_us);
+        }
+        self.differs = true;
+        let hold = if closed {
+            WORK_SWITCH_DEBOUNCE_US
+        } else {
+            WORK_LIFT_CONFIRM_US
+        };
+        if self.differs_for_us < hold {
             return None;
         }
         self.down = closed;
+        self.differs = false;
         self.differs_for_us = 0;
         Some(if closed {
             WorkChange::Lowered
@@ -99,33 +136,42 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    /// Reference: the debounced level is the last raw level that held for
-    /// at least the debounce time without a break (computed over the whole
-    /// history, independently of the state machine).
+    /// Reference: the debounced level changes to a raw level once that
+    /// level has read on every sample for at least its hold time (closed:
+    /// the debounce; open: the lift time), counted from the first sample of
+    /// the run that saw it (computed over the whole history, independently
+    /// of the state machine).
     fn reference(samples: &[(bool, u32)]) -> std::vec::Vec<bool> {
         let mut out = std::vec::Vec::new();
         let mut state = false;
         for i in 0..samples.len() {
-            // The run of equal levels ending at i, and its duration.
+            // The run of equal levels ending at i, and the time from its
+            // first sample to sample i.
             let level = samples[i].0;
             let mut held = 0u64;
             let mut j = i;
-            loop {
-                if samples[j].0 != level {
-                    break;
-                }
+            while j > 0 && samples[j - 1].0 == level {
                 held += u64::from(samples[j].1);
-                if j == 0 {
-                    break;
-                }
                 j -= 1;
             }
-            if level != state && held >= u64::from(WORK_SWITCH_DEBOUNCE_US) {
+            let hold = if level {
+                WORK_SWITCH_DEBOUNCE_US
+            } else {
+                WORK_LIFT_CONFIRM_US
+            };
+            // A run that began before the last change counts from that change.
+            if level != state && held >= u64::from(hold) && !changed_within(&out, j, i) {
                 state = level;
             }
             out.push(state);
         }
         out
+    }
+
+    /// Whether the debounced state changed between samples `from` and
+    /// `to` (exclusive): a run then counts only from the change.
+    fn changed_within(out: &[bool], from: usize, to: usize) -> bool {
+        (from.max(1)..to).any(|k| out[k] != out[k - 1])
     }
 
     proptest! {
@@ -150,6 +196,48 @@ mod tests {
         }
     }
 
+    /// The documented times hold from the contact's change, not from the
+    /// first sample: a contact that closes (or opens) at any moment within
+    /// a 10 ms period is taken no sooner than 30 ms (200 ms) after it and
+    /// no later than one period after that. Before, the first sample that
+    /// saw the new level counted a whole period: a closing was taken
+    /// 20 ms + ε after it, while the contact could still be bouncing.
+    #[test]
+    fn a_change_is_taken_no_sooner_than_its_hold_time_after_it_happened() {
+        for (closing, hold) in [
+            (true, WORK_SWITCH_DEBOUNCE_US),
+            (false, WORK_LIFT_CONFIRM_US),
+        ] {
+            for phase_us in [1u32, 2_500, 5_000, 9_999] {
+                let mut ws = WorkSwitch::new();
+                if !closing {
+                    for _ in 0..4 {
+                        ws.sample(true, 10_000);
+                    }
+                    assert!(ws.is_down());
+                }
+                // The contact changes `phase_us` before the sample at 10 ms.
+                let changed_at = 10_000 - phase_us;
+                let mut t = 0u32;
+                let taken = loop {
+                    t += 10_000;
+                    if ws
+                        .sample(if t >= changed_at { closing } else { !closing }, 10_000)
+                        .is_some()
+                    {
+                        break t;
+                    }
+                    assert!(t < 1_000_000);
+                };
+                let after = taken - changed_at;
+                assert!(
+                    after >= hold && after < hold + 10_000,
+                    "closing {closing}, change {phase_us} µs before a sample: taken {after} µs after it"
+                );
+            }
+        }
+    }
+
     /// A broken wire (open for ever) never reads down.
     #[test]
     fn an_open_contact_never_reads_down() {
@@ -168,7 +256,7 @@ mod tests {
             assert_eq!(ws.sample(i % 2 == 0, 10_000), None);
         }
         assert!(!ws.is_down());
-        for _ in 0..3 {
+        for _ in 0..4 {
             ws.sample(true, 10_000);
         }
         assert!(ws.is_down());

@@ -28,9 +28,10 @@ use hmi_proto::screen::Command;
 use kinematics::profile_b::{LinkageAction, ProfileBSettings};
 use kinematics::units::{Hertz, Metres, MetresPerSecond};
 use machine_sim::{Config, Event, Inputs, Machine, Profile};
-use supervisor::control::{Effect, Hardware, Supervisor};
-use supervisor::machine::{BeltMachine, BELT_MACHINE_ONLY, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING};
-use supervisor::profile_b::{
+use supervisor::belt::{BeltMachine, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING};
+use supervisor::drum::{Effect, Hardware, Supervisor};
+use supervisor::effect::BELT_MACHINE_ONLY;
+use supervisor::planter::{
     BeltPlanter, ConfigField, Error, PlanterAlarm, PlanterState, ProfileBConfig, ProfileBHardware,
     StepperCommand, CONFIG_BYTES,
 };

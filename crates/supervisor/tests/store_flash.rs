@@ -22,9 +22,9 @@ use kinematics::profile_b::ProfileBSettings;
 use kinematics::table::{CoeffTable, K_MAX, K_MIN, MAX_POINTS};
 use kinematics::travel::Calibration;
 use proptest::prelude::*;
-use supervisor::profile_b::ProfileBConfig;
+use supervisor::planter::ProfileBConfig;
+use supervisor::settings::store::{DefaultsReason, Loaded, SettingsStore, SlotStatus, StoreError};
 use supervisor::settings::{Profile, Settings, SETTINGS_BYTES};
-use supervisor::store::{DefaultsReason, Loaded, SettingsStore, SlotStatus, StoreError};
 
 // ---------------------------------------------------------------------------
 // Simulated flash

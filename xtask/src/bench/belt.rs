@@ -98,7 +98,7 @@ fn case(v: f32, compensation: bool, lock: bool, index: u64) -> Result<Row> {
 pub fn section(doc: &mut String) -> Result {
     doc.push_str(
         "## 4. Profile B bench replica (paper B)\n\n\
-         `supervisor::profile_b::BeltPlanter` (the firmware's profile B logic: windowed \
+         `supervisor::planter::BeltPlanter` (the firmware's profile B logic: windowed \
          ground speed from the 600 ppr encoder, the threshold-Y linkage, eq. 4 and eq. 9, \
          acceleration limits) against the machine model in profile B with its default \
          noise (terrain, slip), X = 25 cm, B = 10 cm and the other defaults of \

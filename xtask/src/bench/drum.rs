@@ -71,7 +71,7 @@ pub enum Structure {
     Pid,
     /// Feed-forward `u = target + PID(target − measured)`.
     FfPid,
-    /// The product: `supervisor::control::Supervisor` in Fixed mode
+    /// The product: `supervisor::drum::Supervisor` in Fixed mode
     /// (feed-forward + PID on the error against the drum model).
     Product,
 }
@@ -408,7 +408,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
          Structures: **PID only** is paper A's loop (the controller's output is the drum speed \
          command, no feed-forward), written in the bench around `fuzzy_pid::Controller::step(target, \
          measured, 0)`; **FF + PID** adds the kinematic feed-forward (`step(target, measured, \
-         target)`); **product** is `supervisor::control::Supervisor` in Fixed mode, the firmware's \
+         target)`); **product** is `supervisor::drum::Supervisor` in Fixed mode, the firmware's \
          control step (feed-forward + PID on the error against its drum model, docs/firmware.md), \
          whose fuzzy rows use the product's ΔKp range ±{product_kp} instead of the paper's ±5 \
          (the other rows: the paper's ranges; why: Robustness below). The lookup-table controller cannot be put in the product (`Supervisor` holds a direct \
@@ -690,7 +690,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
                  overspeed error the paper's tables raise Kp (PM, up to ≈ 5 per sample) and lower \
                  Ki; with the 5 ms dead time and the 10 ms measurement that gain is beyond the \
                  loop's margin once the plant is faster than the model. The product therefore \
-                 narrows ΔKp to ±{kp_range} (`supervisor::control::PRODUCT_DELTA_KP_RANGE`, \
+                 narrows ΔKp to ±{kp_range} (`supervisor::drum::PRODUCT_DELTA_KP_RANGE`, \
                  chosen in a trial sweep of ±5, 3, 2, 1.5, 1 and 0.5 on these plants: ±1.5 and narrower settle on τ × 0.5, ±2 and wider do not): same \
                  tables, same nominal response, and {}. \
                  A drive faster still (τ × 0.35) defeats the base gains themselves, the \

@@ -1,6 +1,6 @@
 //! Section 8: paper A's Table 14 (drum speed accuracy) and Table 15 (drum
 //! response to travel-speed steps) reproduced with the product's control
-//! (`supervisor::control::Supervisor`, exactly as the firmware's 10 ms task
+//! (`supervisor::drum::Supervisor`, exactly as the firmware's 10 ms task
 //! runs it) on the machine model, side by side with the paper's figures.
 //!
 //! Every product figure comes from the runs below; the paper's figures are

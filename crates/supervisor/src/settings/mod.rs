@@ -61,10 +61,15 @@
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
 
+pub mod belt;
+pub mod crc;
+pub mod store;
+
 use core::fmt;
 
 use hmi_proto::screen::{
-    self, Brightness, DrumSpeed, FirstPlantDistance, Mode, MotorCoefficient, ParamError, Spacing,
+    self, Brightness, DrumSpeed, FirstPlantDistance, MachineProfile, Mode, MotorCoefficient,
+    ParamError, Spacing,
 };
 use kinematics::consts::Gear;
 use kinematics::table::TableError;
@@ -72,7 +77,7 @@ use kinematics::travel::{Calibration, CALIBRATION_BYTES};
 
 use crate::drive::{DriveModel, DriveModelError, DRIVE_MODEL_BYTES};
 use crate::drive_link::{DriveLinkError, DriveLinkSettings, DRIVE_LINK_BYTES, DRIVE_LINK_V5_BYTES};
-use crate::profile_b::{ProfileBConfig, CONFIG_BYTES};
+use crate::planter::{ProfileBConfig, CONFIG_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
 pub const SETTINGS_FORMAT_VERSION: u8 = 6;
@@ -532,6 +537,22 @@ pub fn decode_into_unchecked_link(bytes: &[u8], out: &mut Settings) -> Result<()
     out.first_plant_distance = first_plant_distance;
     out.drive_link = drive_link;
     Ok(())
+}
+
+/// The screen's profile for ours.
+pub const fn screen_profile(p: Profile) -> MachineProfile {
+    match p {
+        Profile::DrumBelt => MachineProfile::DrumBelt,
+        Profile::SeedlingBelt => MachineProfile::SeedlingBelt,
+    }
+}
+
+/// Ours for the screen's profile.
+pub const fn profile_from_screen(p: MachineProfile) -> Profile {
+    match p {
+        MachineProfile::DrumBelt => Profile::DrumBelt,
+        MachineProfile::SeedlingBelt => Profile::SeedlingBelt,
+    }
 }
 
 #[cfg(test)]

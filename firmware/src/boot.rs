@@ -8,12 +8,13 @@ use core::mem::MaybeUninit;
 use ::drive_link::link::Link;
 use hmi_proto::hmi::Hmi;
 use supervisor::{
-    control::Supervisor,
-    machine::{BeltMachine, Machine},
+    belt::BeltMachine,
+    drum::Supervisor,
+    machine::Machine,
     migrate::{migrate, Migration},
-    profile_b::ProfileBHardware,
+    planter::ProfileBHardware,
+    settings::store::{LoadStatus, SettingsStore},
     settings::{Profile, Settings},
-    store::{LoadStatus, SettingsStore},
 };
 
 use crate::board;

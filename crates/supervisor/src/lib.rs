@@ -22,10 +22,3 @@ pub mod quality;
 pub mod settings;
 pub mod stop_input;
 pub mod work_switch;
-
-// The paths the drum and belt machines had before the split, kept while the
-// firmware and the tests move to the new ones.
-pub use drum as control;
-pub use drum::work as planting;
-pub use planter as profile_b;
-pub use settings::{crc, store};

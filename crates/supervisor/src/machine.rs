@@ -8,16 +8,10 @@
 
 use hmi_proto::screen::{self, Command};
 
+use crate::belt::BeltMachine;
 use crate::drum::Supervisor;
 use crate::effect::Effect;
 use crate::settings::Settings;
-
-// The paths these items had before the split (the firmware's and the tests'),
-// kept while the firmware moves to the new ones.
-pub use crate::belt::{BeltMachine, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING};
-pub use crate::effect::{BELT_MACHINE_ONLY, DRUM_MACHINE_ONLY, PLACEMENT_WHILE_RUNNING};
-pub use crate::settings::belt::{belt_to_screen, belt_with};
-pub use crate::settings::{profile_from_screen, screen_profile};
 
 /// One of the two machines.
 #[allow(clippy::large_enum_variant)]
@@ -66,6 +60,7 @@ impl Machine {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+    use crate::effect::{DRUM_MACHINE_ONLY, PLACEMENT_WHILE_RUNNING};
     use crate::planter::ProfileBHardware;
     use crate::settings::Profile;
     use hmi_proto::screen::MachineProfile;

@@ -6,10 +6,10 @@
 use hmi_proto::screen::Command;
 use kinematics::units::Ticks;
 
-use crate::control::{Actuation, Alarm, RunState};
 use crate::drive_link::LinkSample;
+use crate::drum::{Actuation, Alarm, RunState};
 use crate::machine::Machine;
-use crate::profile_b::{PlanterAlarm, PlanterState, StepperCommand};
+use crate::planter::{PlanterAlarm, PlanterState, StepperCommand};
 
 /// One edge of the pulse input (TIM2 CH1): profile A's Hall tooth, profile
 /// B's feeding-roller index.
@@ -119,9 +119,9 @@ impl Machine {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::control::{Hardware, Supervisor};
-    use crate::machine::BeltMachine;
-    use crate::profile_b::ProfileBHardware;
+    use crate::belt::BeltMachine;
+    use crate::drum::{Hardware, Supervisor};
+    use crate::planter::ProfileBHardware;
     use crate::settings::{Profile, Settings};
 
     /// The step of profile A is the supervisor's own sequence (edges, work

@@ -23,8 +23,8 @@
 
 use embedded_storage::nor_flash::NorFlash;
 
+use crate::settings::store::{DefaultsReason, LoadStatus, SettingsStore, SlotStatus};
 use crate::settings::Settings;
-use crate::store::{DefaultsReason, LoadStatus, SettingsStore, SlotStatus};
 
 /// What [`migrate`] did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -39,7 +39,7 @@ pub const DRUM_PWM_HZ: u32 = 20_000;
 pub const DRUM_ENCODER_COUNTS_PER_REV: u32 = 400 * 118;
 
 /// The board facts the supervisor needs.
-pub const HARDWARE: supervisor::control::Hardware = supervisor::control::Hardware {
+pub const HARDWARE: supervisor::drum::Hardware = supervisor::drum::Hardware {
     encoder_counts_per_drum_rev: DRUM_ENCODER_COUNTS_PER_REV,
     control_period_us: 10_000,
     pwm_arr: (72_000_000 / DRUM_PWM_HZ - 1) as u16,

@@ -6,7 +6,7 @@ use hmi_proto::hmi::Event;
 use hmi_proto::screen::Command;
 use rtic::Mutex as _;
 use rtic_monotonics::systick::prelude::*;
-use supervisor::control::Effect;
+use supervisor::drum::Effect;
 
 use super::notices::{latched_alarm, show_alarm, STOP_INPUT_ALARM};
 use crate::app::hmi;

@@ -5,10 +5,10 @@
 
 use hmi_proto::hmi::Hmi;
 use rtic::Mutex as _;
-use supervisor::control::{Alarm, RunState};
+use supervisor::drum::{Alarm, RunState};
 use supervisor::machine::Machine;
 use supervisor::machine_step::StepOutputs;
-use supervisor::profile_b::{PlanterAlarm, PlanterState};
+use supervisor::planter::{PlanterAlarm, PlanterState};
 use supervisor::stop_input::StopChange;
 use supervisor::work_switch::WorkChange;
 

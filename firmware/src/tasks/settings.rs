@@ -2,10 +2,10 @@
 
 use rtic::Mutex as _;
 use rtic_monotonics::systick::prelude::*;
-use supervisor::control::RunState;
+use supervisor::drum::RunState;
 use supervisor::machine::Machine;
-use supervisor::profile_b::PlanterState;
-use supervisor::store::SettingsStore;
+use supervisor::planter::PlanterState;
+use supervisor::settings::store::SettingsStore;
 
 use super::control::CONTROL_PERIOD_MS;
 use crate::app::settings;

@@ -4,8 +4,8 @@
 //! with the product's store, as a previous Save would have.
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
+use supervisor::settings::store::SettingsStore;
 use supervisor::settings::Settings;
-use supervisor::store::SettingsStore;
 
 /// The two pages in memory (erased: 0xFF; programming clears bits).
 struct Pages(Vec<u8>);
@@ -54,7 +54,7 @@ pub fn pages_with(settings: &Settings) -> Vec<u8> {
 pub fn saved_in(pages: &[u8]) -> Option<Settings> {
     let mut store = SettingsStore::new(Pages(pages.to_vec()), 0).unwrap();
     match store.load() {
-        supervisor::store::Loaded::Saved { settings, .. } => Some(settings),
-        supervisor::store::Loaded::Defaults { .. } => None,
+        supervisor::settings::store::Loaded::Saved { settings, .. } => Some(settings),
+        supervisor::settings::store::Loaded::Defaults { .. } => None,
     }
 }

@@ -4,7 +4,7 @@
 
 use kinematics::profile_b::ProfileBSettings;
 use machine_sim::{Config, Event, Inputs, Profile};
-use supervisor::profile_b::{BeltPlanter, ProfileBConfig, ProfileBHardware, StepperCommand};
+use supervisor::planter::{BeltPlanter, ProfileBConfig, ProfileBHardware, StepperCommand};
 
 use crate::Result;
 

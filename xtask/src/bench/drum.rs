@@ -5,7 +5,7 @@ use fuzzy_pid::{FuzzyConfig, RuleBaseSize, Schedule, I16F16};
 use hmi_proto::screen::{Command, DrumSpeed, Mode};
 use kinematics::units::Ticks;
 use machine_sim::{Config, Inputs, Machine};
-use supervisor::control::{Actuation, Hardware, Supervisor, PRODUCT_DELTA_KP_RANGE};
+use supervisor::drum::{Actuation, Hardware, Supervisor, PRODUCT_DELTA_KP_RANGE};
 use supervisor::settings::Settings;
 
 use crate::Result;
@@ -757,7 +757,7 @@ fn identify_on(plant: Config, settings: Settings) -> Result<Settings> {
     sup.command(Command::IdentifyDrive);
     let mut act = Actuation::OFF;
     for _ in 0..800 {
-        if sup.run_state() != supervisor::control::RunState::Identifying {
+        if sup.run_state() != supervisor::drum::RunState::Identifying {
             break;
         }
         let inputs = Inputs {
@@ -769,7 +769,7 @@ fn identify_on(plant: Config, settings: Settings) -> Result<Settings> {
         act = sup.control_step(Ticks(m.capture_ticks()), m.drum_encoder_count());
     }
     match sup.command(Command::AcceptDriveModel) {
-        supervisor::control::Effect::Save => Ok(sup.settings().clone()),
+        supervisor::drum::Effect::Save => Ok(sup.settings().clone()),
         other => Err(format!(
             "identification: {other:?} ({:?})",
             sup.identify_state()

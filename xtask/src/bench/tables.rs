@@ -12,7 +12,7 @@ use hmi_proto::screen::{Command, DrumSpeed, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Event, Inputs, Machine};
-use supervisor::control::{Actuation, Hardware, RunState, Supervisor};
+use supervisor::drum::{Actuation, Hardware, RunState, Supervisor};
 use supervisor::settings::Settings;
 
 use crate::Result;

@@ -180,7 +180,7 @@ pub struct Supervisor {
     /// loop and the partitions' events ([`crate::phase`]).
     pub(crate) phase: Phase,
     /// The work switch's effect on the drum and the count
-    /// ([`crate::planting`]).
+    /// ([`crate::drum::work`]).
     pub(crate) work: Work,
     /// Live planting quality ([`crate::quality`]).
     pub(crate) quality: crate::quality::Quality,

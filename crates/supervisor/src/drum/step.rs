@@ -86,7 +86,7 @@ impl Supervisor {
     /// ```
     /// use hmi_proto::screen::{Command, DrumSpeed, Mode};
     /// use kinematics::units::Ticks;
-    /// use supervisor::control::{Alarm, Hardware, Supervisor};
+    /// use supervisor::drum::{Alarm, Hardware, Supervisor};
     /// use supervisor::settings::Settings;
     ///
     /// let settings = Settings {

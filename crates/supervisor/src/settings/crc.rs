@@ -11,7 +11,7 @@
 //! budget grew to 56 KB this was a hand-written nibble-table CRC.)
 //!
 //! ```
-//! use supervisor::crc::{crc32, Crc32};
+//! use supervisor::settings::crc::{crc32, Crc32};
 //! // The catalogue check value of CRC-32/ISO-HDLC.
 //! assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
 //! // Incremental updates give the same result as one pass.

@@ -35,7 +35,7 @@
 //!     ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash,
 //! };
 //! use supervisor::settings::Settings;
-//! use supervisor::store::{DefaultsReason, Loaded, SettingsStore};
+//! use supervisor::settings::store::{DefaultsReason, Loaded, SettingsStore};
 //! use hmi_proto::screen::Spacing;
 //!
 //! /// 2 KB of RAM pretending to be two STM32F1 flash pages.
@@ -81,7 +81,7 @@
 //! assert_eq!(flash.0[12], 6); // settings format version
 //! assert_eq!(&flash.0[328..332], b"DONE");
 //! assert_eq!(flash.0[332], 0xFF); // the record ends there
-//! # Ok::<(), supervisor::store::StoreError<NorFlashErrorKind>>(())
+//! # Ok::<(), supervisor::settings::store::StoreError<NorFlashErrorKind>>(())
 //! ```
 
 mod outcome;

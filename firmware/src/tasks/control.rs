@@ -67,7 +67,7 @@ pub async fn control(mut cx: control::Context<'_>) {
                 m.step(&sensed.inputs, queued.chain(sampled))
             });
             write_actuators(&mut cx, &outputs, sensed.inputs.stop_latched);
-            notices.report(&mut cx, &outputs, &sensed);
+            notices.report(&mut cx, &outputs, sensed.stop_change, sensed.work_change);
         }
         stats::CONTROL_LOOPS.inc();
         next += CONTROL_PERIOD_MS.millis();

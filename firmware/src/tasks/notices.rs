@@ -12,7 +12,6 @@ use supervisor::planter::{PlanterAlarm, PlanterState};
 use supervisor::stop_input::StopChange;
 use supervisor::work_switch::WorkChange;
 
-use super::control::Sensed;
 use crate::app::control;
 use crate::stats;
 
@@ -44,9 +43,10 @@ impl Notices {
         &mut self,
         cx: &mut control::Context<'_>,
         outputs: &StepOutputs,
-        sensed: &Sensed,
+        stop_change: Option<StopChange>,
+        work_change: Option<WorkChange>,
     ) {
-        match sensed.stop_change {
+        match stop_change {
             Some(StopChange::Opened) => {
                 defmt::warn!("stop input: open, outputs off (latched until closed and Start)");
                 cx.shared.hmi.lock(|hmi| {
@@ -70,7 +70,7 @@ impl Notices {
                     }
                     self.alarm = alarm;
                 }
-                if let Some(change) = sensed.work_change {
+                if let Some(change) = work_change {
                     let running = self.run;
                     cx.shared
                         .machine

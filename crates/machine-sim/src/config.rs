@@ -194,7 +194,7 @@ impl Default for Config {
 }
 
 impl Config {
-    /// Travel-speed profile "hills" (issue 19): the speed swings ±20 %
+    /// Travel-speed profile "hills": the speed swings ±20 %
     /// around the gear's speed in random steps (uniform ±20 %, one every 3 s
     /// on average, drawn from the seeded RNG), through the chassis's 0.5 s
     /// time constant; the slow terrain sinusoid is off. Other fields kept.
@@ -209,7 +209,7 @@ impl Config {
         }
     }
 
-    /// Travel-speed profile "stop-and-go" (issue 19): every 10 s the
+    /// Travel-speed profile "stop-and-go": every 10 s the
     /// tractor comes to rest for 2 s and drives on (regular stops), through
     /// the chassis's 0.5 s time constant; the default terrain stays on.
     #[must_use]

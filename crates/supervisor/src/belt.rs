@@ -146,7 +146,7 @@ impl BeltMachine {
                 self.settings.drum_encoder_reversed = r;
                 Effect::SettingsChanged
             }
-            // The work switch (profile A only, issue 19): kept and saved
+            // The work switch (profile A only): kept and saved
             // likewise.
             Command::SetWorkSwitchFitted(w) => {
                 self.settings.work_switch_fitted = w;

@@ -107,9 +107,9 @@ pub fn section(doc: &mut String) -> Result {
          Feeding-spacing error as paper B's Table 2: |mean spacing − X| / X; plant-spacing \
          CV as its Table 3: sample SD / mean. The QEMU test \
          `tests/tests/profile_b.rs` runs the same bench through the firmware. \
-         \"Ours\" is position-locked feeding (issue 19, the default: the belt fed since Start \
+         \"Ours\" is position-locked feeding (the default: the belt fed since Start \
          kept at ground · B / X, docs/profile-b.md); \"linkage alone\" is paper B's speed \
-         linkage without it (the product before issue 19), same seeds.\n\n\
+         linkage without it, same seeds.\n\n\
          | travel speed | feeding-spacing error, ours (paper B) | plant-spacing CV, ours (paper B) | linkage alone: error / CV | without radius compensation: error / CV | spacings |\n\
          |---|---|---|---|---|---|\n",
     );

@@ -798,7 +798,7 @@ fn swing_and_partition(speeds: &[f64], w: std::ops::Range<usize>) -> (f64, f64) 
     ((hi - lo) / SETPOINT * 100.0, dev * 100.0)
 }
 
-/// Issue 16 item 3: the robustness table's dead-time sweep, with and
+/// The robustness table's dead-time sweep, with and
 /// without the drive identification, and its plot.
 fn dead_time_sweep(doc: &mut String, img: &std::path::Path) -> Result {
     use std::fmt::Write as _;
@@ -814,7 +814,7 @@ fn dead_time_sweep(doc: &mut String, img: &std::path::Path) -> Result {
          with its default noise (seed 1), the seedlings' load at 10 % (`load_droop` 0.10: the \
          drum droops 0–10 % as each partition passes) and the drive's dead time swept 0–60 ms \
          (τ 25 ms, n_max 44.7 r/min). *Default model*: the drive model the firmware ships with \
-         (5 ms, 25 ms: the tuning before issue 16), with the instability supervisor; \
+         (5 ms, 25 ms: the paper's design drive), with the instability supervisor; \
          *identified*: the model measured by the drive identification on that drive (belt \
          empty) and saved (docs/firmware.md, \"The drum drive model\"). Swing: max − min of the \
          10 ms means; partition mean: the largest deviation of the speed averaged over one \
@@ -898,7 +898,7 @@ fn dead_time_sweep(doc: &mut String, img: &std::path::Path) -> Result {
         doc,
         "\n![Swing vs dead time](img/drum-dead-time.svg)\n\n\
          Reading. With the shipped model the loop limit-cycles from {} ms of dead time in this \
-         sweep (issue 16 item 3 found 18 ms); the instability supervisor names it and switches \
+         sweep (docs/firmware.md: from 18 ms); the instability supervisor names it and switches \
          to the conservative mode, which holds the partition mean but corrects loads slowly. \
          With the identified model the instability warning came on {warned_identified} of {} \
          drives, and the partition mean stayed within {worst_part:.2} % of the set point in \

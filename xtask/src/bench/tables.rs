@@ -295,7 +295,7 @@ pub fn step_plant() -> Config {
 /// measured travel speed).
 ///
 /// Speed-following placement: Table 15 is the drum's *speed* response, the
-/// paper's law. The distance-locked default (issue 19) deliberately moves the
+/// paper's law. The distance-locked default deliberately moves the
 /// drum off the speed target while it recovers the phase lost during the
 /// step (docs/placement.md), so its "settle within ±2 %" would measure the
 /// phase recovery, not the speed loop.
@@ -894,8 +894,8 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
             "**over**"
         },
         if fast >= 4 {
-            " (the drum PID holds the drum slightly fast; issue 19 found ≈ 0.1 % with a \
-             perfect speed signal)"
+            " (the drum PID holds the drum slightly fast; ≈ 0.1 % with a perfect \
+             speed signal)"
         } else {
             ""
         },

@@ -1,5 +1,5 @@
-//! The drum driver's RS-485 link as the supervisor sees it (issue 17,
-//! docs/drive-link.md): the settings (feedback source, command path, driver
+//! The drum driver's RS-485 link as the supervisor sees it
+//! (docs/drive-link.md): the settings (feedback source, command path, driver
 //! profile), the read-back as one more sensor sample with its age, and the
 //! alarms it raises (driver fault, link lost, encoder or driver speed wrong).
 //!

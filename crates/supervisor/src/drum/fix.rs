@@ -30,8 +30,8 @@ pub(super) fn rpm_to_fix(n: RevPerMin) -> I16F16 {
 
 /// `x × 1000`, rounded to nearest (halves up), negative values as 0:
 /// computed from the raw bits in `i64`, so every `I16F16` (up to
-/// 32 767.99 r/min) is reported exactly. Multiplying in `I16F16` itself
-/// saturated at 32.767 r/min (issue 16 item 4). Rounding (not flooring)
+/// 32 767.99 r/min) is reported exactly (multiplying in `I16F16` itself
+/// would saturate at 32.767 r/min). Rounding (not flooring)
 /// gives back the decimal a speed was set from: 25.21 r/min is
 /// 1 652 163 / 65 536 = 25.210 005 in I16F16, and 25.209 995 when truncated.
 pub fn milli(x: I16F16) -> u32 {
@@ -84,8 +84,8 @@ mod tests {
 
     #[test]
     fn milli_above_32_767_r_min_is_exact() {
-        // Failed before the fix: I16F16 × 1000 saturated to 32 767.99…, so
-        // 40 r/min read 32 767 (issue 16 item 4).
+        // I16F16 × 1000 would saturate to 32 767.99…, so 40 r/min would
+        // read 32 767.
         assert_eq!(milli(I16F16::from_num(40)), 40_000);
         assert_eq!(
             milli(I16F16::from_num(44.7)),

@@ -40,8 +40,8 @@ pub(super) const MONITOR_BAND: I16F16 = I16F16::lit("0.05");
 pub(super) const MONITOR_TIME_US: u32 = 1_000_000;
 /// Swing (max − min) of the error in a window that counts as an
 /// oscillation: 25 % of the target. The seedlings' load swings the speed by
-/// up to 10 %; the limit cycle of issue 16 (a 20 ms drive on the 5 ms
-/// tuning) by 80 %.
+/// up to 10 %; the limit cycle of a 20 ms drive on the 5 ms tuning by
+/// 80 %.
 pub(super) const MONITOR_SWING: I16F16 = I16F16::lit("0.25");
 /// Window of the swing, periods (0.5 s at 10 ms), and how many windows in a
 /// row make an oscillation (1 s).

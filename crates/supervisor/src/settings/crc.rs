@@ -7,8 +7,7 @@
 //!
 //! The crate's table-less implementation ([`crc::NoTable`], a bit at a time)
 //! is used: no 1 KB table in flash, and the firmware checks one ~300-byte
-//! record at boot and on save, so speed does not matter. (Until the flash
-//! budget grew to 56 KB this was a hand-written nibble-table CRC.)
+//! record at boot and on save, so speed does not matter.
 //!
 //! ```
 //! use supervisor::settings::crc::{crc32, Crc32};

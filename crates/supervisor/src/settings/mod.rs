@@ -112,7 +112,7 @@ const FLAG_SPEED_FOLLOWING: u8 = 2;
 const FLAG_WORK_SWITCH: u8 = 4;
 
 /// How profile A's drum places the plants in Speed-Adaptive mode
-/// (issue 19, docs/placement.md).
+/// (docs/placement.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Placement {
@@ -121,8 +121,7 @@ pub enum Placement {
     #[default]
     DistanceLocked,
     /// The drum's speed follows the travel speed (eq. 7 + the fuzzy PID)
-    /// and position errors stay in the row: the behaviour before issue 19,
-    /// kept for comparison.
+    /// and position errors stay in the row; kept for comparison.
     SpeedFollowing,
 }
 

@@ -2,8 +2,10 @@
 //!
 //! The machine is QEMU's STM32F205 model, chosen for its memory: 128 KB of
 //! SRAM, of which this board takes the real board's 20 KB at 0x2000_0000
-//! (`memory-qemu.x`, the STM32F103RB's layout), so that the statics and the
-//! stack are laid out, and measured, as on the real board. QEMU emulates
+//! (`memory-qemu.x`, the STM32F103RB's RAM layout), so that the statics and
+//! the stack are laid out, and measured, as on the real board; its code may
+//! use 256 KB of the model's 1 MB of flash, since it carries the simulated
+//! machine. QEMU emulates
 //! the Cortex-M3 core, SysTick, the NVIC and the USARTs (the same USART
 //! model as its STM32F100's), but not RCC, GPIO, timers, the flash
 //! controller or the watchdog of an F103: the F1 addresses of those read

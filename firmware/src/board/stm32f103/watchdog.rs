@@ -2,8 +2,6 @@
 
 use super::*;
 
-/// IWDG prescaler: PR = 011, LSI / 32 (RM0008 §19.4.2).
-pub(super) const IWDG_PR_DIV32: u16 = 0b011;
 /// IWDG reload: 313 counts of LSI / 32, i.e. 10 016 LSI cycles.
 pub(super) const IWDG_RELOAD: u16 = 312;
 /// Bound on the wait for the prescaler and reload to reach the LSI domain
@@ -28,13 +26,19 @@ impl Watchdog {
     /// be stopped again; 0x5555 unlocks PR and RLR; once PVU and RVU clear,
     /// 0xAAAA reloads the counter with the new timeout.
     pub(super) fn start(iwdg: IWDG) -> Self {
-        // SAFETY: the key values and register fields of RM0008 §19.4.1–§19.4.4.
-        iwdg.kr().write(|w| unsafe { w.bits(0xCCCC) });
-        iwdg.kr().write(|w| unsafe { w.bits(0x5555) });
-        iwdg.pr().write(|w| unsafe { w.bits(IWDG_PR_DIV32) });
-        iwdg.rlr().write(|w| unsafe { w.bits(IWDG_RELOAD) });
+        // The key values and register fields of RM0008 §19.4.1–§19.4.4:
+        // KR 0xCCCC (start), 0x5555 (unlock); PR = 011 (LSI / 32); RLR.
+        iwdg.kr().write(|w| w.key().start());
+        iwdg.kr().write(|w| w.key().unlock());
+        iwdg.pr().write(|w| w.pr().divide_by32());
+        iwdg.rlr().write(|w| w.rl().set(IWDG_RELOAD));
+        // SR (§19.4.4): PVU or RVU set while the update is on its way.
+        let updating = || {
+            let sr = iwdg.sr().read();
+            sr.pvu().bit_is_set() || sr.rvu().bit_is_set()
+        };
         let mut polls = 0;
-        while iwdg.sr().read().bits() & 0b11 != 0 {
+        while updating() {
             polls += 1;
             if polls >= IWDG_UPDATE_POLLS {
                 // The LSI does not run: the watchdog cannot either. Said
@@ -45,13 +49,13 @@ impl Watchdog {
                 break;
             }
         }
-        iwdg.kr().write(|w| unsafe { w.bits(0xAAAA) });
+        iwdg.kr().write(|w| w.key().feed());
         Self { iwdg }
     }
 
     /// Reloads the watchdog counter.
     pub fn feed(&mut self) {
-        // SAFETY: 0xAAAA is the reload key (RM0008 §19.4.1 IWDG_KR).
-        self.iwdg.kr().write(|w| unsafe { w.bits(0xAAAA) });
+        // KR 0xAAAA, the reload key (RM0008 §19.4.1 IWDG_KR).
+        self.iwdg.kr().write(|w| w.key().feed());
     }
 }

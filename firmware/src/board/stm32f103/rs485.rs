@@ -36,12 +36,6 @@ pub struct DriveLine {
     pub(super) silent_us: u32,
 }
 
-/// USART_SR / USART_CR1 bits (RM0008 §27.6.1, §27.6.4).
-pub(super) const SR_RXNE: u16 = 1 << 5;
-pub(super) const SR_TC: u16 = 1 << 6;
-pub(super) const SR_TXE: u16 = 1 << 7;
-pub(super) const CR1_TCIE: u16 = 1 << 6;
-pub(super) const CR1_TXEIE: u16 = 1 << 7;
 /// USART2's clock: PCLK1 = 36 MHz.
 pub(super) const PCLK1_HZ: u32 = 36_000_000;
 
@@ -59,10 +53,14 @@ impl DriveLine {
     pub fn set_baud(&mut self, baud: u32) {
         let brr = PCLK1_HZ.saturating_add(baud / 2) / baud.max(1);
         self.silent_us = drive_link::timing::silent_interval_us(baud).unwrap_or(4_011);
-        // SAFETY: any 16-bit value is a valid BRR.
-        Self::regs()
-            .brr()
-            .write(|w| unsafe { w.bits(u16::try_from(brr).unwrap_or(u16::MAX)) });
+        // BRR (§27.6.3): DIV_Mantissa in bits 15:4, DIV_Fraction in 3:0.
+        let brr = u16::try_from(brr).unwrap_or(u16::MAX);
+        Self::regs().brr().write(|w| {
+            w.div_mantissa()
+                .set(brr >> 4)
+                .div_fraction()
+                .set((brr & 0xF) as u8)
+        });
         self.usart_rx.listen();
     }
 
@@ -79,11 +77,9 @@ impl DriveLine {
         // DE high before the first bit: the byte is written only by the
         // TXE interrupt this enables.
         self.de.set_high();
-        // SAFETY: setting TXEIE in CR1 (read-modify-write from priority 3,
-        // the only task that touches CR1 after `init`).
-        Self::regs()
-            .cr1()
-            .modify(|r, w| unsafe { w.bits(r.bits() | CR1_TXEIE) });
+        // CR1 (§27.6.4) TXEIE set (read-modify-write from priority 3, the
+        // only task that touches CR1 after `init`).
+        Self::regs().cr1().modify(|_, w| w.txeie().set_bit());
     }
 
     /// The request's last stop bit has left (TC; DE is low): its time, once.
@@ -112,11 +108,12 @@ impl DriveLine {
     /// USART2's interrupt.
     pub fn on_interrupt(&mut self, now_us: u64) {
         let r = Self::regs();
-        let sr = r.sr().read().bits();
-        let cr1 = r.cr1().read().bits();
-        if sr & SR_RXNE != 0 {
+        // SR (§27.6.1) and CR1 (§27.6.4).
+        let sr = r.sr().read();
+        let cr1 = r.cr1().read();
+        if sr.rxne().bit_is_set() {
             // Reading DR after SR clears RXNE and the error flags.
-            let byte = r.dr().read().bits() as u8;
+            let byte = r.dr().read().dr().bits() as u8;
             if !self.sending {
                 if let Some(slot) = self.rx.get_mut(usize::from(self.rx_len)) {
                     *slot = byte;
@@ -125,25 +122,22 @@ impl DriveLine {
                 self.rx_last_us = now_us;
             }
         }
-        if cr1 & CR1_TXEIE != 0 && sr & SR_TXE != 0 {
+        if cr1.txeie().bit_is_set() && sr.txe().bit_is_set() {
             match self.out.get(usize::from(self.out_pos)) {
                 Some(&b) if self.out_pos < self.out_len => {
-                    // SAFETY: a byte into DR (clears TC after the SR read).
-                    r.dr().write(|w| unsafe { w.bits(u16::from(b)) });
+                    // A byte into DR (clears TC after the SR read).
+                    r.dr().write(|w| w.dr().set(u16::from(b)));
                     self.out_pos += 1;
                 }
                 _ => {
                     // All bytes are in: wait for TC, not TXE.
-                    // SAFETY: CR1 bits of this USART only.
                     r.cr1()
-                        .modify(|r, w| unsafe { w.bits((r.bits() & !CR1_TXEIE) | CR1_TCIE) });
+                        .modify(|_, w| w.txeie().clear_bit().tcie().set_bit());
                 }
             }
-        } else if cr1 & CR1_TCIE != 0 && sr & SR_TC != 0 {
+        } else if cr1.tcie().bit_is_set() && sr.tc().bit_is_set() {
             self.de.set_low();
-            // SAFETY: CR1 bits of this USART only.
-            r.cr1()
-                .modify(|r, w| unsafe { w.bits(r.bits() & !CR1_TCIE) });
+            r.cr1().modify(|_, w| w.tcie().clear_bit());
             self.sending = false;
             self.sent_at = Some(now_us);
         }

@@ -27,8 +27,30 @@ impl HallCapture {
             .write(|w| w.cc1s().ti1().ic1f().fdts_div32_n8());
         tim2.ccer().write(|w| w.cc1e().set_bit().cc1p().set_bit());
         tim2.egr().write(|w| w.ug().set_bit());
-        // SAFETY: SR (§15.4.5) is rc_w0: zeros clear every flag.
-        tim2.sr().write(|w| unsafe { w.bits(0) });
+        // SR (§15.4.5) is rc_w0: zeros clear every flag (the register
+        // written is 0, as from reset).
+        tim2.sr().write(|w| {
+            w.uif()
+                .clear()
+                .cc1if()
+                .clear()
+                .cc2if()
+                .clear()
+                .cc3if()
+                .clear()
+                .cc4if()
+                .clear()
+                .tif()
+                .clear()
+                .cc1of()
+                .clear()
+                .cc2of()
+                .clear()
+                .cc3of()
+                .clear()
+                .cc4of()
+                .clear()
+        });
         tim2.dier().write(|w| w.cc1ie().set_bit().uie().set_bit());
         tim2.cr1().write(|w| w.cen().set_bit());
         Self {
@@ -59,21 +81,27 @@ impl HallCapture {
     /// (its interrupt is already pending) is marked too — one window too
     /// many discarded rather than one measured wrong.
     pub fn on_interrupt(&mut self) -> Option<crate::board::HallEdge> {
-        let sr = self.tim2.sr().read().bits();
-        let ccr = (sr & SR_CC1IF != 0).then(|| self.tim2.ccr1().read().bits() as u16);
-        let sr = self.tim2.sr().read().bits();
-        let counter = self.tim2.cnt().read().bits() as u16;
-        let overflowed = sr & SR_UIF != 0;
-        let lost = sr & SR_CC1OF != 0;
-        let clear = if sr & SR_CC1IF == 0 {
-            sr & (SR_UIF | SR_CC1OF)
-        } else {
-            sr & SR_UIF
-        };
-        if clear != 0 {
-            // SAFETY: rc_w0 flags: 0 clears exactly the flags seen, 1 leaves
-            // the others (CC1IF included) untouched.
-            self.tim2.sr().write(|w| unsafe { w.bits(!clear & 0xFFFF) });
+        let captured = self.tim2.sr().read().cc1if().bit_is_set();
+        let ccr = captured.then(|| self.tim2.ccr1().read().ccr().bits());
+        let sr = self.tim2.sr().read();
+        let counter = self.tim2.cnt().read().cnt().bits();
+        let overflowed = sr.uif().bit_is_set();
+        let lost = sr.cc1of().bit_is_set();
+        let clear_lost = lost && sr.cc1if().bit_is_clear();
+        if overflowed || clear_lost {
+            // rc_w0 flags: the writer starts with every flag written 1
+            // (left untouched, CC1IF included); only the flags seen are
+            // written 0, which clears exactly them. (The reserved bits are
+            // written 0, as RM0008 asks.)
+            self.tim2.sr().write(|w| {
+                if overflowed {
+                    w.uif().clear();
+                }
+                if clear_lost {
+                    w.cc1of().clear();
+                }
+                w
+            });
         }
         let edge = ccr.map(|ccr| crate::board::HallEdge {
             stamp: self.extender.extend_at(ccr, overflowed, counter).0,
@@ -88,9 +116,9 @@ impl HallCapture {
     /// The capture timer's time, 1 MHz, extended to 32 bits: the counter
     /// read between two reads of UIF (`CaptureExtender::now_between`).
     pub fn now(&self) -> u32 {
-        let before = self.tim2.sr().read().bits() & SR_UIF != 0;
-        let counter = self.tim2.cnt().read().bits() as u16;
-        let after = self.tim2.sr().read().bits() & SR_UIF != 0;
+        let before = self.tim2.sr().read().uif().bit_is_set();
+        let counter = self.tim2.cnt().read().cnt().bits();
+        let after = self.tim2.sr().read().uif().bit_is_set();
         self.extender.now_between(before, counter, after).0
     }
 }

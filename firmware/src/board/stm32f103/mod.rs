@@ -28,8 +28,8 @@
 //! (TIM1 CH1), `steppers` (profile B's step timers), `hall_capture`
 //! (TIM2 CH1), `encoder` (TIM3), `rs485` (USART2 and DE),
 //! `watchdog` (IWDG), `settings_flash`, `pins` (stop input, work
-//! switch, LED), `outputs` (the outputs' safe states); `timer_regs`
-//! holds the timer bits that the writes without a typed PAC writer use.
+//! switch, LED), `outputs` (the outputs' safe states). Registers are
+//! written through the PAC's field writers.
 //! This module wires them up in `init`.
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
@@ -57,7 +57,6 @@ mod rs485;
 mod settings_flash;
 mod steppers;
 mod system;
-mod timer_regs;
 mod watchdog;
 pub use clocks::*;
 pub use drum_pwm::*;
@@ -69,7 +68,6 @@ pub use rs485::*;
 pub use settings_flash::*;
 pub use steppers::*;
 use system::*;
-use timer_regs::*;
 pub use watchdog::*;
 
 use super::{

@@ -14,7 +14,7 @@ pub fn stop_outputs() {
     // only when the stop latch allows it (under the same lock).
     unsafe {
         let gpiob = &*pac::GPIOB::ptr();
-        gpiob.bsrr().write(|w| w.bits(1 << (12 + 16)));
+        gpiob.bsrr().write(|w| w.br12().set_bit());
         let tim1 = &*TIM1::ptr();
         tim1.ccr1().write(|w| w.ccr().set(0));
         tim1.egr().write(|w| w.ug().set_bit());
@@ -26,13 +26,7 @@ pub fn stop_outputs() {
     }
 }
 
-/// GPIOx_CRL/CRH nibble (RM0008 §9.2.1, §9.2.2) for a general-purpose
-/// push-pull output at 2 MHz: CNF = 00, MODE = 10.
-pub(super) const GPIO_OUT_PP_2MHZ: u32 = 0b0010;
-/// RCC_APB2ENR IOPAEN (bit 2) and IOPBEN (bit 3) (RM0008 §7.3.7).
-pub(super) const APB2ENR_IOPA_IOPB: u32 = (1 << 2) | (1 << 3);
-
-/// Drives the outputs to their safe state at once, with raw register writes
+/// Drives the outputs to their safe state at once, with direct register writes
 /// and no stack of its own to speak of, from any context (boot before the
 /// clocks, panic, HardFault after a stack overflow, NMI, an unexpected
 /// interrupt):
@@ -64,33 +58,38 @@ pub fn safe_state() {
     // never returns to the application or runs before it exists (boot).
     unsafe {
         let rcc = &*pac::RCC::ptr();
+        // RCC_APB2ENR (§7.3.7): IOPAEN, IOPBEN.
         rcc.apb2enr()
-            .modify(|r, w| w.bits(r.bits() | APB2ENR_IOPA_IOPB));
+            .modify(|_, w| w.iopaen().set_bit().iopben().set_bit());
         let gpioa = &*pac::GPIOA::ptr();
         let gpiob = &*pac::GPIOB::ptr();
-        gpioa.brr().write(|w| w.bits((1 << 8) | (1 << 1)));
-        gpiob.brr().write(|w| w.bits((1 << 12) | (1 << 6)));
+        gpioa.brr().write(|w| w.br8().set_bit().br1().set_bit());
+        gpiob.brr().write(|w| w.br12().set_bit().br6().set_bit());
+        // CRL/CRH nibbles: CNF = 00 (general-purpose push-pull), MODE = 10
+        // (output, 2 MHz).
         gpioa
             .crh()
-            .modify(|r, w| w.bits((r.bits() & !0xF) | GPIO_OUT_PP_2MHZ));
+            .modify(|_, w| w.mode8().output2().cnf8().push_pull());
         gpioa
             .crl()
-            .modify(|r, w| w.bits((r.bits() & !(0xF << 4)) | (GPIO_OUT_PP_2MHZ << 4)));
+            .modify(|_, w| w.mode1().output2().cnf1().push_pull());
         gpiob
             .crh()
-            .modify(|r, w| w.bits((r.bits() & !(0xF << 16)) | (GPIO_OUT_PP_2MHZ << 16)));
+            .modify(|_, w| w.mode12().output2().cnf12().push_pull());
         gpiob
             .crl()
-            .modify(|r, w| w.bits((r.bits() & !(0xF << 24)) | (GPIO_OUT_PP_2MHZ << 24)));
+            .modify(|_, w| w.mode6().output2().cnf6().push_pull());
+        // CCMR1: OC1M = 100 (forced inactive), OC1PE = 1; BDTR: OSSR =
+        // OSSI = 1, MOE = 0 (the whole register written: no break, no lock).
         let tim1 = &*TIM1::ptr();
         tim1.ccmr1_output()
-            .write(|w| w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE));
+            .write(|w| w.oc1m().force_inactive().oc1pe().enabled());
         tim1.ccr1().write(|w| w.ccr().set(0));
-        tim1.bdtr().write(|w| w.bits(BDTR_OSSR_OSSI));
+        tim1.bdtr().write(|w| w.ossr().set_bit().ossi().set_bit());
         {
             let tim4 = &*pac::TIM4::ptr();
             tim4.ccmr1_output()
-                .write(|w| w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE));
+                .write(|w| w.oc1m().force_inactive().oc1pe().enabled());
             tim4.ccr1().write(|w| w.ccr().set(0));
         }
     }
@@ -101,5 +100,5 @@ pub fn safe_state() {
 /// while it is low.
 pub fn drivers_enabled() -> bool {
     // SAFETY: a read of GPIOB_ODR, no side effect.
-    unsafe { (*pac::GPIOB::ptr()).odr().read().bits() & (1 << 12) != 0 }
+    unsafe { (*pac::GPIOB::ptr()).odr().read().odr12().bit_is_set() }
 }

@@ -39,30 +39,30 @@ macro_rules! set_step_rate {
         let tim = &$tim;
         match step_timing($rate_bits) {
             Some((psc, arr)) => {
-                let mode = tim.ccmr1_output().read().bits() & CCMR1_OC1M_MASK;
-                // SAFETY: register values from RM0008 §15.4 (see above); the
-                // timer is owned by the caller.
-                unsafe {
-                    if mode == CCMR1_OC1M_PWM1 {
-                        tim.cr1().write(|w| w.bits(CR1_ARPE | CR1_UDIS | CR1_CEN));
-                        tim.psc().write(|w| w.psc().set(psc));
-                        tim.arr().write(|w| w.arr().set(arr));
-                        tim.ccr1().write(|w| w.ccr().set(arr / 2 + 1));
-                        tim.cr1().write(|w| w.bits(CR1_ARPE | CR1_CEN));
-                    } else {
-                        tim.psc().write(|w| w.psc().set(psc));
-                        tim.arr().write(|w| w.arr().set(arr));
-                        tim.ccr1().write(|w| w.ccr().set(arr / 2 + 1));
-                        tim.ccmr1_output()
-                            .write(|w| w.bits(CCMR1_OC1M_PWM1 | CCMR1_OC1PE));
-                        tim.egr().write(|w| w.bits(EGR_UG));
-                    }
+                // Register fields from RM0008 §15.4 (see above); the timer is
+                // owned by the caller.
+                if tim.ccmr1_output().read().oc1m().is_pwm_mode1() {
+                    // CR1 (§15.4.1): ARPE, UDIS, CEN.
+                    tim.cr1()
+                        .write(|w| w.arpe().set_bit().udis().set_bit().cen().set_bit());
+                    tim.psc().write(|w| w.psc().set(psc));
+                    tim.arr().write(|w| w.arr().set(arr));
+                    tim.ccr1().write(|w| w.ccr().set(arr / 2 + 1));
+                    tim.cr1().write(|w| w.arpe().set_bit().cen().set_bit());
+                } else {
+                    tim.psc().write(|w| w.psc().set(psc));
+                    tim.arr().write(|w| w.arr().set(arr));
+                    tim.ccr1().write(|w| w.ccr().set(arr / 2 + 1));
+                    // CCMR1 (§15.4.7): OC1M = 110 (PWM mode 1), OC1PE = 1.
+                    tim.ccmr1_output()
+                        .write(|w| w.oc1m().pwm_mode1().oc1pe().enabled());
+                    tim.egr().write(|w| w.ug().set_bit());
                 }
             }
             None => {
-                // SAFETY: as above.
+                // CCMR1: OC1M = 100 (forced inactive), OC1PE = 1.
                 tim.ccmr1_output()
-                    .write(|w| unsafe { w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE) });
+                    .write(|w| w.oc1m().force_inactive().oc1pe().enabled());
             }
         }
     }};
@@ -106,8 +106,7 @@ impl FeedStep {
     ) -> Self {
         feed_dir.set_low();
         plant_dir.set_low();
-        // SAFETY: raw register values from RM0008 §15.4; TIM4 is owned by
-        // this struct. ARR (§15.4.12) must be non-zero before the update and
+        // Register fields from RM0008 §15.4; TIM4 is owned by this struct. ARR (§15.4.12) must be non-zero before the update and
         // the counter start: "the counter is blocked while the auto-reload
         // value is null", and with it every later preload (PSC, ARR, CCR1)
         // would wait for an update that never comes. The idle values (PSC 0,
@@ -117,12 +116,12 @@ impl FeedStep {
         tim.ccr1().write(|w| w.ccr().set(0));
         // CCMR1 (§15.4.7): OC1M = 100 (forced inactive: no pulses), OC1PE = 1.
         tim.ccmr1_output()
-            .write(|w| unsafe { w.bits(CCMR1_OC1M_FORCE_INACTIVE | CCMR1_OC1PE) });
+            .write(|w| w.oc1m().force_inactive().oc1pe().enabled());
         // CCER (§15.4.9): CC1E = 1, active high.
-        tim.ccer().write(|w| unsafe { w.bits(CCER_CC1E) });
+        tim.ccer().write(|w| w.cc1e().set_bit());
         // EGR UG (§15.4.6), then CR1 (§15.4.1): ARPE = 1, CEN = 1.
-        tim.egr().write(|w| unsafe { w.bits(EGR_UG) });
-        tim.cr1().write(|w| unsafe { w.bits(CR1_ARPE | CR1_CEN) });
+        tim.egr().write(|w| w.ug().set_bit());
+        tim.cr1().write(|w| w.arpe().set_bit().cen().set_bit());
         Self {
             tim,
             _feed_dir: feed_dir,

@@ -13,9 +13,9 @@ const TRUTH_MAX_FRAMES: usize = 3;
 pub(super) struct DriveSim {
     /// The truth FIFO (semihosting handle).
     pub(super) truth: usize,
-    /// Replies from the gate, to [`DriveLine`].
+    /// Replies from the gate, to [`DriveLine`](super::DriveLine).
     pub(super) rx_in: heapless::spsc::Producer<'static, DriveFrame>,
-    /// Request end times from [`DriveLine`].
+    /// Request end times from [`DriveLine`](super::DriveLine).
     pub(super) tx_ends: heapless::spsc::Consumer<'static, u32>,
     /// The driver's state from the last gate record: bit 0 its motor is
     /// enabled (control word, no fault), bit 1 it runs on its bus speed

@@ -13,7 +13,7 @@ pub(super) type GateQueue = heapless::spsc::Queue<u8, { GATE_BYTES + 1 }>;
 
 /// Receive half of the touchscreen UART. In lock-step the screen's bytes
 /// come through the gate at the start of a control period (see
-/// [`Sensors::sample`]) and are read here first, through the same USART1
+/// [`Sensors::sample`](super::Sensors::sample)) and are read here first, through the same USART1
 /// interrupt task; otherwise from the emulated USART1.
 pub struct HmiRx {
     pub(super) uart: usart1::Rx,

@@ -6,7 +6,7 @@ use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
 /// Stand-in for TIM2's counter, extended to 32 bits (1 MHz).
 pub(super) static HALL_TIMER_NOW: AtomicU32 = AtomicU32::new(0);
 
-/// Hall capture: edges come from [`Sensors::sample`] on this board.
+/// Hall capture: edges come from [`Sensors::sample`](super::Sensors::sample) on this board.
 pub struct HallCapture;
 
 impl HallCapture {

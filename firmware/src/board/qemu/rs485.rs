@@ -22,7 +22,7 @@ pub struct DriveFrame {
 pub(super) type DriveRxQueue = heapless::spsc::Queue<DriveFrame, 4>;
 
 /// When each request frame's last bit left (firmware µs), for the truth
-/// record (see [`Sensors::sample`]): at most two requests fit in a 10 ms
+/// record (see [`Sensors::sample`](super::Sensors::sample)): at most two requests fit in a 10 ms
 /// period at 115 200 baud.
 pub(super) type DriveTxQueue = heapless::spsc::Queue<u32, 4>;
 

@@ -6,7 +6,7 @@
 pub(super) struct CmdLine {
     pub(super) run_ms: Option<u32>,
     pub(super) scenario: Scenario,
-    /// `gate=PATH`: the lock-step gate (see [`Sensors::sample`]).
+    /// `gate=PATH`: the lock-step gate (see [`Sensors::sample`](super::Sensors::sample)).
     pub(super) gate: [u8; GATE_PATH_MAX],
     pub(super) gate_len: usize,
 }
@@ -53,7 +53,7 @@ pub(super) struct Scenario {
     /// Stop-and-go period, ms (`stopgo=MS`).
     pub(super) stop_go_ms: Option<u32>,
     /// The host runs a virtual drum driver on USART2 (`drive_link=1`,
-    /// lock-step only): see [`Sensors::sample`].
+    /// lock-step only): see [`Sensors::sample`](super::Sensors::sample).
     pub(super) drive_link: bool,
     pub(super) stall: Option<u32>,
     pub(super) hall_loss: Option<u32>,
@@ -87,7 +87,7 @@ pub(super) struct Scenario {
     /// No slip variation (`slip_noise=0`).
     pub(super) no_slip_noise: bool,
     /// Run the stack off the bottom of RAM at this time
-    /// (`stack_overflow=T`, the test of [`stack_guard`]).
+    /// (`stack_overflow=T`, the test of [`stack_guard`](super::stack_guard)).
     pub(super) stack_overflow: Option<u32>,
 }
 

@@ -32,7 +32,7 @@ pub struct Sensors {
     pub(super) work_fired: u8,
     /// The lock-step gate: a host FIFO read once per control period.
     pub(super) gate: Option<usize>,
-    /// Screen bytes from the gate, to [`HmiRx`].
+    /// Screen bytes from the gate, to [`HmiRx`](super::HmiRx).
     pub(super) gate_in: heapless::spsc::Producer<'static, u8>,
     /// The host's virtual drum driver (`drive_link=1`), in a static.
     pub(super) drive: Option<&'static mut DriveSim>,

@@ -49,7 +49,7 @@ pub fn workspace_root() -> PathBuf {
 
 /// The QEMU machine the QEMU board runs on: QEMU's STM32F205 model (128 KB
 /// of SRAM, of which the board uses the real board's 20 KB;
-/// `firmware/src/board/qemu.rs`).
+/// `firmware/src/board/qemu/mod.rs`).
 pub const QEMU_MACHINE: &str = "netduino2";
 
 /// The QEMU board's cargo features (both machines and the drum driver's
@@ -93,7 +93,7 @@ pub struct BootOptions {
     /// survives a reboot of the emulated board.
     pub flash: Option<PathBuf>,
     /// Scenario words for the simulated machine (`gear=2`, `stall=3000`, …;
-    /// see `firmware/src/board/qemu.rs`).
+    /// see `firmware/src/board/qemu/scenario.rs`).
     pub scenario: Vec<String>,
     /// Run in QEMU's instruction-counting mode with idle time skipped
     /// (`-icount shift=0,sleep=off`): deterministic and faster than real

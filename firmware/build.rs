@@ -6,12 +6,6 @@ fn main() -> Result<(), String> {
     let qemu = env::var_os("CARGO_FEATURE_BOARD_QEMU").is_some();
     let stm32 = env::var_os("CARGO_FEATURE_BOARD_STM32F103").is_some();
     let memory = match (stm32, qemu) {
-        // The image with the drum driver's link keeps its settings in the
-        // last 8 KB of the 128 KB parts; the others keep theirs at
-        // 0x0800E000 with code on both sides (docs/drive-link.md, "Images").
-        (true, false) if env::var_os("CARGO_FEATURE_DRIVE_LINK").is_some() => {
-            "memory-stm32f103-128k.x"
-        }
         (true, false) => "memory-stm32f103.x",
         (false, true) => "memory-qemu.x",
         (true, true) => {
@@ -26,7 +20,6 @@ fn main() -> Result<(), String> {
     fs::copy(memory, out.join("memory.x")).map_err(|e| format!("copy {memory}: {e}"))?;
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=memory-stm32f103.x");
-    println!("cargo:rerun-if-changed=memory-stm32f103-128k.x");
     println!("cargo:rerun-if-changed=memory-qemu.x");
     println!("cargo:rerun-if-changed=build.rs");
     Ok(())

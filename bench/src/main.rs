@@ -113,7 +113,7 @@ fn lut_cost(name: &str, inputs: &[(I16F16, I16F16); INPUTS], baseline: u32) {
 enum Slot {
     Empty,
     Lut(fuzzy_pid::LutController),
-    Supervisor(supervisor::control::Supervisor),
+    Supervisor(supervisor::drum::Supervisor),
 }
 
 /// Builds the lookup-table controller into `slot` (a frame of its own).
@@ -142,8 +142,8 @@ fn lut_step_cost(slot: &mut Slot, inputs: &[(I16F16, I16F16); INPUTS], baseline:
 /// Builds the product's supervisor into `slot` (a frame of its own).
 #[inline(never)]
 fn fill(slot: &mut Slot) {
-    *slot = supervisor::control::Supervisor::new(
-        supervisor::control::Hardware::BOARD,
+    *slot = supervisor::drum::Supervisor::new(
+        supervisor::drum::Hardware::BOARD,
         supervisor::settings::Settings::default(),
     )
     .map_or(Slot::Empty, Slot::Supervisor);

@@ -58,7 +58,7 @@ pub fn lock() -> io::Result<BuildLock> {
 }
 
 /// The release build of the firmware with `features_args` (for example
-/// `["--no-default-features", "--features", "board-qemu,profile-a"]`), in
+/// `["--no-default-features", "--features", "board-qemu"]`), in
 /// [`target_dir`]; run it while holding [`lock`], then [`keep`] the ELF.
 pub fn build_command(features_args: &[&str]) -> Command {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());

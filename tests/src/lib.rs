@@ -49,89 +49,36 @@ pub fn workspace_root() -> PathBuf {
 
 /// The QEMU machine the QEMU board runs on: QEMU's STM32F205 model (128 KB
 /// of SRAM, of which the board uses the real board's 20 KB;
-/// `firmware/src/board/qemu.rs`).
+/// `firmware/src/board/qemu/mod.rs`).
 pub const QEMU_MACHINE: &str = "netduino2";
 
-/// The QEMU board's cargo features: the board and both machines (the real
-/// board takes one image per machine).
-pub const QEMU_FEATURES: &str = "board-qemu,profile-a,profile-b";
+/// The QEMU board's cargo features (both machines and the drum driver's
+/// link, as on the real board: the settings choose).
+pub const QEMU_FEATURES: &str = "board-qemu";
 
-/// A QEMU board image: which machines it carries.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Image {
-    /// Both machines: the image every QEMU test runs unless it says
-    /// otherwise.
-    BothMachines,
-    /// Profile A only, like the real board's default image.
-    ProfileAOnly,
-    /// Profile B only, like the real board's profile B image.
-    ProfileBOnly,
-    /// Profile A with the drum driver's link (feature `drive-link`), for
-    /// the virtual driver on USART2 ([`drive`]).
-    DriveLink,
-}
+/// The name the QEMU board's ELF is kept under
+/// (`target/images/<name>/firmware`, [`images`]).
+pub const QEMU_IMAGE: &str = "qemu";
 
-impl Image {
-    /// The firmware's cargo features for this image.
-    pub fn features(self) -> &'static str {
-        match self {
-            Image::BothMachines => QEMU_FEATURES,
-            Image::ProfileAOnly => "board-qemu,profile-a",
-            Image::ProfileBOnly => "board-qemu,profile-b",
-            Image::DriveLink => "board-qemu,profile-a,drive-link",
-        }
-    }
-
-    /// The name its ELF is kept under (`target/images/<name>/firmware`,
-    /// [`images`]).
-    pub fn name(self) -> &'static str {
-        match self {
-            Image::BothMachines => "qemu",
-            Image::ProfileAOnly => "qemu-a",
-            Image::ProfileBOnly => "qemu-b",
-            Image::DriveLink => "qemu-dl",
-        }
-    }
-
-    /// Builds this image (release) once per process and returns the ELF
-    /// path. `FIRMWARE_QEMU_ELF` overrides the build of
-    /// [`Image::BothMachines`] (used by `cargo xtask test`, which has just
-    /// built it).
-    pub fn elf(self) -> io::Result<PathBuf> {
-        static BUILT: [OnceLock<Result<PathBuf, String>>; 4] = [
-            OnceLock::new(),
-            OnceLock::new(),
-            OnceLock::new(),
-            OnceLock::new(),
-        ];
-        let (slot, override_var) = match self {
-            Image::BothMachines => (&BUILT[0], std::env::var_os("FIRMWARE_QEMU_ELF")),
-            Image::ProfileAOnly => (&BUILT[1], None),
-            Image::ProfileBOnly => (&BUILT[2], None),
-            Image::DriveLink => (&BUILT[3], None),
-        };
-        if let Some(elf) = override_var {
-            return Ok(PathBuf::from(elf));
-        }
-        slot.get_or_init(|| self.build().map_err(|e| e.to_string()))
-            .clone()
-            .map_err(io::Error::other)
-    }
-
-    /// Builds this image (release, in the one firmware target directory,
-    /// [`images`]) and returns the kept ELF's path.
-    pub fn build(self) -> io::Result<PathBuf> {
-        images::build(
-            self.name(),
-            &["--no-default-features", "--features", self.features()],
-        )
-    }
-}
-
-/// Builds the QEMU board with both machines (release) once per process and
-/// returns the ELF path ([`Image::elf`] of [`Image::BothMachines`]).
+/// Builds the QEMU board (release, in the one firmware target directory,
+/// [`images`]) once per process and returns the ELF path.
+/// `FIRMWARE_QEMU_ELF` names a prebuilt ELF instead (used by `cargo xtask
+/// test`, which has just built it).
 pub fn qemu_firmware_elf() -> io::Result<PathBuf> {
-    Image::BothMachines.elf()
+    static BUILT: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    if let Some(elf) = std::env::var_os("FIRMWARE_QEMU_ELF") {
+        return Ok(PathBuf::from(elf));
+    }
+    BUILT
+        .get_or_init(|| {
+            images::build(
+                QEMU_IMAGE,
+                &["--no-default-features", "--features", QEMU_FEATURES],
+            )
+            .map_err(|e| e.to_string())
+        })
+        .clone()
+        .map_err(io::Error::other)
 }
 
 /// How to start the emulation.
@@ -146,7 +93,7 @@ pub struct BootOptions {
     /// survives a reboot of the emulated board.
     pub flash: Option<PathBuf>,
     /// Scenario words for the simulated machine (`gear=2`, `stall=3000`, …;
-    /// see `firmware/src/board/qemu.rs`).
+    /// see `firmware/src/board/qemu/scenario.rs`).
     pub scenario: Vec<String>,
     /// Run in QEMU's instruction-counting mode with idle time skipped
     /// (`-icount shift=0,sleep=off`): deterministic and faster than real
@@ -916,12 +863,7 @@ impl Bench {
     /// Boots the firmware and powers up the screen (it sends its start-up
     /// and ready frames, as a real Nextion does).
     pub fn boot(options: &BootOptions) -> io::Result<Self> {
-        Self::boot_image(Image::BothMachines, options)
-    }
-
-    /// [`Bench::boot`] with another image.
-    pub fn boot_image(image: Image, options: &BootOptions) -> io::Result<Self> {
-        let elf = image.elf()?;
+        let elf = qemu_firmware_elf()?;
         let fw = Firmware::boot(&elf, options)?;
         let mut screen = hmi_proto::virtual_screen::VirtualScreen::with_contract();
         screen.boot();

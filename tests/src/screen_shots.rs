@@ -66,7 +66,7 @@ pub fn adaptive_run(monitored_kmh: f64) -> (f64, f64, Option<String>) {
             ..
         }) => {
             let mut text = String::new();
-            let alarm = supervisor::control::Alarm::TooFast {
+            let alarm = supervisor::drum::Alarm::TooFast {
                 max_kmh_x100: u16::try_from(max_travel_speed.to_milli() / 10).unwrap_or(u16::MAX),
             };
             let _ = alarm.write_text(&mut text);
@@ -123,7 +123,7 @@ fn message(page: Page) -> Option<String> {
         Page::Adaptive => adaptive_run(monitored_kmh(0.0)).2,
         Page::Settings => Some("Settings saved".into()),
         Page::BeltParameters => Some("Spacing X must be 10.0-100.0 cm".into()),
-        Page::Drive => Some(supervisor::control::IDENTIFY_MESSAGE.into()),
+        Page::Drive => Some(supervisor::drum::IDENTIFY_MESSAGE.into()),
         _ => None,
     }
 }
@@ -131,7 +131,7 @@ fn message(page: Page) -> Option<String> {
 /// The alarm page's text: the firmware's stall alarm.
 fn alarm_text() -> String {
     let mut text = String::new();
-    let _ = supervisor::control::Alarm::DrumStall.write_text(&mut text);
+    let _ = supervisor::drum::Alarm::DrumStall.write_text(&mut text);
     text
 }
 

@@ -1,4 +1,4 @@
-//! Issue 17 in QEMU: the drum driver's RS-485 link (docs/drive-link.md).
+//! The drum driver's RS-485 link in QEMU (docs/drive-link.md).
 //!
 //! The QEMU board's USART2 talks to a virtual ZLAC8015D on the host
 //! (`qemu_tests::drive`), which reads the simulated drum's true speed
@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use machine_sim::reference::eq7_drum_speed;
-use qemu_tests::{log_time_ms, sim_samples, Bench, BootOptions, Image, SimSample};
+use qemu_tests::{log_time_ms, sim_samples, Bench, BootOptions, SimSample};
 use supervisor::drive_link::{CommandPath, DriveLinkSettings, DriverKind, FeedbackSource};
 use supervisor::settings::Settings;
 
@@ -58,7 +58,7 @@ fn boot(name: &str, s: &Settings, baud: u32, scenario: &[&str], run_ms: u32) -> 
         echo_logs: std::env::var_os("ECHO").is_some(),
         ..BootOptions::default()
     };
-    let mut bench = Bench::boot_image(Image::DriveLink, &options).expect("boot QEMU");
+    let mut bench = Bench::boot(&options).expect("boot QEMU");
     assert!(
         bench
             .pump_until(Duration::from_secs(10), |s| s.page() == 1)
@@ -434,67 +434,4 @@ fn crc_errors_and_late_replies_are_survived() {
     );
     let last = sim_samples(&logs).last().copied().unwrap();
     assert!(last.ccr > 0 && last.drum_rpm > 20.0, "{last:?}");
-}
-
-/// An image without the link (`Image::ProfileAOnly`, like the real board's
-/// default) booting on saved settings that name the driver's read-back as
-/// the feedback: it says so on the screen and in the log, runs the drum on
-/// its encoder (no stall alarm from a read-back that never comes) and
-/// tracks eq. 7 within 1 % like profile_a.rs's encoder test. Before the
-/// image sanitised the settings, the read-back feedback integrated nothing
-/// and the drum stalled ("alarm: DrumStall" 0.2 s after Start).
-#[test]
-fn an_image_without_the_link_runs_saved_link_settings_on_its_encoder() {
-    let s = settings(FeedbackSource::Driver, CommandPath::Pwm, 115_200);
-    let flash = flash_with("nolink", &s);
-    let options = BootOptions {
-        run_ms: Some(9_000),
-        flash: Some(flash.clone()),
-        scenario: ["gear=2", "noise=0", "tau=2500"]
-            .iter()
-            .map(|w| w.to_string())
-            .collect(),
-        echo_logs: std::env::var_os("ECHO").is_some(),
-        ..BootOptions::default()
-    };
-    let mut bench = Bench::boot_image(Image::ProfileAOnly, &options).expect("boot QEMU");
-    assert!(
-        bench
-            .pump_until(Duration::from_secs(20), |s| {
-                s.page() == 1 && s.text("tmsg") == Some("Drive link not in this image")
-            })
-            .unwrap(),
-        "no notice on the screen"
-    );
-    // Page 10 is read-only here: a value is refused with the same notice.
-    for (button, page) in [("bset", 6), ("bdrive", 9), ("blink", 10)] {
-        bench.tap(button).unwrap();
-        assert!(bench
-            .pump_until(Duration::from_secs(20), |s| s.page() == page)
-            .unwrap());
-    }
-    bench.screen.set_value("nlval", 0).unwrap();
-    bench.tap("blval").unwrap();
-    assert!(
-        bench
-            .pump_until(Duration::from_secs(20), |s| {
-                s.page() == 10 && s.text("tmsg") == Some("Drive link not in this image")
-            })
-            .unwrap(),
-        "page 10 took a value"
-    );
-    for page in [9, 6, 1] {
-        bench.tap("bback").unwrap();
-        assert!(bench
-            .pump_until(Duration::from_secs(20), |s| s.page() == page)
-            .unwrap());
-    }
-    let logs = start_adaptive_and_run(bench, 2_000, &flash);
-    assert!(logs
-        .iter()
-        .any(|l| l.contains("settings: the drive link is not in this image")));
-    assert_no_alarm(&logs);
-    let start = time_of(&logs, "drum: Running");
-    let (worst, at) = worst_tracking(&sim_samples(&logs), start + 2_000, start + 6_000);
-    assert!(worst <= 0.01, "worst {:.2} % at {at} ms", worst * 100.0);
 }

@@ -23,7 +23,9 @@ use machine_sim::SpacingAccumulator;
 use qemu_tests::browser::Browser;
 use qemu_tests::screen_shots::page_bytes;
 use qemu_tests::screen_web::ScreenServer;
-use qemu_tests::{log_time_ms, number_after, sim_samples, BootOptions, Firmware, Image};
+use qemu_tests::{
+    log_time_ms, number_after, qemu_firmware_elf, sim_samples, BootOptions, Firmware,
+};
 
 fn sel(page: u8, name: &str) -> String {
     format!("section[data-page=\"{page}\"] [data-name=\"{name}\"]")
@@ -646,7 +648,7 @@ fn true_indices(logs: &[String], from_ms: u32, spacing_m: f64) -> ([f64; 4], u32
 
 #[test]
 fn the_qemu_board_is_driven_from_the_page() {
-    let elf = Image::BothMachines.elf().unwrap();
+    let elf = qemu_firmware_elf().unwrap();
     // Real time, paced by the wall clock; the page answers when it does.
     let mut fw = Firmware::boot(
         &elf,

@@ -11,6 +11,9 @@ use std::time::Duration;
 use hmi_proto::screen::{Page, COMPONENTS};
 use qemu_tests::{log_time_ms, number_after, sim_samples, Bench, BootOptions};
 
+#[path = "support/pages.rs"]
+mod pages;
+
 /// The control period, ms (firmware/src/main.rs `CONTROL_PERIOD_MS`).
 const CONTROL_PERIOD_MS: u32 = 10;
 
@@ -265,15 +268,23 @@ fn start_is_refused_while_the_stop_input_is_open() {
 #[test]
 fn the_stop_input_stops_both_steppers_of_profile_b() {
     let open_at = 4_000;
+    // The saved settings select profile B.
+    let flash = std::env::temp_dir().join(format!("stop-profile-b-{}.bin", std::process::id()));
+    let profile_b = supervisor::settings::Settings {
+        profile: supervisor::settings::Profile::SeedlingBelt,
+        ..supervisor::settings::Settings::default()
+    };
+    std::fs::write(&flash, pages::pages_with(&profile_b)).unwrap();
     let options = BootOptions {
         run_ms: Some(7_000),
+        flash: Some(flash),
         scenario: ["profile=b", "speed=300", &format!("stop_input={open_at}")]
             .iter()
             .map(|s| s.to_string())
             .collect(),
         ..BootOptions::default()
     };
-    let mut bench = Bench::boot_image(qemu_tests::Image::ProfileBOnly, &options).unwrap();
+    let mut bench = Bench::boot(&options).unwrap();
     assert!(bench
         .pump_until(Duration::from_secs(30), |s| s.page() == Page::Belt.id())
         .unwrap());

@@ -1,13 +1,25 @@
-//! The real board's release images on the twin: both boot to the idle loop,
-//! and the registers after `init` are what RM0008 says they must be for the
+//! The real board's release image on the twin: on the settings of either
+//! machine it boots to the idle loop, and the registers after `init` are what RM0008 says they must be for the
 //! board's clock tree, pins and task priorities.
 //!
 //! Every expected value is computed here from RM0008 / PM0056 formulas and
 //! the board's documented requirements (README pin map, docs/firmware.md),
 //! not read from the firmware's constants.
 
-use twin::image::Image;
+#[path = "support/board.rs"]
+mod board;
+#[path = "support/pages.rs"]
+mod pages;
 use twin::{CoreState, Options, Twin};
+
+/// The machine the saved settings select (the one image runs both).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Machine {
+    /// No saved record: the defaults, profile A.
+    ProfileA,
+    /// A saved record naming profile B.
+    ProfileB,
+}
 
 /// The crystal on the board (README: 8 MHz HSE) and the clocks the board
 /// runs at (docs/firmware.md: SYSCLK 72 MHz, APB1 36 MHz, APB2 72 MHz).
@@ -16,20 +28,26 @@ const SYSCLK: f64 = 72e6;
 const PCLK1: f64 = 36e6;
 const PCLK2: f64 = 72e6;
 
-/// The image on a fresh twin at power-on, not run yet.
-fn load(image: Image) -> Twin {
-    let elf = image.elf().expect("build the real-board image");
+/// The image on a fresh twin at power-on, not run yet, with the settings
+/// of `image`'s machine.
+fn load(image: Machine) -> Twin {
+    let elf = twin::image::elf().expect("build the real-board image");
+    let flash = match image {
+        Machine::ProfileA => None,
+        Machine::ProfileB => Some(board::flash_with(&elf, &board::profile_b())),
+    };
     Twin::new(
         &elf,
         Options {
             decode_logs: false,
+            flash,
             ..Options::default()
         },
     )
     .expect("load the ELF")
 }
 
-fn boot(image: Image) -> Twin {
+fn boot(image: Machine) -> Twin {
     let mut twin = load(image);
     // init runs with interrupts off, then the idle loop sleeps: 50 ms is
     // ample (init is ~1 ms of work plus the 2 ms HSE start-up).
@@ -62,7 +80,7 @@ fn ipr(twin: &Twin, irq: u32) -> u32 {
     field(word, 8 * (irq % 4), 8)
 }
 
-fn check_common(twin: &mut Twin, image: Image) {
+fn check_common(twin: &mut Twin, image: Machine) {
     // Booted without a reset or fault.
     assert_eq!(twin.resets.len(), 1, "{image:?}: resets {:?}", twin.resets);
     assert_eq!(twin.peek(0xE000_ED2C), 0, "{image:?}: HFSR after boot");
@@ -292,8 +310,8 @@ fn check_tim1_pwm(twin: &Twin, carrier_hz: f64) {
 
 #[test]
 fn profile_a_boots_to_idle_with_rm0008_registers() {
-    let mut twin = boot(Image::ProfileA);
-    check_common(&mut twin, Image::ProfileA);
+    let mut twin = boot(Machine::ProfileA);
+    check_common(&mut twin, Machine::ProfileA);
     // Drum PWM carrier 20 kHz (docs/firmware.md: above hearing).
     check_tim1_pwm(&twin, 20e3);
     // TIM4 is not used by profile A: reset state (RM0008 §15.4).
@@ -310,8 +328,8 @@ fn profile_a_boots_to_idle_with_rm0008_registers() {
 
 #[test]
 fn profile_b_boots_to_idle_with_rm0008_registers() {
-    let mut twin = boot(Image::ProfileB);
-    check_common(&mut twin, Image::ProfileB);
+    let mut twin = boot(Machine::ProfileB);
+    check_common(&mut twin, Machine::ProfileB);
     // TIM4 CH1 on PB6: PWM mode 1 with preload — or, while the steppers
     // are idle, forced inactive — output enabled (RM0008 §15.4.7, §15.4.9),
     // counter enabled with ARR preload.
@@ -335,7 +353,7 @@ fn profile_b_boots_to_idle_with_rm0008_registers() {
 /// event that would load the rates written later (issue 15, item 1).
 #[test]
 fn profile_b_step_timers_are_not_blocked_after_init() {
-    let twin = boot(Image::ProfileB);
+    let twin = boot(Machine::ProfileB);
     for (name, i) in [("TIM1", 0), ("TIM4", 3)] {
         let t = &twin.state().bus.tim[i];
         assert_ne!(
@@ -355,10 +373,10 @@ fn profile_b_step_timers_are_not_blocked_after_init() {
 /// no later than the watchdog's start (the order was the other way round).
 #[test]
 fn the_outputs_are_driven_low_before_the_watchdog_starts() {
-    for image in [Image::ProfileA, Image::ProfileB] {
+    for image in [Machine::ProfileA, Machine::ProfileB] {
         let mut twin = load(image);
         let mut outputs = vec![('A', 8), ('B', 12), ('A', 1)];
-        if image == Image::ProfileB {
+        if image == Machine::ProfileB {
             outputs.push(('B', 6));
         }
         for &(port, pin) in &outputs {
@@ -418,7 +436,7 @@ fn the_outputs_are_driven_low_before_the_watchdog_starts() {
 fn the_boot_safe_state_holds_the_outputs_without_the_timer_writes_made_before_their_clocks() {
     const TIM1: u32 = 0x4001_2C00;
     const TIM4: u32 = 0x4000_0800;
-    for image in [Image::ProfileA, Image::ProfileB] {
+    for image in [Machine::ProfileA, Machine::ProfileB] {
         let mut twin = load(image);
         let started = twin
             .run_until(50, |t| t.state().bus.iwdg.started_at.is_some())
@@ -426,7 +444,7 @@ fn the_boot_safe_state_holds_the_outputs_without_the_timer_writes_made_before_th
         assert!(started, "{image:?}: the watchdog never started");
         let bus = &twin.state().bus;
         let mut timers = vec![("TIM1", 0, TIM1)];
-        if image == Image::ProfileB {
+        if image == Machine::ProfileB {
             timers.push(("TIM4", 3, TIM4));
         }
         for &(name, i, base) in &timers {
@@ -454,7 +472,7 @@ fn the_boot_safe_state_holds_the_outputs_without_the_timer_writes_made_before_th
             );
         }
         let mut outputs = vec![('A', 8), ('B', 12), ('A', 1)];
-        if image == Image::ProfileB {
+        if image == Machine::ProfileB {
             outputs.push(('B', 6));
         }
         for (port, pin) in outputs {
@@ -482,7 +500,7 @@ fn the_boot_safe_state_holds_the_outputs_without_the_timer_writes_made_before_th
 #[test]
 fn handlers_find_an_8_byte_aligned_stack_whatever_sp_the_interrupt_finds() {
     use twin::RegisterARM;
-    for image in [Image::ProfileA, Image::ProfileB] {
+    for image in [Machine::ProfileA, Machine::ProfileB] {
         let mut twin = boot(image);
         let sp = twin.reg(RegisterARM::SP);
         assert_eq!(sp % 8, 0, "{image:?}: SP in the idle loop {sp:#x}");

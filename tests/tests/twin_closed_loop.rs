@@ -11,7 +11,10 @@
 
 use kinematics::consts::Gear;
 use machine_sim::reference::eq7_drum_speed;
-use twin::image::Image;
+#[path = "support/board.rs"]
+mod board;
+#[path = "support/pages.rs"]
+mod pages;
 use twin::plant::Wiring;
 use twin::{Options, Twin, TICKS_PER_S};
 
@@ -27,7 +30,7 @@ fn number_after(line: &str, key: &str) -> Option<f64> {
 
 #[test]
 fn profile_a_speed_adaptive_7cm_low2_tracks_eq7_within_1_percent_through_a_10_percent_change() {
-    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let elf = twin::image::elf().expect("build the real-board image");
     let mut twin = Twin::new(
         &elf,
         Options {
@@ -104,10 +107,16 @@ fn profile_a_speed_adaptive_7cm_low2_tracks_eq7_within_1_percent_through_a_10_pe
 
 #[test]
 fn profile_b_steps_at_the_commanded_rates_and_stops_with_the_tractor() {
-    let elf = Image::ProfileB.elf().expect("build the profile B image");
+    let elf = twin::image::elf().expect("build the real-board image");
+    // The saved settings select profile B.
+    let flash = board::flash_with(&elf, &board::profile_b());
     let spr = f64::from(kinematics::profile_b::ProfileBSettings::default().planting_steps_per_rev);
     for mm_s in [200u32, 300, 400] {
-        let mut twin = Twin::new(&elf, Options::default()).unwrap();
+        let options = Options {
+            flash: Some(flash.clone()),
+            ..Options::default()
+        };
+        let mut twin = Twin::new(&elf, options).unwrap();
         let mut config = machine_sim::Config::noiseless();
         config.profile = machine_sim::Profile::B;
         config.target_spacing_m = 0.25;
@@ -229,7 +238,7 @@ fn profile_a_70_m_row_at_7_cm_gets_its_1000_plants_within_half_a_percent() {
     // noise model (terrain, slip variation, tooth errors, seedling load),
     // Speed-Adaptive at the default 7 cm; plants counted by the machine
     // model over the first 70 m after Start (70 m / 7 cm = 1000).
-    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let elf = twin::image::elf().expect("build the real-board image");
     let mut twin = Twin::new(
         &elf,
         Options {
@@ -285,7 +294,7 @@ fn profile_a_70_m_row_at_7_cm_gets_its_1000_plants_within_half_a_percent() {
 /// then holds its Fixed-mode speed, 20 r/min, like a correctly wired one.
 #[test]
 fn a_swapped_drum_encoder_runs_once_its_direction_is_reversed_on_the_screen() {
-    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let elf = twin::image::elf().expect("build the real-board image");
     let mut twin = Twin::new(
         &elf,
         Options {

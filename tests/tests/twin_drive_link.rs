@@ -1,5 +1,5 @@
-//! Issue 17 on the twin: the RS-485 pin timing of the drum driver's Modbus
-//! link on the real profile A image (USART2 on PA2/PA3, DE on PA1;
+//! The RS-485 pin timing of the drum driver's Modbus link on the twin, with
+//! the real board's image (USART2 on PA2/PA3, DE on PA1;
 //! docs/drive-link.md "Board layer", docs/twin.md "The drive link").
 //!
 //! The image boots on a format-5 settings record (read-back feedback,
@@ -36,27 +36,12 @@ use drive_link::virtual_driver::VirtualZlac;
 use supervisor::drive_link::{CommandPath, DriveLinkSettings, DriverKind, FeedbackSource};
 use supervisor::settings::Settings;
 
+#[path = "support/board.rs"]
+mod board;
 #[path = "support/pages.rs"]
 mod pages;
-use twin::image::{workspace_root, Image};
 use twin::periph::{Level, LineEvent, Ticks};
 use twin::{Options, Twin, TICKS_PER_S};
-
-/// The settings pages' address: the `SETTINGS` region of the link image's
-/// linker script (firmware/memory-stm32f103-128k.x: the image with the link
-/// is linked for the 128 KB parts), which the board's `SETTINGS_OFFSET`
-/// mirrors under the same feature.
-fn settings_address() -> u32 {
-    let x =
-        std::fs::read_to_string(workspace_root().join("firmware/memory-stm32f103-128k.x")).unwrap();
-    let line = x
-        .lines()
-        .find(|l| l.trim_start().starts_with("SETTINGS"))
-        .expect("a SETTINGS region");
-    let hex = line.split("0x").nth(1).unwrap();
-    let hex: String = hex.chars().take_while(char::is_ascii_hexdigit).collect();
-    u32::from_str_radix(&hex, 16).unwrap()
-}
 
 /// Read-back feedback from a ZLAC8015D behind 20:1 at `baud`, PWM command.
 fn settings(baud: u32) -> Settings {
@@ -114,21 +99,15 @@ const UNANSWERED: usize = 20;
 /// request but [`UNANSWERED`] for `ms` of firmware time and cuts the
 /// recorded timeline into transactions.
 fn run(baud: u32, ms: u64) -> Run {
-    let elf = Image::ProfileALink
-        .elf()
-        .expect("build the profile A image with the drive link");
-    let mut twin = Twin::new(&elf, Options::default()).unwrap();
+    let elf = twin::image::elf().expect("build the real-board image");
     // The settings record, written by the supervisor's own store into the
-    // board's settings pages (as a previous Save would have).
-    let pages = pages::pages_with(&settings(baud));
-    let at = settings_address();
-    let flash = twin.flash();
-    let off = (at - twin::periph::FLASH_BASE) as usize;
-    assert!(
-        flash[off..off + pages.len()].iter().all(|&b| b == 0xFF),
-        "the image overlaps the settings pages at {at:#010x} (profile A over its flash budget?)"
-    );
-    twin.write_mem(at, &pages).unwrap();
+    // board's settings pages (as a previous Save would have): the link is
+    // in force because the settings name a driver.
+    let options = Options {
+        flash: Some(board::flash_with(&elf, &settings(baud))),
+        ..Options::default()
+    };
+    let mut twin = Twin::new(&elf, options).unwrap();
 
     twin.trace_pin('A', 1);
     twin.state_mut().bus.usart[1].record = true;

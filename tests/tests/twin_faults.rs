@@ -16,7 +16,6 @@
 //!   puts it at the start of RAM, 0x2000_0000) and an enabled interrupt
 //!   (TIM2) is pended: its exception entry stacks below RAM.
 
-use twin::image::Image;
 use twin::plant::Wiring;
 use twin::RegisterARM;
 use twin::{CoreState, External, Level, Options, ResetCause, Twin, TICKS_PER_S};
@@ -24,7 +23,7 @@ use twin::{CoreState, External, Level, Options, ResetCause, Twin, TICKS_PER_S};
 const US: u64 = TICKS_PER_S / 1_000_000;
 
 fn boot_a(options: Options) -> Twin {
-    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let elf = twin::image::elf().expect("build the real-board image");
     let mut twin = Twin::new(&elf, options).expect("load the ELF");
     let machine = machine_sim::Config {
         initial_gear: Some(kinematics::consts::Gear::ALL[1]),
@@ -351,7 +350,7 @@ fn a_stopped_control_task_gets_the_board_reset_by_the_watchdog_and_it_comes_back
 
 #[test]
 fn hse_never_ready_keeps_the_outputs_safe_and_the_watchdog_retries() {
-    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let elf = twin::image::elf().expect("build the real-board image");
     let mut twin = Twin::new(
         &elf,
         Options {

@@ -8,11 +8,10 @@
 //! A cut during a page erase leaves the page half erased (neither old nor
 //! blank); a cut before a half-word program leaves it unwritten.
 
-use twin::image::Image;
 use twin::{Options, Twin};
 
 fn boot(flash: Option<Vec<u8>>) -> Twin {
-    let elf = Image::ProfileA.elf().expect("build the profile A image");
+    let elf = twin::image::elf().expect("build the real-board image");
     let mut twin = Twin::new(
         &elf,
         Options {

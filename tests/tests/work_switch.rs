@@ -165,7 +165,7 @@ fn a_70_m_row_with_a_lift_at_30_m_plants_nothing_while_up_and_shows_its_quality(
 
     // 1. Nothing planted while the unit was up. The drum ramps to rest
     //    after the firmware has seen the lift (30 ms debounce, then
-    //    supervisor::planting::WORK_RAMP_RPM_PER_S from ≈ 27 r/min: 0.11 s
+    //    supervisor::drum::work::WORK_RAMP_RPM_PER_S from ≈ 27 r/min: 0.11 s
     //    and the drive's 25 ms lag): the ground covered meanwhile, ≈ 0.17 s
     //    at 0.14 m/s = 24 mm, is where a partition already on its way may
     //    still fall.

@@ -34,13 +34,20 @@ type Result<T = ()> = std::result::Result<T, String>;
 
 const TARGET: &str = "thumbv7m-none-eabi";
 
-/// Flash and static-RAM budgets of the real-board images without the drive
-/// link: the 128 KB parts (RB, CB) less the 8 KB of settings pages kept at
-/// 0x0800E000 and the last 8 KB (memory-stm32f103.x: 56 KB of code below
-/// the settings pages, 56 KB above; the linker holds each part to its
-/// region). Where the bytes are: docs/firmware.md, "Memory and flash".
-const STM32F103_FLASH_BUDGET: u64 = 112 * 1024;
-const STM32F103_RAM_BUDGET: u64 = 8 * 1024;
+/// Flash and static-RAM budgets of every image: the 128 KB parts (RB, CB)
+/// less the last 8 KB, which hold the settings (memory-stm32f103.x). Where
+/// the bytes are: docs/firmware.md, "Memory and flash".
+const FLASH_BUDGET: u64 = 120 * 1024;
+/// The QEMU board's code budget (memory-qemu.x): its image also carries the
+/// simulated machine, in the emulated part's larger flash.
+const QEMU_FLASH_BUDGET: u64 = 256 * 1024;
+const RAM_BUDGET: u64 = 8 * 1024;
+/// The real board's code regions (memory-stm32f103.x): below the hole
+/// that keeps the earlier layout's settings pages, and above it.
+const STM32F103_CODE_REGIONS: [(&str, std::ops::Range<u64>); 2] = [
+    ("below the hole", 0x0800_0000..0x0800_E000),
+    ("above the hole", 0x0800_E800..0x0801_E000),
+];
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -99,45 +106,27 @@ fn run(what: &str, cmd: &mut Command) -> Result {
     }
 }
 
-/// The firmware images: the real board takes one image per machine
-/// (profile A is the default), the QEMU board carries both machines.
+/// The firmware images, one per board: each carries both machines and the
+/// drum driver's link (the settings choose).
 #[derive(Clone, Copy, Debug)]
 enum Board {
     Stm32f103,
-    Stm32f103ProfileB,
-    /// Profile A with the drum driver's link (feature `drive-link`), linked
-    /// with its settings in the last 8 KB of the 128 KB parts
-    /// (memory-stm32f103-128k.x; docs/drive-link.md, "Images").
-    Stm32f103DriveLink,
     Qemu,
 }
 
 impl Board {
-    const ALL: [Board; 4] = [
-        Board::Stm32f103,
-        Board::Stm32f103ProfileB,
-        Board::Stm32f103DriveLink,
-        Board::Qemu,
-    ];
+    const ALL: [Board; 2] = [Board::Stm32f103, Board::Qemu];
 
     fn name(self) -> &'static str {
         match self {
             Board::Stm32f103 => "stm32f103",
-            Board::Stm32f103ProfileB => "stm32f103-b",
-            Board::Stm32f103DriveLink => "stm32f103-link (128 KB parts)",
             Board::Qemu => "qemu",
         }
     }
 
     fn features(self) -> &'static [&'static str] {
         match self {
-            Board::Stm32f103 => &[],
-            Board::Stm32f103ProfileB => &[
-                "--no-default-features",
-                "--features",
-                "board-stm32f103,profile-b",
-            ],
-            Board::Stm32f103DriveLink => &["--features", "drive-link"],
+            Board::Stm32f103 => &["--no-default-features", "--features", "board-stm32f103"],
             Board::Qemu => &[
                 "--no-default-features",
                 "--features",
@@ -152,9 +141,7 @@ impl Board {
     fn image_name(self) -> &'static str {
         match self {
             Board::Stm32f103 => "stm32f103",
-            Board::Stm32f103ProfileB => "stm32f103-b",
-            Board::Stm32f103DriveLink => "stm32f103-link",
-            Board::Qemu => qemu_tests::Image::BothMachines.name(),
+            Board::Qemu => qemu_tests::QEMU_IMAGE,
         }
     }
 
@@ -639,32 +626,10 @@ fn test() -> Result<Totals> {
             .env("PROPTEST_RNG_SEED", PROPTEST_RNG_SEED),
         &mut totals,
     )?;
-    // The real board's images carry one machine each: the supervisor's
-    // tests run in those configurations too (a profile B build once started
-    // on profile A's defaults; the workspace run enables both), without the
-    // drive link like the default images (its tests need the feature).
-    for machine in ["profile-a", "profile-b"] {
-        run_tests(
-            &format!("supervisor tests, {machine} only"),
-            cargo()
-                .args([
-                    "test",
-                    "-p",
-                    "supervisor",
-                    "--no-default-features",
-                    "--features",
-                    machine,
-                ])
-                .env("PROPTEST_RNG_SEED", PROPTEST_RNG_SEED),
-            &mut totals,
-        )?;
-    }
     let elf = Board::Qemu.build()?;
     // The twin tests (tests/tests/twin_*.rs) run the real board's release
-    // images: the ones `cargo xtask size` checks, built once here.
-    let twin_a = Board::Stm32f103.build()?;
-    let twin_b = Board::Stm32f103ProfileB.build()?;
-    let twin_a_link = Board::Stm32f103DriveLink.build()?;
+    // image: the one `cargo xtask size` checks, built once here.
+    let twin = Board::Stm32f103.build()?;
     run_tests(
         "QEMU and twin tests (tests/)",
         cargo()
@@ -674,9 +639,7 @@ fn test() -> Result<Totals> {
             // twin tests are deterministic too (instruction-counted time).
             .args(["test", "-p", "qemu-tests", "--", "--test-threads=2"])
             .env("FIRMWARE_QEMU_ELF", &elf)
-            .env("TWIN_ELF_A", &twin_a)
-            .env("TWIN_ELF_B", &twin_b)
-            .env("TWIN_ELF_A_LINK", &twin_a_link),
+            .env("TWIN_ELF", &twin),
         &mut totals,
     )?;
     println!(
@@ -848,9 +811,17 @@ fn check_forbidden_symbols(elf: &Path) -> Result {
     Ok(())
 }
 
-/// The settings pages of the images without the drive link
-/// (memory-stm32f103.x), which boards in the field already hold.
-const STM32F103_SETTINGS_PAGES: std::ops::Range<u64> = 0x0800_E000..0x0801_0000;
+/// The pages of the real board's flash that no loaded byte of its image may
+/// touch, because a board keeps data there across flashing (probe-rs and
+/// cargo-flash erase only the pages a segment covers): the settings pages
+/// (memory-stm32f103.x).
+const STM32F103_KEPT_PAGES: &[(std::ops::Range<u64>, &str)] = &[
+    (
+        0x0800_E000..0x0800_E800,
+        "the settings pages of the earlier layout",
+    ),
+    (0x0801_E000..0x0802_0000, "the settings pages"),
+];
 
 /// The loaded bytes of an ELF (`PT_LOAD` with file bytes): load address
 /// and length, from `llvm-readobj -l` (rustup's llvm-tools).
@@ -892,21 +863,41 @@ fn on_pages(
         .cloned()
 }
 
-/// An image without the link must leave the settings pages unflashed.
-fn check_settings_pages_kept(elf: &Path) -> Result {
-    match on_pages(&loaded_ranges(elf)?, &STM32F103_SETTINGS_PAGES) {
-        Some(r) => Err(format!(
-            "{}: loaded bytes {:#010x}..{:#010x} fall on the settings pages \
-             {:#010x}..{:#010x}: flashing it would erase a board's settings \
-             (memory-stm32f103.x)",
-            elf.display(),
-            r.start,
-            r.end,
-            STM32F103_SETTINGS_PAGES.start,
-            STM32F103_SETTINGS_PAGES.end
-        )),
-        None => Ok(()),
+/// The free bytes at the end of each of the real board's code regions.
+fn region_margins(elf: &Path) -> Result<Vec<(&'static str, u64)>> {
+    let loaded = loaded_ranges(elf)?;
+    Ok(STM32F103_CODE_REGIONS
+        .iter()
+        .map(|(name, region)| {
+            let end = loaded
+                .iter()
+                .filter(|r| region.contains(&r.start))
+                .map(|r| r.end)
+                .max()
+                .unwrap_or(region.start);
+            (*name, region.end.saturating_sub(end))
+        })
+        .collect())
+}
+
+/// The real board's image must leave [`STM32F103_KEPT_PAGES`] unflashed.
+fn check_kept_pages(elf: &Path) -> Result {
+    let loaded = loaded_ranges(elf)?;
+    for (pages, what) in STM32F103_KEPT_PAGES {
+        if let Some(r) = on_pages(&loaded, pages) {
+            return Err(format!(
+                "{}: loaded bytes {:#010x}..{:#010x} fall on {what} \
+                 {:#010x}..{:#010x}: flashing it would erase what a board \
+                 keeps there (memory-stm32f103.x)",
+                elf.display(),
+                r.start,
+                r.end,
+                pages.start,
+                pages.end
+            ));
+        }
     }
+    Ok(())
 }
 
 /// Section sizes of an ELF, from `llvm-size -A` (rustup's llvm-tools).
@@ -943,8 +934,7 @@ fn footprint(elf: &Path) -> Result<(u64, u64)> {
     let mut ram = 0;
     for (name, size) in sections(elf)? {
         match name.as_str() {
-            // `.upper_text`: the code above the settings pages
-            // (memory-stm32f103.x).
+            // `.upper_text`: the code above the hole (memory-stm32f103.x).
             ".vector_table" | ".text" | ".upper_text" | ".rodata" | ".gnu.sgstubs" => flash += size,
             ".data" => {
                 flash += size;
@@ -961,23 +951,20 @@ fn footprint(elf: &Path) -> Result<(u64, u64)> {
 fn size() -> Result {
     ensure_linker()?;
     let mut over = Vec::new();
-    println!("| board | flash | flash budget | static RAM | RAM budget |");
-    println!("|---|---|---|---|---|");
+    println!("| board | flash | flash budget | flash margin | static RAM | RAM budget |");
+    println!("|---|---|---|---|---|---|");
     for board in Board::ALL {
         let elf = board.build()?;
         let (flash, ram) = footprint(&elf)?;
         let (flash_budget, ram_budget) = match board {
-            Board::Stm32f103 | Board::Stm32f103ProfileB => {
-                (STM32F103_FLASH_BUDGET, STM32F103_RAM_BUDGET)
-            }
-            // The 128 KB parts' 120 KB (their last 8 KB hold the settings).
-            Board::Stm32f103DriveLink => (120 * 1024, STM32F103_RAM_BUDGET),
-            // The QEMU board has the real board's RAM (memory-qemu.x).
-            Board::Qemu => (120 * 1024, STM32F103_RAM_BUDGET),
+            // The hole's 2 KB are not code.
+            Board::Stm32f103 => (FLASH_BUDGET - 2 * 1024, RAM_BUDGET),
+            Board::Qemu => (QEMU_FLASH_BUDGET, RAM_BUDGET),
         };
         println!(
-            "| {} | {flash} B | {flash_budget} B | {ram} B | {ram_budget} B |",
-            board.name()
+            "| {} | {flash} B | {flash_budget} B | {} B | {ram} B | {ram_budget} B |",
+            board.name(),
+            i128::from(flash_budget) - i128::from(flash)
         );
         if flash > flash_budget {
             over.push(format!(
@@ -1008,11 +995,18 @@ fn size() -> Result {
     if !over.is_empty() {
         return Err(format!("over budget: {}", over.join("; ")));
     }
+    let margins = region_margins(&Board::Stm32f103.elf())?;
+    println!(
+        "\n{}: {}",
+        Board::Stm32f103.name(),
+        margins
+            .iter()
+            .map(|(name, free)| format!("{free} B free {name}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
     check_forbidden_symbols(&Board::Stm32f103.elf())?;
-    check_forbidden_symbols(&Board::Stm32f103ProfileB.elf())?;
-    check_settings_pages_kept(&Board::Stm32f103.elf())?;
-    check_settings_pages_kept(&Board::Stm32f103ProfileB.elf())?;
-    check_forbidden_symbols(&Board::Stm32f103DriveLink.elf())
+    check_kept_pages(&Board::Stm32f103.elf())
 }
 
 /// `cargo xtask flash`: a real board on a debug probe.
@@ -1037,22 +1031,22 @@ fn flash() -> Result {
 
 #[cfg(test)]
 mod tests {
-    use super::{is_libclang, on_pages, STM32F103_SETTINGS_PAGES};
+    use super::{is_libclang, on_pages};
 
-    /// Loaded bytes next to the settings pages pass; one byte on them, at
-    /// either end, is found.
+    /// Loaded bytes next to kept pages pass; one byte on them, at either
+    /// end, is found.
     #[test]
-    fn loaded_bytes_on_the_settings_pages_are_found() {
-        let pages = STM32F103_SETTINGS_PAGES;
+    fn loaded_bytes_on_kept_pages_are_found() {
+        let pages = 0x0800_E000..0x0800_E800;
         let below = 0x0800_0000..0x0800_E000;
-        let above = 0x0801_0000..0x0801_1000;
+        let above = 0x0800_E800..0x0801_1000;
         assert_eq!(on_pages(&[below.clone(), above.clone()], &pages), None);
         let first = 0x0800_C000..0x0800_E001;
         assert_eq!(
             on_pages(&[below.clone(), first.clone()], &pages),
             Some(first)
         );
-        let last = 0x0800_FFFF..0x0801_0004;
+        let last = 0x0800_E7FF..0x0800_E804;
         assert_eq!(on_pages(&[above, last.clone()], &pages), Some(last));
     }
 

@@ -298,8 +298,8 @@ mod tests {
         assert!(parse_speed("fast").is_err());
     }
 
-    /// Units are case-insensitive for every option alike (issue 16 item 6:
-    /// `7CM` was refused while `0.51KM/H` was accepted).
+    /// Units are case-insensitive for every option alike (`7CM` as well as
+    /// `0.51KM/H`).
     #[test]
     fn units_are_case_insensitive_for_every_option() {
         for (upper, lower) in [

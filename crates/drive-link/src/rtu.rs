@@ -13,8 +13,8 @@
 //! parsed by `modbus-core` 0.2, whose `ExceptionResponse::try_from` panics
 //! on a one-byte exception PDU (a four-byte frame with a valid CRC; test
 //! `modbus_core_panics_on_a_one_byte_exception_pdu_and_this_parser_does_not`,
-//! docs/drive-link.md); in the link image it would cost 764 B (measured
-//! 2026-11-24, not the 5 KB first put down). modbus-core stays the tests' independent
+//! docs/drive-link.md); in the link image it would cost 764 B (measured).
+//! modbus-core stays the tests' independent
 //! reference: every frame [`encode`] writes decodes with it to the same
 //! request, and every reply it encodes parses here to the same values
 //! (proptests below). Its own `rtu::client::decode_response` was never
@@ -456,10 +456,9 @@ mod tests {
     /// exception code at index 1 without checking the length, so a one-byte
     /// exception PDU — four bytes on the line with a valid CRC, which noise
     /// or a confused driver can send — panics (codec/mod.rs:65), and a panic
-    /// in the link task is a fault stop of the machine. Found when the
-    /// crate was tried again in `parse_reply` (2026-11-24; it would cost
-    /// 764 B of the link image, not the 5 KB first measured): the proptest
-    /// `parse_never_panics` failed at once. When a modbus-core release
+    /// in the link task is a fault stop of the machine. In `parse_reply`
+    /// (where it would cost 764 B of the link image) the proptest
+    /// `parse_never_panics` fails at once. When a modbus-core release
     /// fixes it, this test fails: then build on the crate again.
     #[test]
     fn modbus_core_panics_on_a_one_byte_exception_pdu_and_this_parser_does_not() {

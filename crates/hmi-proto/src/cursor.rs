@@ -1,6 +1,12 @@
 //! A bounds-checked write cursor over the caller's buffer (internal).
 
-use crate::encoder::EncodeError;
+/// The three bytes that end every instruction and every return frame.
+pub const TERMINATOR: [u8; 3] = [0xFF, 0xFF, 0xFF];
+
+/// The buffer is full: the write did not fit (the encoder's
+/// `EncodeError::BufferTooSmall`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct BufferFull;
 
 /// Writes bytes into a borrowed buffer; every write is checked, nothing panics.
 pub(crate) struct Cursor<'b> {
@@ -21,26 +27,20 @@ impl<'b> Cursor<'b> {
     // Out of line: inlined at each of the encoder's ≈ 25 writes it cost
     // ≈ 400 B of flash (docs/hmi.md, "Flash").
     #[inline(never)]
-    pub(crate) fn put(&mut self, bytes: &[u8]) -> Result<(), EncodeError> {
-        let end = self
-            .pos
-            .checked_add(bytes.len())
-            .ok_or(EncodeError::BufferTooSmall)?;
-        let dst = self
-            .buf
-            .get_mut(self.pos..end)
-            .ok_or(EncodeError::BufferTooSmall)?;
+    pub(crate) fn put(&mut self, bytes: &[u8]) -> Result<(), BufferFull> {
+        let end = self.pos.checked_add(bytes.len()).ok_or(BufferFull)?;
+        let dst = self.buf.get_mut(self.pos..end).ok_or(BufferFull)?;
         dst.copy_from_slice(bytes);
         self.pos = end;
         Ok(())
     }
 
-    pub(crate) fn byte(&mut self, b: u8) -> Result<(), EncodeError> {
+    pub(crate) fn byte(&mut self, b: u8) -> Result<(), BufferFull> {
         self.put(&[b])
     }
 
     /// Decimal ASCII, no leading zeros.
-    pub(crate) fn u32(&mut self, mut n: u32) -> Result<(), EncodeError> {
+    pub(crate) fn u32(&mut self, mut n: u32) -> Result<(), BufferFull> {
         // Digits from the last place up, into the end of the buffer (a
         // `u32` has at most 10).
         let mut digits = [0u8; 10];
@@ -56,11 +56,11 @@ impl<'b> Cursor<'b> {
                 break;
             }
         }
-        self.put(digits.get(start..).ok_or(EncodeError::BufferTooSmall)?)
+        self.put(digits.get(start..).ok_or(BufferFull)?)
     }
 
     /// Signed decimal ASCII (`-` then digits); handles `i32::MIN`.
-    pub(crate) fn i32(&mut self, n: i32) -> Result<(), EncodeError> {
+    pub(crate) fn i32(&mut self, n: i32) -> Result<(), BufferFull> {
         if n < 0 {
             self.byte(b'-')?;
         }
@@ -68,7 +68,7 @@ impl<'b> Cursor<'b> {
     }
 
     /// The Nextion terminator `0xFF 0xFF 0xFF`.
-    pub(crate) fn terminator(&mut self) -> Result<(), EncodeError> {
-        self.put(&crate::TERMINATOR)
+    pub(crate) fn terminator(&mut self) -> Result<(), BufferFull> {
+        self.put(&TERMINATOR)
     }
 }

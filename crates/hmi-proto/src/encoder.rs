@@ -11,7 +11,7 @@
 
 use core::fmt;
 
-use crate::cursor::Cursor;
+use crate::cursor::{BufferFull, Cursor};
 
 /// Longest object name segment accepted (the vendor editors allow 14 characters).
 pub const MAX_NAME_SEGMENT: usize = 14;
@@ -44,6 +44,12 @@ impl fmt::Display for EncodeError {
             Self::TextTooLong => "text too long for the screen",
             Self::OutOfRange => "argument out of range",
         })
+    }
+}
+
+impl From<BufferFull> for EncodeError {
+    fn from(_: BufferFull) -> Self {
+        Self::BufferTooSmall
     }
 }
 

@@ -32,12 +32,10 @@ pub mod screen;
 #[cfg(feature = "std")]
 pub mod virtual_screen;
 
+pub use cursor::TERMINATOR;
 pub use decoder::{DecodeError, Decoder, DecoderStats};
 pub use encoder::{
     Attr, BaudRate, BkCmd, EncodeError, Instruction, NameError, ObjName, ScreenText,
     MAX_INSTRUCTION_LEN, MAX_NAME_SEGMENT, MAX_TEXT_LEN,
 };
 pub use frame::{ErrorCode, Frame, Text, TextError, TouchEvent, MAX_STRING_LEN};
-
-/// The three bytes that end every instruction and every return frame.
-pub const TERMINATOR: [u8; 3] = [0xFF, 0xFF, 0xFF];

@@ -637,7 +637,7 @@ bounded!(
 );
 bounded!(
     /// Profile B speed-change threshold Y in mm/s, 1–200 (0.001–0.200 m/s:
-    /// the planter's own limit, `supervisor::profile_b`). Default 20 (0.02 m/s).
+    /// the planter's own limit, `supervisor::planter`). Default 20 (0.02 m/s).
     SpeedThreshold, u16, Field::SpeedThreshold, 1, 200, 20
 );
 

@@ -3,8 +3,6 @@
 
 use kinematics::consts::{self, Gear};
 
-use crate::machine::Machine;
-
 /// Longest transport delay the delay line holds, milliseconds: enough for
 /// drives with their own speed loop, ramp or RS-485 read-back (20–60 ms).
 pub const MAX_TRANSPORT_DELAY_MS: u8 = 63;
@@ -196,7 +194,7 @@ impl Default for Config {
 }
 
 impl Config {
-    /// Travel-speed profile "hills" (issue 19): the speed swings ±20 %
+    /// Travel-speed profile "hills": the speed swings ±20 %
     /// around the gear's speed in random steps (uniform ±20 %, one every 3 s
     /// on average, drawn from the seeded RNG), through the chassis's 0.5 s
     /// time constant; the slow terrain sinusoid is off. Other fields kept.
@@ -211,7 +209,7 @@ impl Config {
         }
     }
 
-    /// Travel-speed profile "stop-and-go" (issue 19): every 10 s the
+    /// Travel-speed profile "stop-and-go": every 10 s the
     /// tractor comes to rest for 2 s and drives on (regular stops), through
     /// the chassis's 0.5 s time constant; the default terrain stays on.
     #[must_use]
@@ -287,12 +285,6 @@ impl Config {
             hall_jitter_us: 0,
             ..Self::default()
         }
-    }
-
-    /// Checks every field and builds the machine at rest at t = 0.
-    pub fn build(self) -> Result<Machine, Error> {
-        self.validate()?;
-        Ok(Machine::new(self))
     }
 
     /// Checks every field against its documented range.

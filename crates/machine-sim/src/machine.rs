@@ -2,15 +2,15 @@
 
 use kinematics::consts::{self, Gear};
 
-use crate::config::{Config, Profile};
+use crate::config::{Config, Error, Profile};
 use crate::metrics::{FieldMetrics, MetricsError, SpacingAccumulator};
 use crate::rng::{hash_signed_unit, splitmix64, Rng};
 use crate::tables;
 
 /// Slots of the transport-delay line (one per millisecond): up to
-/// [`crate::MAX_TRANSPORT_DELAY_MS`]. Each slot holds the duty in `u16`
+/// [`crate::config::MAX_TRANSPORT_DELAY_MS`]. Each slot holds the duty in `u16`
 /// fractions of 1 (1/65 535, far finer than the PWM's 1/3600).
-const RING: usize = crate::MAX_TRANSPORT_DELAY_MS as usize + 1;
+const RING: usize = crate::config::MAX_TRANSPORT_DELAY_MS as usize + 1;
 /// Scale of a delay-line slot (see [`RING`]).
 const DUTY_SCALE: f32 = 65_535.0;
 /// The model's internal grid: sub-steps never cross a millisecond boundary.
@@ -204,6 +204,14 @@ fn event_time_us(rng: &mut Rng, mean_s: f32, now_us: u64) -> u64 {
         now_us.saturating_add(dt as u64)
     } else {
         u64::MAX
+    }
+}
+
+impl Config {
+    /// Checks every field and builds the machine at rest at t = 0.
+    pub fn build(self) -> Result<Machine, Error> {
+        self.validate()?;
+        Ok(Machine::new(self))
     }
 }
 

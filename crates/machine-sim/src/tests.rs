@@ -714,7 +714,7 @@ fn regular_stops_make_a_stop_and_go_profile_and_the_deceleration_limit_holds() {
 #[test]
 fn a_long_transport_delay_holds_the_drum_still_for_exactly_that_long() {
     // Drives with their own speed loop or a slow link: up to 60 ms of dead
-    // time (issue 16 item 3). A duty step at t = 0 moves nothing for d ms,
+    // time. A duty step at t = 0 moves nothing for d ms,
     // then the 25 ms lag starts: at d + 25 ms, 1 − 1/e of the step.
     // Up to the longest the build holds (63 ms with `std`, 15 without).
     let max = crate::MAX_TRANSPORT_DELAY_MS;

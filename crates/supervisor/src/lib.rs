@@ -1,25 +1,24 @@
 //! The transplanter's supervisor, free of hardware so that it is tested on the
-//! host: persisted settings ([`settings`], [`store`]), and the operating logic
-//! — modes, faults and the 10 ms control step ([`control`]).
+//! host: persisted settings ([`settings`], [`settings::store`]), and the operating logic
+//! — the drum machine ([`drum`], profile A), the belt machine ([`belt`],
+//! profile B) and the one the firmware runs ([`machine`]).
 #![no_std]
 #![cfg_attr(not(test), forbid(unsafe_code))]
 
 #[cfg(test)]
 extern crate std;
 
-#[cfg(not(any(feature = "profile-a", feature = "profile-b")))]
-compile_error!("enable at least one machine: feature `profile-a` or `profile-b`");
-
-pub mod control;
-pub mod crc;
+pub mod belt;
 pub mod drive;
 pub mod drive_link;
+pub mod drum;
+pub mod effect;
 pub mod machine;
+pub mod machine_step;
+pub mod migrate;
 pub mod phase;
-pub mod planting;
-pub mod profile_b;
+pub mod planter;
 pub mod quality;
 pub mod settings;
 pub mod stop_input;
-pub mod store;
 pub mod work_switch;

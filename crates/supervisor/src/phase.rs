@@ -1,4 +1,4 @@
-//! Distance-locked planting (issue 19): a phase loop around the drum's speed
+//! Distance-locked planting: a phase loop around the drum's speed
 //! loop (profile A, Speed-Adaptive).
 //!
 //! The speed loop (eq. 7 feed-forward + the fuzzy PID) matches the drum's

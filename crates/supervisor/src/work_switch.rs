@@ -45,7 +45,7 @@
 /// A lever or proximity switch on the planting unit's frame bounces for a
 /// few ms; 30 ms (three control periods after the first sample that saw it
 /// closed) cost 4 mm of ground at 0.5 km/h, which the first plant's
-/// placement takes off (`crate::planting`).
+/// placement takes off (`crate::drum::work`).
 pub const WORK_SWITCH_DEBOUNCE_US: u32 = 30_000;
 
 /// How long an open contact must hold before the unit counts as lifted, µs:

@@ -16,7 +16,7 @@ use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::reference::eq7_drum_speed;
 use machine_sim::{Config, Fault, Inputs, Machine};
-use supervisor::control::{Actuation, Alarm, Hardware, RunState, Supervisor};
+use supervisor::drum::{Actuation, Alarm, Hardware, RunState, Supervisor};
 use supervisor::settings::Settings;
 
 const HW: Hardware = Hardware::BOARD;
@@ -107,7 +107,7 @@ fn speed_adaptive_7cm_low2_settles_within_half_a_second_and_follows_a_10_percent
     rig.run_ms(10_000);
     assert_eq!(
         rig.sup.command(Command::Start),
-        supervisor::control::Effect::None
+        supervisor::drum::Effect::None
     );
     let start = rig.t_ms;
     let mut worst_after_settle: f64 = 0.0;
@@ -368,7 +368,7 @@ fn the_k2_calibration_on_the_screen_measures_the_track_slip() {
     let d = hmi_proto::screen::CalibrationDistance::new(ground_cm).unwrap();
     assert_eq!(
         rig.sup.command(Command::CalibrationActualDistance(d)),
-        supervisor::control::Effect::None
+        supervisor::drum::Effect::None
     );
     let status = rig.sup.screen_status();
     let k2 = f64::from(status.calibration_result_x1000) / 1000.0;
@@ -384,7 +384,7 @@ fn the_k2_calibration_on_the_screen_measures_the_track_slip() {
     );
     assert_eq!(
         rig.sup.command(Command::CalibrationAccept),
-        supervisor::control::Effect::SettingsChanged
+        supervisor::drum::Effect::SettingsChanged
     );
 }
 
@@ -395,12 +395,12 @@ fn saving_is_refused_while_the_drum_runs() {
     rig.sup.command(Command::Start);
     assert!(matches!(
         rig.sup.command(Command::SaveSettings),
-        supervisor::control::Effect::Message(_)
+        supervisor::drum::Effect::Message(_)
     ));
     rig.sup.command(Command::Stop);
     assert_eq!(
         rig.sup.command(Command::SaveSettings),
-        supervisor::control::Effect::Save
+        supervisor::drum::Effect::Save
     );
 }
 
@@ -468,14 +468,14 @@ fn the_k1_calibration_makes_the_shown_travel_speed_the_taped_one() {
     let d = hmi_proto::screen::CalibrationDistance::new(taped_cm).unwrap();
     assert_eq!(
         rig.sup.command(Command::CalibrationActualDistance(d)),
-        supervisor::control::Effect::None
+        supervisor::drum::Effect::None
     );
     let k1 = f64::from(rig.sup.screen_status().calibration_result_x1000) / 1000.0;
     // k1 = true / monitored = 0.963 · 0.966 = 0.930 (Tables 11, 12 at Low 3).
     assert!((k1 - 0.930).abs() <= 0.004, "k1 {k1}");
     assert_eq!(
         rig.sup.command(Command::CalibrationAccept),
-        supervisor::control::Effect::SettingsChanged
+        supervisor::drum::Effect::SettingsChanged
     );
     rig.run_ms(5_000);
     // The truth: the simulator's ground speed, km/h × 1000.
@@ -521,7 +521,7 @@ fn the_k3_calibration_measures_the_belt_slip_of_table_13() {
     );
     assert_eq!(
         rig.sup.command(Command::CalibrationAccept),
-        supervisor::control::Effect::SettingsChanged
+        supervisor::drum::Effect::SettingsChanged
     );
 }
 
@@ -581,7 +581,7 @@ fn k2_then_k1_make_the_shown_travel_speed_true_on_a_machine_that_slips_twice_the
         }
         assert_eq!(
             rig.sup.command(Command::CalibrationAccept),
-            supervisor::control::Effect::SettingsChanged
+            supervisor::drum::Effect::SettingsChanged
         );
     }
     rig.run_ms(5_000);

@@ -32,10 +32,10 @@ use hmi_proto::screen::{Command, DrumSpeed, Mode};
 use kinematics::units::Ticks;
 use peer::{Faults, Line, Peer};
 use serde_json::json;
-use supervisor::control::{Actuation, Alarm, Hardware, RunState, Supervisor};
 use supervisor::drive_link::{
     CommandPath, DriveLinkSettings, DriverKind, FeedbackSource, LinkSample, ReadBack,
 };
+use supervisor::drum::{Actuation, Alarm, Hardware, RunState, Supervisor};
 use supervisor::settings::Settings;
 
 /// The tests' gearbox: 20:1 behind the ZLAC8015D (0.1 r/min of the motor

@@ -115,7 +115,7 @@ mod closed {
     use super::*;
     use hmi_proto::screen::{Command, DrumSpeed, Mode};
     use kinematics::units::Ticks;
-    use supervisor::control::{Actuation, Effect, Hardware, RunState, Supervisor};
+    use supervisor::drum::{Actuation, Effect, Hardware, RunState, Supervisor};
     use supervisor::settings::Settings;
 
     pub const HW: Hardware = Hardware::BOARD;
@@ -157,7 +157,7 @@ mod closed {
     pub fn identify_and_save(rig: &mut Rig) {
         assert_eq!(
             rig.sup.command(Command::IdentifyDrive),
-            Effect::Message(supervisor::control::IDENTIFY_MESSAGE)
+            Effect::Message(supervisor::drum::IDENTIFY_MESSAGE)
         );
         assert_eq!(rig.sup.run_state(), RunState::Identifying);
         let mut periods = 0;
@@ -309,8 +309,8 @@ fn a_misidentified_drive_raises_the_instability_warning_and_falls_back() {
     // the 10 % seedling load, Fixed 25.21 r/min.
     use closed::*;
     use hmi_proto::screen::Command;
-    use supervisor::control::{Alarm, DRUM_UNSTABLE_TEXT};
     use supervisor::drive::DriveModel;
+    use supervisor::drum::{Alarm, DRUM_UNSTABLE_TEXT};
     let sp = 25.21;
     for (name, real, model) in [
         (
@@ -381,7 +381,7 @@ fn a_misidentified_drive_raises_the_instability_warning_and_falls_back() {
         );
         assert!(f.pmin >= 0.98 * sp && f.pmax <= 1.02 * sp, "{name}");
         assert!(f.max - f.min <= 0.15 * sp, "{name}");
-        assert_eq!(rig.sup.run_state(), supervisor::control::RunState::Running);
+        assert_eq!(rig.sup.run_state(), supervisor::drum::RunState::Running);
     }
 }
 
@@ -400,7 +400,7 @@ fn no_false_instability_warning_in_the_field_at_every_gear() {
     use closed::*;
     use hmi_proto::screen::{Command, Mode, Spacing};
     use kinematics::consts::Gear;
-    use supervisor::control::Alarm;
+    use supervisor::drum::Alarm;
     for (i, gear) in Gear::ALL.into_iter().enumerate() {
         let spacing_mm = if i < 3 { 70 } else { 200 };
         let cfg = Config {
@@ -449,11 +449,11 @@ fn no_false_instability_warning_in_the_field_at_every_gear() {
 fn a_stop_during_identification_aborts_it_and_the_next_start_runs_the_drum() {
     use closed::*;
     use hmi_proto::screen::Command;
-    use supervisor::control::{Effect, RunState};
+    use supervisor::drum::{Effect, RunState};
     let mut rig = Rig::new(drive(1.0, 0.025, 5), fixed(2000));
     assert_eq!(
         rig.sup.command(Command::IdentifyDrive),
-        Effect::Message(supervisor::control::IDENTIFY_MESSAGE)
+        Effect::Message(supervisor::drum::IDENTIFY_MESSAGE)
     );
     for _ in 0..30 {
         rig.period();

@@ -29,8 +29,8 @@ use drive_rig::{row_70m, row_70m_placed, tracking, Rig, ROW_PLANTS};
 use hmi_proto::screen::Command;
 use kinematics::consts::Gear;
 use machine_sim::{Config, Fault};
-use supervisor::control::{Actuation, Alarm, RunState};
 use supervisor::drive_link::{CommandPath, FeedbackSource};
+use supervisor::drum::{Actuation, Alarm, RunState};
 use supervisor::settings::Placement;
 
 /// Read-back only (the encoder cut), Start at 8 s; the worst error vs
@@ -297,7 +297,7 @@ fn a_refused_speed_register_is_its_own_alarm_with_safe_outputs() {
         settings.drive_link.kind = supervisor::drive_link::DriverKind::Generic;
         settings.drive_link.generic.speed_feedback = 0x2AB0;
         let profile = settings.drive_link.build().unwrap().unwrap();
-        rig.sup = supervisor::control::Supervisor::new(drive_rig::HW, settings).unwrap();
+        rig.sup = supervisor::drum::Supervisor::new(drive_rig::HW, settings).unwrap();
         rig.link = drive_link::link::Link::new(profile, LinkConfig::for_baud(baud).unwrap());
         // From power-up (the commissioning case: the profile just saved).
         let alarm = until(&mut rig, 1_000, |r| r.sup.alarm().is_some()).expect("no alarm");
@@ -313,7 +313,7 @@ fn a_refused_speed_register_is_its_own_alarm_with_safe_outputs() {
         let effect = rig.sup.command(Command::AcknowledgeAlarm);
         assert_eq!(
             effect,
-            supervisor::control::Effect::Message("Drum driver still not answering")
+            supervisor::drum::Effect::Message("Drum driver still not answering")
         );
         assert_eq!(rig.sup.alarm(), Some(Alarm::LinkRefused));
         assert!(rig.link.counters().exceptions >= 3);
@@ -340,7 +340,7 @@ fn a_readback_of_the_wrong_sign_is_named_backwards() {
         let mut settings = rig.sup.settings().clone();
         settings.drive_link.generic.micro_rpm_per_count = -drive_rig::SCALE;
         let profile = settings.drive_link.build().unwrap().unwrap();
-        rig.sup = supervisor::control::Supervisor::new(drive_rig::HW, settings).unwrap();
+        rig.sup = supervisor::drum::Supervisor::new(drive_rig::HW, settings).unwrap();
         rig.link = drive_link::link::Link::new(profile, LinkConfig::for_baud(baud).unwrap());
         rig.run_ms(1_000);
         rig.start();

@@ -17,7 +17,7 @@ use hmi_proto::screen::{Command, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Event, Fault, Inputs, Machine};
-use supervisor::control::{Actuation, Alarm, Hardware, Supervisor};
+use supervisor::drum::{Actuation, Alarm, Hardware, Supervisor};
 use supervisor::settings::Settings;
 
 const HW: Hardware = Hardware::BOARD;

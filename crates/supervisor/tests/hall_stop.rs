@@ -23,7 +23,7 @@ use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::reference::eq7_drum_speed;
 use machine_sim::{Config, Fault, Inputs, Machine};
-use supervisor::control::{Actuation, Alarm, Hardware, Supervisor};
+use supervisor::drum::{Actuation, Alarm, Hardware, Supervisor};
 use supervisor::settings::Settings;
 
 const HW: Hardware = Hardware::BOARD;

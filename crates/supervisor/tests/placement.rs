@@ -18,7 +18,7 @@ use hmi_proto::screen::{Command, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Event, Inputs};
-use supervisor::control::{Actuation, Hardware, Supervisor};
+use supervisor::drum::{Actuation, Hardware, Supervisor};
 use supervisor::settings::{Placement, Settings};
 
 const HW: Hardware = Hardware::BOARD;

@@ -28,9 +28,10 @@ use hmi_proto::screen::Command;
 use kinematics::profile_b::{LinkageAction, ProfileBSettings};
 use kinematics::units::{Hertz, Metres, MetresPerSecond};
 use machine_sim::{Config, Event, Inputs, Machine, Profile};
-use supervisor::control::{Effect, Hardware, Supervisor};
-use supervisor::machine::{BeltMachine, BELT_MACHINE_ONLY, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING};
-use supervisor::profile_b::{
+use supervisor::belt::{BeltMachine, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING};
+use supervisor::drum::{Effect, Hardware, Supervisor};
+use supervisor::effect::BELT_MACHINE_ONLY;
+use supervisor::planter::{
     BeltPlanter, ConfigField, Error, PlanterAlarm, PlanterState, ProfileBConfig, ProfileBHardware,
     StepperCommand, CONFIG_BYTES,
 };
@@ -715,15 +716,11 @@ fn new_roll_is_refused_on_profile_a_and_the_messages_fit() {
         Effect::Message(BELT_MACHINE_ONLY)
     );
     assert_eq!(a.settings(), &before);
-    // (`Machine::DrumBelt` is in images with profile A.)
-    #[cfg(feature = "profile-a")]
-    {
-        let mut m = supervisor::machine::Machine::DrumBelt(a);
-        assert_eq!(
-            m.command(Command::NewRoll),
-            Effect::Message(BELT_MACHINE_ONLY)
-        );
-    }
+    let mut m = supervisor::machine::Machine::DrumBelt(a);
+    assert_eq!(
+        m.command(Command::NewRoll),
+        Effect::Message(BELT_MACHINE_ONLY)
+    );
     for text in [BELT_MACHINE_ONLY, NEW_ROLL_DONE, NEW_ROLL_WHILE_RUNNING] {
         assert!(
             text.is_ascii() && text.len() <= hmi_proto::MAX_TEXT_LEN,

@@ -22,9 +22,9 @@ use kinematics::profile_b::ProfileBSettings;
 use kinematics::table::{CoeffTable, K_MAX, K_MIN, MAX_POINTS};
 use kinematics::travel::Calibration;
 use proptest::prelude::*;
-use supervisor::profile_b::ProfileBConfig;
+use supervisor::planter::ProfileBConfig;
+use supervisor::settings::store::{DefaultsReason, Loaded, SettingsStore, SlotStatus, StoreError};
 use supervisor::settings::{Profile, Settings, SETTINGS_BYTES};
-use supervisor::store::{DefaultsReason, Loaded, SettingsStore, SlotStatus, StoreError};
 
 // ---------------------------------------------------------------------------
 // Simulated flash
@@ -697,10 +697,8 @@ fn a_record_with_valid_crc_but_invalid_field_is_corrupt() {
 /// A record whose drive link block parses but does not pass its checks
 /// (the store checks it after the decode, `decode_into_unchecked_link`):
 /// a ZLAC8015D behind 59:1 needs 2638 motor r/min, beyond its 1000. It
-/// is corrupt: the older valid record (or the defaults) is used. (An image
-/// without the link checks the block no further than its bytes.)
+/// is corrupt: the older valid record (or the defaults) is used.
 #[test]
-#[cfg(feature = "drive-link")]
 fn a_record_whose_drive_link_fails_its_checks_is_corrupt() {
     let mut bad = settings_b();
     bad.drive_link.generic.micro_rpm_per_count = 1695;

@@ -17,8 +17,8 @@ use hmi_proto::screen::{Command, FirstPlantDistance, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Event, Inputs, Machine};
-use supervisor::control::{Actuation, Hardware, RunState, Supervisor};
-use supervisor::planting::WORK_RAMP_RPM_PER_S;
+use supervisor::drum::work::WORK_RAMP_RPM_PER_S;
+use supervisor::drum::{Actuation, Hardware, RunState, Supervisor};
 use supervisor::settings::Settings;
 
 const HW: Hardware = Hardware::BOARD;

@@ -1,6 +1,6 @@
 //! The fatal exception entries, shared by both boards: HardFault, NMI and
 //! every exception or interrupt without a handler of its own. They make the
-//! outputs safe on a fresh stack before anything else (issue 15, item 3).
+//! outputs safe on a fresh stack before anything else.
 
 use cortex_m::peripheral::scb::VectActive;
 

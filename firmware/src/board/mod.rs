@@ -18,9 +18,6 @@
 mod fault;
 mod screen_tx;
 pub use screen_tx::{kick as kick_screen_tx, HmiTx};
-// The run-time memory and division routines of the target (they take the
-// place of compiler_builtins' weak symbols; `unsafe` by their ABI).
-mod mem;
 
 #[cfg(feature = "board-qemu")]
 mod qemu;
@@ -39,12 +36,10 @@ pub const DRUM_PWM_HZ: u32 = 20_000;
 /// Drum encoder counts per drum revolution: a 100-line encoder on the motor
 /// shaft read in ×4 quadrature (400 counts per motor turn) behind the 118:1
 /// gearbox.
-#[cfg_attr(not(feature = "profile-a"), allow(dead_code))]
 pub const DRUM_ENCODER_COUNTS_PER_REV: u32 = 400 * 118;
 
 /// The board facts the supervisor needs.
-#[cfg(feature = "profile-a")]
-pub const HARDWARE: supervisor::control::Hardware = supervisor::control::Hardware {
+pub const HARDWARE: supervisor::drum::Hardware = supervisor::drum::Hardware {
     encoder_counts_per_drum_rev: DRUM_ENCODER_COUNTS_PER_REV,
     control_period_us: 10_000,
     pwm_arr: (72_000_000 / DRUM_PWM_HZ - 1) as u16,
@@ -75,7 +70,7 @@ pub struct SensorSample {
     pub hall_edges: heapless::Vec<u32, MAX_EDGES_PER_SAMPLE>,
 }
 
-/// The two 1 KB pages of the settings store (both boards).
+/// The settings store's two 1 KB pages (both boards).
 pub const SETTINGS_FLASH_BYTES: u32 = 2 * 1024;
 /// Erase unit of the settings flash (the F103's page).
 pub const SETTINGS_PAGE_BYTES: u32 = 1024;
@@ -100,23 +95,34 @@ impl embedded_storage::nor_flash::NorFlashError for FlashError {
     }
 }
 
-/// Checks an access of `len` bytes at `offset` against the settings pages
-/// and the write unit `align` (1 for reads, 2 for half-word programs);
-/// returns its end.
-pub fn check_flash_access(offset: u32, len: usize, align: u32) -> Result<u32, FlashError> {
+/// Checks an access of `len` bytes at `offset` against the pages a board's
+/// settings flash reaches (`windows`) and the write unit `align` (1 for
+/// reads, 2 for half-word programs); returns its end.
+pub fn check_flash_access(
+    offset: u32,
+    len: usize,
+    align: u32,
+    windows: &[core::ops::Range<u32>],
+) -> Result<u32, FlashError> {
     let len = u32::try_from(len).map_err(|_| FlashError::OutOfBounds)?;
     let end = offset.checked_add(len).ok_or(FlashError::OutOfBounds)?;
-    if end > SETTINGS_FLASH_BYTES || !offset.is_multiple_of(align) || !len.is_multiple_of(align) {
+    let inside = windows.iter().any(|w| w.start <= offset && end <= w.end);
+    if !inside || !offset.is_multiple_of(align) || !len.is_multiple_of(align) {
         return Err(FlashError::OutOfBounds);
     }
     Ok(end)
 }
 
-/// Checks an erase of the pages `[from, to)`.
-pub fn check_flash_erase(from: u32, to: u32) -> Result<(), FlashError> {
+/// Checks an erase of the pages `[from, to)` against `windows`.
+pub fn check_flash_erase(
+    from: u32,
+    to: u32,
+    windows: &[core::ops::Range<u32>],
+) -> Result<(), FlashError> {
+    let inside = windows.iter().any(|w| w.start <= from && to <= w.end);
     if !from.is_multiple_of(SETTINGS_PAGE_BYTES)
         || !to.is_multiple_of(SETTINGS_PAGE_BYTES)
-        || to > SETTINGS_FLASH_BYTES
+        || !inside
         || from > to
     {
         return Err(FlashError::OutOfBounds);
@@ -126,7 +132,6 @@ pub fn check_flash_erase(from: u32, to: u32) -> Result<(), FlashError> {
 
 /// Firmware time in µs: the monotonic's milliseconds and SysTick's count
 /// within the current one (a pending SysTick means a millisecond more).
-#[cfg(any(feature = "board-qemu", feature = "drive-link"))]
 pub fn now_us64() -> u64 {
     use cortex_m::peripheral::{SCB, SYST};
     loop {

@@ -4,8 +4,8 @@
 //! with the product's store, as a previous Save would have.
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
+use supervisor::settings::store::SettingsStore;
 use supervisor::settings::Settings;
-use supervisor::store::SettingsStore;
 
 /// The two pages in memory (erased: 0xFF; programming clears bits).
 struct Pages(Vec<u8>);
@@ -46,4 +46,15 @@ pub fn pages_with(settings: &Settings) -> Vec<u8> {
     let mut store = SettingsStore::new(Pages(vec![0xFF; 2048]), 0).unwrap();
     store.save(settings).unwrap();
     store.into_inner().0
+}
+
+/// The settings the store on `pages` (two 1 KB pages) loads, if it holds a
+/// valid record.
+#[allow(dead_code)] // not every test file reads pages back
+pub fn saved_in(pages: &[u8]) -> Option<Settings> {
+    let mut store = SettingsStore::new(Pages(pages.to_vec()), 0).unwrap();
+    match store.load() {
+        supervisor::settings::store::Loaded::Saved { settings, .. } => Some(settings),
+        supervisor::settings::store::Loaded::Defaults { .. } => None,
+    }
 }

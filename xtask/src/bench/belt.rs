@@ -4,7 +4,7 @@
 
 use kinematics::profile_b::ProfileBSettings;
 use machine_sim::{Config, Event, Inputs, Profile};
-use supervisor::profile_b::{BeltPlanter, ProfileBConfig, ProfileBHardware, StepperCommand};
+use supervisor::planter::{BeltPlanter, ProfileBConfig, ProfileBHardware, StepperCommand};
 
 use crate::Result;
 
@@ -98,7 +98,7 @@ fn case(v: f32, compensation: bool, lock: bool, index: u64) -> Result<Row> {
 pub fn section(doc: &mut String) -> Result {
     doc.push_str(
         "## 4. Profile B bench replica (paper B)\n\n\
-         `supervisor::profile_b::BeltPlanter` (the firmware's profile B logic: windowed \
+         `supervisor::planter::BeltPlanter` (the firmware's profile B logic: windowed \
          ground speed from the 600 ppr encoder, the threshold-Y linkage, eq. 4 and eq. 9, \
          acceleration limits) against the machine model in profile B with its default \
          noise (terrain, slip), X = 25 cm, B = 10 cm and the other defaults of \
@@ -107,9 +107,9 @@ pub fn section(doc: &mut String) -> Result {
          Feeding-spacing error as paper B's Table 2: |mean spacing − X| / X; plant-spacing \
          CV as its Table 3: sample SD / mean. The QEMU test \
          `tests/tests/profile_b.rs` runs the same bench through the firmware. \
-         \"Ours\" is position-locked feeding (issue 19, the default: the belt fed since Start \
+         \"Ours\" is position-locked feeding (the default: the belt fed since Start \
          kept at ground · B / X, docs/profile-b.md); \"linkage alone\" is paper B's speed \
-         linkage without it (the product before issue 19), same seeds.\n\n\
+         linkage without it, same seeds.\n\n\
          | travel speed | feeding-spacing error, ours (paper B) | plant-spacing CV, ours (paper B) | linkage alone: error / CV | without radius compensation: error / CV | spacings |\n\
          |---|---|---|---|---|---|\n",
     );

@@ -5,7 +5,7 @@ use fuzzy_pid::{FuzzyConfig, RuleBaseSize, Schedule, I16F16};
 use hmi_proto::screen::{Command, DrumSpeed, Mode};
 use kinematics::units::Ticks;
 use machine_sim::{Config, Inputs, Machine};
-use supervisor::control::{Actuation, Hardware, Supervisor, PRODUCT_DELTA_KP_RANGE};
+use supervisor::drum::{Actuation, Hardware, Supervisor, PRODUCT_DELTA_KP_RANGE};
 use supervisor::settings::Settings;
 
 use crate::Result;
@@ -71,7 +71,7 @@ pub enum Structure {
     Pid,
     /// Feed-forward `u = target + PID(target − measured)`.
     FfPid,
-    /// The product: `supervisor::control::Supervisor` in Fixed mode
+    /// The product: `supervisor::drum::Supervisor` in Fixed mode
     /// (feed-forward + PID on the error against the drum model).
     Product,
 }
@@ -408,7 +408,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
          Structures: **PID only** is paper A's loop (the controller's output is the drum speed \
          command, no feed-forward), written in the bench around `fuzzy_pid::Controller::step(target, \
          measured, 0)`; **FF + PID** adds the kinematic feed-forward (`step(target, measured, \
-         target)`); **product** is `supervisor::control::Supervisor` in Fixed mode, the firmware's \
+         target)`); **product** is `supervisor::drum::Supervisor` in Fixed mode, the firmware's \
          control step (feed-forward + PID on the error against its drum model, docs/firmware.md), \
          whose fuzzy rows use the product's ΔKp range ±{product_kp} instead of the paper's ±5 \
          (the other rows: the paper's ranges; why: Robustness below). The lookup-table controller cannot be put in the product (`Supervisor` holds a direct \
@@ -690,7 +690,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
                  overspeed error the paper's tables raise Kp (PM, up to ≈ 5 per sample) and lower \
                  Ki; with the 5 ms dead time and the 10 ms measurement that gain is beyond the \
                  loop's margin once the plant is faster than the model. The product therefore \
-                 narrows ΔKp to ±{kp_range} (`supervisor::control::PRODUCT_DELTA_KP_RANGE`, \
+                 narrows ΔKp to ±{kp_range} (`supervisor::drum::PRODUCT_DELTA_KP_RANGE`, \
                  chosen in a trial sweep of ±5, 3, 2, 1.5, 1 and 0.5 on these plants: ±1.5 and narrower settle on τ × 0.5, ±2 and wider do not): same \
                  tables, same nominal response, and {}. \
                  A drive faster still (τ × 0.35) defeats the base gains themselves, the \
@@ -757,7 +757,7 @@ fn identify_on(plant: Config, settings: Settings) -> Result<Settings> {
     sup.command(Command::IdentifyDrive);
     let mut act = Actuation::OFF;
     for _ in 0..800 {
-        if sup.run_state() != supervisor::control::RunState::Identifying {
+        if sup.run_state() != supervisor::drum::RunState::Identifying {
             break;
         }
         let inputs = Inputs {
@@ -769,7 +769,7 @@ fn identify_on(plant: Config, settings: Settings) -> Result<Settings> {
         act = sup.control_step(Ticks(m.capture_ticks()), m.drum_encoder_count());
     }
     match sup.command(Command::AcceptDriveModel) {
-        supervisor::control::Effect::Save => Ok(sup.settings().clone()),
+        supervisor::drum::Effect::Save => Ok(sup.settings().clone()),
         other => Err(format!(
             "identification: {other:?} ({:?})",
             sup.identify_state()
@@ -798,7 +798,7 @@ fn swing_and_partition(speeds: &[f64], w: std::ops::Range<usize>) -> (f64, f64) 
     ((hi - lo) / SETPOINT * 100.0, dev * 100.0)
 }
 
-/// Issue 16 item 3: the robustness table's dead-time sweep, with and
+/// The robustness table's dead-time sweep, with and
 /// without the drive identification, and its plot.
 fn dead_time_sweep(doc: &mut String, img: &std::path::Path) -> Result {
     use std::fmt::Write as _;
@@ -814,7 +814,7 @@ fn dead_time_sweep(doc: &mut String, img: &std::path::Path) -> Result {
          with its default noise (seed 1), the seedlings' load at 10 % (`load_droop` 0.10: the \
          drum droops 0–10 % as each partition passes) and the drive's dead time swept 0–60 ms \
          (τ 25 ms, n_max 44.7 r/min). *Default model*: the drive model the firmware ships with \
-         (5 ms, 25 ms: the tuning before issue 16), with the instability supervisor; \
+         (5 ms, 25 ms: the paper's design drive), with the instability supervisor; \
          *identified*: the model measured by the drive identification on that drive (belt \
          empty) and saved (docs/firmware.md, \"The drum drive model\"). Swing: max − min of the \
          10 ms means; partition mean: the largest deviation of the speed averaged over one \
@@ -898,7 +898,7 @@ fn dead_time_sweep(doc: &mut String, img: &std::path::Path) -> Result {
         doc,
         "\n![Swing vs dead time](img/drum-dead-time.svg)\n\n\
          Reading. With the shipped model the loop limit-cycles from {} ms of dead time in this \
-         sweep (issue 16 item 3 found 18 ms); the instability supervisor names it and switches \
+         sweep (docs/firmware.md: from 18 ms); the instability supervisor names it and switches \
          to the conservative mode, which holds the partition mean but corrects loads slowly. \
          With the identified model the instability warning came on {warned_identified} of {} \
          drives, and the partition mean stayed within {worst_part:.2} % of the set point in \

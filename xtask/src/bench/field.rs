@@ -5,7 +5,7 @@ use hmi_proto::screen::{Command, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Inputs, Recorder};
-use supervisor::control::{Actuation, Hardware, Supervisor};
+use supervisor::drum::{Actuation, Hardware, Supervisor};
 use supervisor::settings::Settings;
 
 use crate::Result;

@@ -6,7 +6,7 @@
 //! the gaps since the last update, and the predictor that carried the last
 //! slope between two windows (±10 %) and returned the estimator's bound on
 //! an overdue edge. A line-by-line port of `kinematics::speed::MtEstimator`
-//! and `supervisor::control::Predictor` as they were (no glitch hold, no
+//! and `supervisor::drum::predictor` as they were (no glitch hold, no
 //! steady runs, no noisy flag); the edge rules, timeout and settings are
 //! the product's defaults.
 

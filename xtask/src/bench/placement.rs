@@ -1,11 +1,11 @@
-//! Item 9: distance-locked vs speed-following placement (issue 19), side by
+//! Item 9: distance-locked vs speed-following placement, side by
 //! side on the machine model, landing scatter off.
 
 use hmi_proto::screen::{Command, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Event, Inputs};
-use supervisor::control::{Actuation, Hardware, Supervisor};
+use supervisor::drum::{Actuation, Hardware, Supervisor};
 use supervisor::settings::{Placement, Settings};
 
 use crate::Result;
@@ -242,7 +242,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
     let started = std::time::Instant::now();
     let _ = write!(
         doc,
-        "## 9. Distance-locked vs speed-following placement (issue 19)\n\n\
+        "## 9. Distance-locked vs speed-following placement\n\n\
          Profile A, Speed-Adaptive, the product's closed loop (`Supervisor`) on the machine \
          model with the landing scatter **off** (`plant_scatter_m` 0: the figures are the \
          control's). Per case {ROWS} rows of {ROW_M:.0} m from rest (the drum started with \
@@ -439,10 +439,10 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
             profile.name()
         );
     }
-    // The issue's targets for distance-locked, case by case.
+    // The targets for distance-locked, case by case.
     let _ = write!(
         doc,
-        "\nTargets of issue 19 for distance-locked (first plant ±3 mm; phase vs measured \
+        "\nTargets for distance-locked (first plant ±3 mm; phase vs measured \
          ground p95 ≤ 5 mm and no drift; count within one plant of 70 m / X; hills p95 \
          |spacing error| ≤ 1.0 % at 7 cm; stop-and-go ≤ 3 % with no alarm):\n\n\
          | profile | X, gear | first ≤ 3 mm | p95 vs measured ≤ 5 mm | drift ≤ 2 mm | count within 1 | spacing p95 target | no alarm |\n|---|---|---|---|---|---|---|---|\n"
@@ -494,11 +494,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          from rest at the second Hall edge and the phase loop has one spacing, 0.5 s, to \
          absorb its start lag). **The measured ground** (docs/placement.md, \
          \"Positions\") is exact at each Hall edge and moves on between edges at the last \
-         M/T window's speed, up to the next edge's position. Before 2026-11-23 \
-         it was the predictor's speed (carried along the slope of the last two \
-         single-gap speeds) × the whole time since the edge: hills p95 spacing at 7 cm \
-         was 2.95 / 1.91 % (Low 1 / Low 2), the default terrain's 2.39 / 2.08 %, and the \
-         phase p95 outside stop-and-go 1.7–2.4 mm. \
+         M/T window's speed, up to the next edge's position. \
          **Against the true ground** every row carries the Hall measurement's own \
          error: the measured distance ends {g_lo:+.0} … {g_hi:+.0} mm off the true 70 m \
          (the k1·k2 tables against the model's slip), in both modes; \
@@ -518,7 +514,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          off in turn (bench variants, not in the table): without the Hall gear's ±2 % \
          tooth errors (`hall_pitch_error` 0) 2.53 / 1.69 %; without them and without the \
          belt's and track's slip noise 2.41 / 1.64 %; without the random speed steps \
-         (`terrain_step_amplitude` 0) ≈ 1.0 % (measured before 2026-11-23). What is left \
+         (`terrain_step_amplitude` 0) ≈ 1.0 % (measured with the predictor's speed in the ground). What is left \
          is the speed steps: the gear reports the ground every 25 mm (0.30 s at Low 1, \
          0.18 s at Low 2), a step of up to 40 % of v through τ 0.5 s changes the speed by \
          up to 0.8·v per second, and between edges the ground is extrapolated at the last \
@@ -527,14 +523,13 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          follows that ground until the edge shows the error. Carrying the speed along \
          its slope (second order) would remove part of it on a perfect gear, but on this \
          gear the slope of two single-gap speeds is mostly the tooth errors: in the \
-         ground it gave the 2.95 / 1.91 % above; in the feed-forward it is worth its \
+         ground (the predictor's speed × the time since the edge, with nominal tooth \
+         pitches) it gave 2.95 / 1.91 %; in the feed-forward it is worth its \
          noise (the M/T value alone there: hills 3.43 / 2.61 %, default terrain 1.53 / \
          1.35 %; the slope over two windows: 3.22 / 2.15 % and 1.86 / 1.67 %); the phase \
          loop's time constant does not move it (0.25 s: 2.82 / 1.92 %). The gear's \
          tooth errors are learnt under the varying speed and each edge counts at its \
-         learnt pitch (docs/kinematics.md; before, the learning needed a revolution \
-         steady within 0.2 %, which neither profile gives, and the default terrain's \
-         distance-locked CV was 1.22 / 1.07 / 0.61 / 0.54 %); that does not take the \
+         learnt pitch (docs/kinematics.md); that does not take the \
          hills below 2.5 % at 7 cm Low 1: reaching 1 % there needs a finer ground sensor (a Hall gear of 100 teeth, or profile B's \
          600 ppr encoder). **Stop-and-go**: the phase against the measured ground is \
          {sg_lo:.1}–{sg_hi:.1} mm p95 and the spacing p95 {sgs_lo:.0}–{sgs_hi:.0} %, \
@@ -549,12 +544,11 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          15.9 mm): not taken. (2) A 2 s rest is often shorter than the estimator's 1.5 s \
          stop timeout counted from the last edge before it, so the first edge after the \
          rest closes an M/T window that spans the rest: the first speed is a fraction of \
-         the real one, the drum starts late and is ≈ 25 mm behind at the next edge. Since \
-         2026-11-23 a rest (travel speed 0, or no edge for 1 s) \
+         the real one, the drum starts late and is ≈ 25 mm behind at the next edge. A rest (travel speed 0, or no edge for 1 s) \
          gives the next plant the first plant's allowance (+100 %, T/2), so that lag is \
          caught up before it instead of over half a metre of 0.91 X spacings (phase p95 \
-         7.4 / 16.8 / 6.7 / 16.2 → 6.0 / 16.8 / 5.4 / 16.3 mm with travel speed 0 alone, \
-         then 5.4 / 16.6 / 4.8 / 15.5 → 5.3 / 11.9 / 4.8 / 8.1 mm with the 1 s rule). Tried and not taken: starting the drum at the first edge after a rest \
+         5.3 / 11.9 / 4.8 / 8.1 mm with the 1 s rule, 5.4 / 16.6 / 4.8 / 15.5 mm with travel \
+         speed 0 alone). Tried and not taken: starting the drum at the first edge after a rest \
          with the speed of the run before it, at most one gap / time since the edge \
          (phase p95 6.0 / 17.3 / 5.2 / 14.9 mm, spacing p95 30.3 / 30.5 / 10.5 / 13.8 % \
          against 6.0 / 16.8 / 5.4 / 16.3 mm and 29.6 / 29.8 / 11.1 / 12.9 %: the belt is \

@@ -9,7 +9,7 @@ use hmi_proto::screen::{Command, FirstPlantDistance, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Event, Fault, Inputs, Machine};
-use supervisor::control::{Actuation, Alarm, Hardware, Supervisor};
+use supervisor::drum::{Actuation, Alarm, Hardware, Supervisor};
 use supervisor::settings::Settings;
 use supervisor::work_switch::{WorkChange, WorkSwitch, WORK_LIFT_CONFIRM_US};
 
@@ -511,7 +511,7 @@ fn work_switch(doc: &mut String) -> Result {
         let stop = rig.m.ground_position_m();
         let shown = rig.sup.quality_since_start();
         let ramp_s = machine_sim::reference::eq7_drum_speed(v, x)
-            / f64::from(supervisor::planting::WORK_RAMP_RPM_PER_S);
+            / f64::from(supervisor::drum::work::WORK_RAMP_RPM_PER_S);
         let bound_ms = (f64::from(WORK_LIFT_CONFIRM_US) + 10_000.0) / 1e3 + (ramp_s + 0.03) * 1e3;
         let late: Vec<String> = drops_us
             .iter()

@@ -1,6 +1,6 @@
 //! Section 8: paper A's Table 14 (drum speed accuracy) and Table 15 (drum
 //! response to travel-speed steps) reproduced with the product's control
-//! (`supervisor::control::Supervisor`, exactly as the firmware's 10 ms task
+//! (`supervisor::drum::Supervisor`, exactly as the firmware's 10 ms task
 //! runs it) on the machine model, side by side with the paper's figures.
 //!
 //! Every product figure comes from the runs below; the paper's figures are
@@ -12,7 +12,7 @@ use hmi_proto::screen::{Command, DrumSpeed, Mode, Spacing};
 use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Event, Inputs, Machine};
-use supervisor::control::{Actuation, Hardware, RunState, Supervisor};
+use supervisor::drum::{Actuation, Hardware, RunState, Supervisor};
 use supervisor::settings::Settings;
 
 use crate::Result;
@@ -295,7 +295,7 @@ pub fn step_plant() -> Config {
 /// measured travel speed).
 ///
 /// Speed-following placement: Table 15 is the drum's *speed* response, the
-/// paper's law. The distance-locked default (issue 19) deliberately moves the
+/// paper's law. The distance-locked default deliberately moves the
 /// drum off the speed target while it recovers the phase lost during the
 /// step (docs/placement.md), so its "settle within ±2 %" would measure the
 /// phase recovery, not the speed loop.
@@ -894,8 +894,8 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result {
             "**over**"
         },
         if fast >= 4 {
-            " (the drum PID holds the drum slightly fast; issue 19 found ≈ 0.1 % with a \
-             perfect speed signal)"
+            " (the drum PID holds the drum slightly fast; ≈ 0.1 % with a perfect \
+             speed signal)"
         } else {
             ""
         },

@@ -32,10 +32,10 @@ use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::reference::eq7_drum_speed;
 use machine_sim::{Config, Event, Fault, Inputs, Machine};
-use supervisor::control::{Actuation, Alarm, Hardware, Supervisor};
 use supervisor::drive_link::{
     CommandPath, DriveLinkSettings, DriverKind, FeedbackSource, LinkSample, ReadBack,
 };
+use supervisor::drum::{Actuation, Alarm, Hardware, Supervisor};
 use supervisor::settings::{Placement, Settings};
 
 pub const HW: Hardware = Hardware::BOARD;

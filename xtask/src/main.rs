@@ -159,7 +159,7 @@ impl Board {
             nvic_prio_bits: 4,
             // The QEMU board's injected stack overflow (`stack_overflow=T`).
             overflow_on_purpose: match self {
-                Board::Qemu => &["board::qemu::exhaust_stack"],
+                Board::Qemu => &["board::qemu::sim::exhaust_stack"],
                 _ => &[],
             },
         }

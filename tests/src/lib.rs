@@ -296,13 +296,13 @@ impl Firmware {
             .args(["-semihosting-config", &semihosting])
             .arg("-chardev")
             .arg(format!(
-                "socket,id=hmi,host=127.0.0.1,port={port},server=off"
+                "socket,id=hmi,host=127.0.0.1,port={port},server=off,nodelay=on"
             ))
             .args(["-serial", "chardev:hmi"]);
         if let Some((l, _, _)) = &drive_listener {
             qemu.arg("-chardev")
                 .arg(format!(
-                    "socket,id=drive,host=127.0.0.1,port={},server=off",
+                    "socket,id=drive,host=127.0.0.1,port={},server=off,nodelay=on",
                     l.local_addr()?.port()
                 ))
                 .args(["-serial", "chardev:drive"]);
@@ -963,8 +963,17 @@ impl Bench {
         Ok(pred(&self.screen))
     }
 
-    /// The operator taps a button.
+    /// The operator taps a button. Like an operator, it waits for the
+    /// button's page first: a page change the firmware sent at the end of
+    /// the last period may still be on its way through QEMU's serial
+    /// socket (up to 100 periods of 10 ms, counted in firmware periods).
     pub fn tap(&mut self, name: &str) -> io::Result<()> {
+        for _ in 0..100 {
+            if self.screen.component(name).is_some() {
+                break;
+            }
+            self.pump(Duration::from_millis(10))?;
+        }
         self.screen
             .tap(name)
             .map_err(|e| io::Error::other(format!("tap {name}: {e:?}")))?;

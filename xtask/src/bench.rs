@@ -102,7 +102,7 @@ fn write_file(path: &Path, text: &str) -> Result {
 }
 
 /// Section 7: the twin's speed (firmware seconds per host second), from
-/// `twin`'s `speed` example on the profile A image (docs/twin.md).
+/// `twin`'s `speed` example on the real board's image, machine A (docs/twin.md).
 fn twin_section(doc: &mut String) -> Result {
     eprintln!("xtask: bench 7 twin speed");
     let elf = Board::Stm32f103.build()?;

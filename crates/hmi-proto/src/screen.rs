@@ -210,6 +210,9 @@ pub enum CalibrationKind {
     /// k3: the drum turns counted while the belt runs; the belt length that
     /// passed is taped.
     BeltK3,
+    /// Machine A's ground wheel: its encoder counts over a taped course give
+    /// its counts per metre.
+    GroundWheel,
 }
 
 impl CalibrationKind {
@@ -219,16 +222,60 @@ impl CalibrationKind {
             Self::SpeedK1 => "k1 speed sensor",
             Self::SlipK2 => "k2 track slip",
             Self::BeltK3 => "k3 belt slip",
+            Self::GroundWheel => "ground wheel pulses/m",
         }
     }
 
-    /// The next kind (k1 → k2 → k3 → k1), for the selector button.
+    /// The next kind (k1 → k2 → k3 → ground wheel → k1), for the selector
+    /// button.
     pub const fn next(self) -> Self {
         match self {
             Self::SpeedK1 => Self::SlipK2,
             Self::SlipK2 => Self::BeltK3,
-            Self::BeltK3 => Self::SpeedK1,
+            Self::BeltK3 => Self::GroundWheel,
+            Self::GroundWheel => Self::SpeedK1,
         }
+    }
+}
+
+/// Where machine A's travel speed and ground distance come from
+/// (docs/ground-wheel.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TravelSource {
+    /// The Hall gear on the track's driving wheel (paper A; the default).
+    #[default]
+    HallGear,
+    /// The ground wheel's encoder alone.
+    GroundWheel,
+    /// The ground wheel for speed and distance, the Hall gear as its
+    /// cross-check: the live track slip, and either one stopping while the
+    /// other turns.
+    Both,
+}
+
+impl TravelSource {
+    /// The label shown on the settings page.
+    pub const fn label(self) -> &'static str {
+        match self {
+            Self::HallGear => "Hall gear",
+            Self::GroundWheel => "Ground wheel",
+            Self::Both => "Wheel + Hall",
+        }
+    }
+
+    /// The next source (Hall → wheel → both → Hall), for the selector button.
+    pub const fn next(self) -> Self {
+        match self {
+            Self::HallGear => Self::GroundWheel,
+            Self::GroundWheel => Self::Both,
+            Self::Both => Self::HallGear,
+        }
+    }
+
+    /// The ground wheel is read (alone or with the Hall gear).
+    pub const fn uses_wheel(self) -> bool {
+        matches!(self, Self::GroundWheel | Self::Both)
     }
 }
 
@@ -837,6 +884,13 @@ pub enum Command {
     /// roller turn count j (and with it the radius `r + h·j`) starts again
     /// from 0. Only with the motors stopped.
     NewRoll,
+    /// Profile A: the travel source (Hall gear, ground wheel, both). Only
+    /// with the drum stopped; persisted with *Save settings*.
+    SelectTravelSource(TravelSource),
+    /// Profile A: the ground wheel's encoder counts backwards (`true`: A/B
+    /// swapped, or the encoder mounted the other way). Persisted with *Save
+    /// settings*.
+    SetGroundWheelReversed(bool),
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -898,6 +952,10 @@ pub struct Settings {
     pub link_parameter: LinkParameter,
     /// Its value as saved (`nlval`).
     pub link_value: i32,
+    /// Machine A's travel source setting.
+    pub travel_source: TravelSource,
+    /// The ground wheel counts backwards (its direction setting).
+    pub ground_wheel_reversed: bool,
 }
 
 /// The label of the placement setting (page 6 `tplace`).
@@ -979,6 +1037,39 @@ pub struct Status {
     pub within_10_pct_x10: u16,
     /// Plants per metre planted (unit down), × 100.
     pub plants_per_m_x100: u16,
+    /// Machine A: the track's live slip measured against the ground wheel,
+    /// 0.1 % ([`SLIP_UNKNOWN`] while not measured).
+    pub track_slip_x10: i16,
+    /// Machine A: the sensor giving the ground now.
+    pub travel_source_in_use: TravelSourceInUse,
+}
+
+/// [`Status::track_slip_x10`] while no slip is measured (the Hall gear alone,
+/// or one of the two sensors failing, or before three gear turns).
+pub const SLIP_UNKNOWN: i16 = i16::MIN;
+
+/// The sensor machine A measures the ground with now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TravelSourceInUse {
+    /// The Hall gear (its setting).
+    #[default]
+    HallGear,
+    /// The ground wheel.
+    GroundWheel,
+    /// The Hall gear standing in for a ground wheel that does not roll.
+    HallStandIn,
+}
+
+impl TravelSourceInUse {
+    /// The label shown on the run page.
+    pub const fn label(self) -> &'static str {
+        match self {
+            Self::HallGear => "Hall gear",
+            Self::GroundWheel => "Ground wheel",
+            Self::HallStandIn => "Hall (wheel stopped)",
+        }
+    }
 }
 
 /// Live values shown by display-only components.

@@ -49,6 +49,8 @@ fn burst(page: Page) -> (usize, u32) {
         precision_cv_x10: u16::MAX,
         within_10_pct_x10: u16::MAX,
         plants_per_m_x100: u16::MAX,
+        track_slip_x10: i16::MIN + 1,
+        travel_source_in_use: hmi_proto::screen::TravelSourceInUse::HallStandIn,
     };
     let _ = hmi.show_page(page);
     let _ = hmi.write_status(&status);

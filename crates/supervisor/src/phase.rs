@@ -361,16 +361,8 @@ impl Phase {
         if !self.armed && new > 0 {
             // The origin: the first edge counts nothing (of several in the
             // step, the mean pitch is taken off).
-            self.armed = true;
             new_q16 = new_q16.saturating_sub(new_q16.checked_div(u64::from(new)).unwrap_or(0));
-            if self.belt_nm > ROLLING_START_NM && !self.pass_started {
-                // Started on the move: the drum ran on the feed-forward
-                // before the origin. Its phase here is kept (the next
-                // partition's place is where the matched belt puts it), so
-                // a rolling Start neither stalls nor sprints the drum.
-                let to_boundary = self.ref_belt_nm.saturating_sub(self.belt_nm);
-                self.ref_ground_nm = to_boundary.saturating_mul(self.x_nm) / PARTITION_NM;
-            }
+            self.arm();
         }
         if !self.armed {
             return;
@@ -403,6 +395,45 @@ impl Phase {
         self.reach_nm = cap;
         let g = edges_nm.saturating_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
+    }
+
+    /// Advances the ground by `distance_nm` measured this step by a sensor
+    /// that resolves it finely (the ground wheel, docs/ground-wheel.md), at
+    /// the travel speed `travel` (`MetresPerSecond` bits, 0 at rest). The
+    /// first step that moves after Start is the origin (its own distance
+    /// counts nothing, as the Hall gear's first edge); the next partition's
+    /// place can always be reached (no edge to wait for).
+    #[inline(never)]
+    pub fn advance_ground_by(&mut self, distance_nm: u64, travel: u32) {
+        if !self.armed {
+            if distance_nm == 0 {
+                return;
+            }
+            self.arm();
+        } else {
+            self.ground_nm = self.ground_nm.saturating_add(distance_nm);
+        }
+        if travel == 0 {
+            // At rest: the first plant after it gets the first plant's
+            // allowance (module docs).
+            self.pass_started = false;
+        }
+        self.ground_edges_q8 = self.ground_nm << 8;
+        self.reach_nm = u64::MAX;
+    }
+
+    /// The origin: the ground from here; a rolling Start keeps the belt's
+    /// phase (module docs).
+    fn arm(&mut self) {
+        self.armed = true;
+        if self.belt_nm > ROLLING_START_NM && !self.pass_started {
+            // Started on the move: the drum ran on the feed-forward
+            // before the origin. Its phase here is kept (the next
+            // partition's place is where the matched belt puts it), so
+            // a rolling Start neither stalls nor sprints the drum.
+            let to_boundary = self.ref_belt_nm.saturating_sub(self.belt_nm);
+            self.ref_ground_nm = to_boundary.saturating_mul(self.x_nm) / PARTITION_NM;
+        }
     }
 
     /// Advances the belt by `counts` encoder counts turned at belt slip

@@ -300,6 +300,11 @@ fn settings_b() -> Settings {
                 offline_time_ms: 800,
             },
         },
+        ground_wheel: supervisor::settings::wheel::GroundWheelSettings {
+            source: hmi_proto::screen::TravelSource::Both,
+            counts_per_m_x1000: 3_001_000,
+            reversed: true,
+        },
     }
 }
 
@@ -1141,6 +1146,15 @@ fn settings() -> impl Strategy<Value = Settings> {
                 first_plant_distance: hmi_proto::screen::FirstPlantDistance::new(i32::from(first))
                     .unwrap(),
                 drive_link: Default::default(),
+                ground_wheel: supervisor::settings::wheel::GroundWheelSettings {
+                    source: if work {
+                        hmi_proto::screen::TravelSource::GroundWheel
+                    } else {
+                        hmi_proto::screen::TravelSource::HallGear
+                    },
+                    counts_per_m_x1000: 2_500_000 + u32::from(sp) * 1000,
+                    reversed: rev,
+                },
             },
         )
 }

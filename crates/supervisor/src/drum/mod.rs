@@ -187,6 +187,9 @@ pub struct Supervisor {
     /// The drum driver's link: its newest sample, the read-back's
     /// integration, the cross-check ([`crate::drive_link`]).
     pub(crate) link: crate::drive_link::Feedback,
+    /// The travel source: the ground wheel, its cross-check with the Hall
+    /// gear, the live slip ([`crate::ground`]).
+    pub(crate) ground: crate::ground::Ground,
 }
 
 /// The drum controller, or the drive identification in its place.
@@ -288,6 +291,7 @@ impl Supervisor {
             work: Work::new(),
             quality: crate::quality::Quality::new(),
             link: crate::drive_link::Feedback::default(),
+            ground: crate::ground::Ground::new(),
         })
     }
 
@@ -403,6 +407,13 @@ impl Supervisor {
             self.pitches_q16 = self.pitches_q16.wrapping_add(pitches);
             self.last_tooth_at = Some(t.0);
         }
+    }
+
+    /// The ground wheel's encoder counter (wraps at 2¹⁶), read once a control
+    /// period before [`Supervisor::control_step`] (machine A with a ground
+    /// wheel, docs/ground-wheel.md).
+    pub fn ground_wheel_count(&mut self, counter: u16) {
+        self.ground.wheel_count(counter);
     }
 
     /// Says that Hall edges were lost before the next one (the capture

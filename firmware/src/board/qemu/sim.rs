@@ -246,11 +246,13 @@ impl Sensors {
             return SensorSample {
                 drum_encoder: self.machine.ground_encoder_count(),
                 hall_edges: edges,
+                ground_wheel: None,
             };
         }
         SensorSample {
             drum_encoder: self.machine.drum_encoder_count(),
             hall_edges: edges,
+            ground_wheel: None,
         }
     }
 }

@@ -39,6 +39,7 @@ impl Sensors {
         SensorSample {
             drum_encoder: self.tim3.cnt().read().cnt().bits(),
             hall_edges: heapless::Vec::new(),
+            ground_wheel: None,
         }
     }
 }

@@ -733,17 +733,17 @@ mod tests {
 
     #[test]
     fn f1_layout() {
-        // 311-byte payload (format 6), WRITE_SIZE 2: CRC at 12 + 312 (the
-        // payload padded to a word) = 324, commit at 328, end 332 = 166
+        // 317-byte payload (format 7), WRITE_SIZE 2: CRC at 12 + 320 (the
+        // payload padded to a word) = 332, commit at 336, end 340 = 170
         // half-words.
         let l = layout(SETTINGS_BYTES, 2).unwrap();
         assert_eq!(
             (l.crc_off, l.commit_off, l.commit_len, l.end),
-            (324, 328, 4, 332)
+            (332, 336, 4, 340)
         );
-        // WRITE_SIZE 8: the commit gets its own double word at 328.
+        // WRITE_SIZE 8: the commit gets its own double word at 336.
         let l = layout(SETTINGS_BYTES, 8).unwrap();
-        assert_eq!((l.commit_off, l.commit_len, l.end), (328, 8, 336));
+        assert_eq!((l.commit_off, l.commit_len, l.end), (336, 8, 344));
     }
 
     #[test]

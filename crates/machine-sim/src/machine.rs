@@ -185,6 +185,9 @@ pub struct Machine {
     wheel_ground_m: f64,
     /// Ground left of the clod under the wheel, m.
     clod_left_m: f32,
+    /// The clods' own random stream: a wheel with clods sees the same
+    /// terrain as one without.
+    wheel_rng: Rng,
     feed_steps: f64,
     plant_steps: f64,
     feed_belt_m: f64,
@@ -272,6 +275,7 @@ impl Machine {
             ground_encoder: 0,
             wheel_ground_m: 0.0,
             clod_left_m: 0.0,
+            wheel_rng: Rng::new(cfg.seed ^ 0x5EED_0F_C10D),
             feed_steps: 0.0,
             plant_steps: 0.0,
             feed_belt_m: 0.0,
@@ -639,7 +643,8 @@ impl Machine {
         let mut rolled = dg;
         if c.ground_wheel_clod_rate_per_m > 0.0 && dg > 0.0 {
             if self.clod_left_m <= 0.0
-                && f64::from(self.rng.uniform()) < dg * f64::from(c.ground_wheel_clod_rate_per_m)
+                && f64::from(self.wheel_rng.uniform())
+                    < dg * f64::from(c.ground_wheel_clod_rate_per_m)
             {
                 self.clod_left_m = c.ground_wheel_clod_m;
             }

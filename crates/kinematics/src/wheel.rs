@@ -22,10 +22,10 @@
 /// Periods the speed window holds at most.
 pub const WINDOW_PERIODS: usize = 32;
 /// Periods the speed window holds at least.
-pub const MIN_WINDOW_PERIODS: usize = 10;
+pub const MIN_WINDOW_PERIODS: usize = 5;
 /// Counts the speed window should hold (it grows up to
 /// [`WINDOW_PERIODS`] to reach them).
-pub const MIN_WINDOW_COUNTS: u32 = 64;
+pub const MIN_WINDOW_COUNTS: u32 = 24;
 
 /// One period's reading of the wheel.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -157,7 +157,8 @@ impl WheelOdometer {
 #[allow(
     clippy::cast_possible_truncation,
     clippy::cast_sign_loss,
-    clippy::cast_precision_loss
+    clippy::cast_precision_loss,
+    clippy::arithmetic_side_effects
 )]
 mod tests {
     extern crate std;

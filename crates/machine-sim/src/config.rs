@@ -126,8 +126,9 @@ pub struct Config {
     /// The wheel's own slip on the soil, fraction (0 … 0.05: it rolls this
     /// much less than the ground; a trailed wheel's 0–1 %). Default 0.
     pub ground_wheel_slip: f32,
-    /// Relative noise of the wheel's slip (0 … 1), following the track's
-    /// slip noise process (the same soil under both). Default 0.
+    /// Relative noise of the wheel's own slip (0 … 1: its SD against the
+    /// mean), a low-pass process of 20 s (the soil under a free-rolling wheel
+    /// changes by patches). Default 0.
     pub ground_wheel_slip_noise: f32,
     /// Clods that lift the wheel off the soil, per metre of ground (0 … 5).
     /// Default 0.

@@ -26,6 +26,10 @@ const SPEED_NOISE: (f32, f32) = (0.05, 6.244_998);
 const BELT_NOISE: (f32, f32) = (0.005, 19.974_984);
 /// Slip variation, τ = 1 s: a = 0.001, c = √1999.
 const SLIP_NOISE: (f32, f32) = (0.001, 44.710_18);
+/// The ground wheel's own slip: τ = 20 s (the soil under a free-rolling
+/// wheel changes by patches, not by the track's load swings);
+/// c = √((2 − a)/a).
+const WHEEL_SLIP_NOISE: (f32, f32) = (0.000_05, 199.997_5);
 
 /// What the controller drives during one step.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
@@ -188,6 +192,7 @@ pub struct Machine {
     /// The clods' own random stream: a wheel with clods sees the same
     /// terrain as one without.
     wheel_rng: Rng,
+    wheel_slip_noise: LpNoise,
     feed_steps: f64,
     plant_steps: f64,
     feed_belt_m: f64,
@@ -275,7 +280,8 @@ impl Machine {
             ground_encoder: 0,
             wheel_ground_m: 0.0,
             clod_left_m: 0.0,
-            wheel_rng: Rng::new(cfg.seed ^ 0x5EED_0F_C10D),
+            wheel_rng: Rng::new(cfg.seed ^ 0x05EE_D0FC_10D0),
+            wheel_slip_noise: LpNoise::default(),
             feed_steps: 0.0,
             plant_steps: 0.0,
             feed_belt_m: 0.0,
@@ -338,7 +344,11 @@ impl Machine {
         if c.belt_slip_noise > 0.0 {
             self.belt_noise.tick(&mut self.rng, BELT_NOISE);
         }
-        if c.track_slip_noise > 0.0 || c.ground_wheel_slip_noise > 0.0 {
+        if c.ground_wheel_slip_noise > 0.0 {
+            self.wheel_slip_noise
+                .tick(&mut self.wheel_rng, WHEEL_SLIP_NOISE);
+        }
+        if c.track_slip_noise > 0.0 {
             self.slip_noise.tick(&mut self.rng, SLIP_NOISE);
         }
         if self.now_us >= self.next_terrain_step_us {
@@ -656,8 +666,7 @@ impl Machine {
         if c.ground_wheel_slip > 0.0 {
             let mut slip = f64::from(c.ground_wheel_slip);
             if c.ground_wheel_slip_noise > 0.0 {
-                // The soil's: the track's slip noise process.
-                slip *= 1.0 + f64::from(c.ground_wheel_slip_noise * self.slip_noise.0);
+                slip *= 1.0 + f64::from(c.ground_wheel_slip_noise * self.wheel_slip_noise.0);
             }
             rolled *= 1.0 - slip.clamp(0.0, 0.5);
         }

@@ -15,17 +15,24 @@
 //!   (whole turns: the teeth's spacing errors cancel), the wheel's distance
 //!   taken at the same Hall edges;
 //! - **a wheel that stops rolling** (lifted, blocked, clogged, or counting
-//!   backwards) while the Hall gear says the machine moves: after
-//!   [`WHEEL_SILENT_US`] without a count (the wheel makes one every 4 ms at
-//!   the slowest gear) the ground goes on at the Hall gear's speed (the
-//!   track's speed × (1 − the slip last measured)), from the wheel's last
+//!   backwards) while the Hall gear turns: the gear gives an edge while the
+//!   wheel has not counted for [`WHEEL_SILENT_US`] (it counts every 4 ms at
+//!   the slowest gear). Evidence, not the Hall gear's estimated speed, which
+//!   lags a stopping tractor by up to its stop timeout: a tractor at rest
+//!   stops both. From then the ground goes on at the Hall gear's speed (the
+//!   track's speed × (1 − the slip last measured)) from the wheel's last
 //!   count, so a clod that lifts the wheel for a moment costs no distance;
-//!   after [`WHEEL_STOP_ALARM_US`] more it is a warning, and the machine
-//!   plants on the Hall gear until the wheel rolls again for
+//!   [`WHEEL_STOP_ALARM_US`] later it is a warning (within 0.5 s of the stop
+//!   at the slowest gear: up to one gap of the gear, 0.29 s, then 0.2 s), and
+//!   the machine plants on the Hall gear until the wheel rolls again for
 //!   [`WHEEL_BACK_US`];
 //! - **a Hall gear that stops** while the wheel rolls: a warning once the
-//!   next edge is 1.5 gaps late at the wheel's speed; the wheel carries on
-//!   (the slip is not measured meanwhile).
+//!   wheel has rolled [`HALL_SILENT_PITCHES_X10`] / 10 of the gear's pitches
+//!   since its last edge (the track, slipping, moves more than the ground:
+//!   a turning gear gives an edge within one pitch of ground); the wheel
+//!   carries on (the slip is not measured meanwhile). Counted in ground, not
+//!   time, so the restart after a rest, when the wheel rolls at once and the
+//!   gear's first tooth may be a whole pitch away, is no alarm.
 //!
 //! With the wheel **alone**, a wheel that counts backwards is a latched
 //! alarm (the supervisor's), and a silent one is the "no travel pulses"
@@ -37,12 +44,12 @@ use kinematics::wheel::{WheelOdometer, WheelStep};
 use crate::phase::EDGE_NM;
 use crate::settings::wheel::GroundWheelSettings;
 
-/// The wheel is taken as stopped after this long without a count while the
-/// Hall gear says the machine moves, µs.
+/// The wheel is taken as stopped when the Hall gear gives an edge after it
+/// has not counted for this long, µs.
 pub const WHEEL_SILENT_US: u32 = 50_000;
 /// A wheel stopped this much longer raises the warning, µs (a clod lifts it
-/// for less).
-pub const WHEEL_STOP_ALARM_US: u32 = 300_000;
+/// for less at Low 2 and above).
+pub const WHEEL_STOP_ALARM_US: u32 = 200_000;
 /// A stopped wheel is trusted again after rolling this long, µs.
 pub const WHEEL_BACK_US: u32 = 200_000;
 /// Counts backwards, without a count forward between them, that make a
@@ -52,6 +59,10 @@ pub const BACKWARD_COUNTS: u32 = 100;
 /// The slowest travel speed at which one source judges the other, m/s
 /// (U8F24 bits): 0.03 m/s, 0.11 km/h, a third of Low 1.
 pub const MOVING_BITS: u32 = 503_316;
+/// Ground the wheel may roll after the Hall gear's last edge, tenths of a
+/// pitch (π·0.20 m / 25 = 25.1 mm): 1.5 pitches, 37.7 mm — 0.44 s at the
+/// slowest gear (Low 1, 0.086 m/s).
+pub const HALL_SILENT_PITCHES_X10: u64 = 15;
 /// Gear turns the live slip is measured over.
 pub const SLIP_REVOLUTIONS: usize = 3;
 /// The Hall gear's teeth (one turn).
@@ -122,7 +133,11 @@ pub struct Ground {
     in_use: SourceInUse,
     stopped_us: u32,
     rolling_us: u32,
-    moving_us: u32,
+    /// Teeth at the last step, and the wheel's ground since the newest edge.
+    edge_teeth: u32,
+    since_edge_nm: u64,
+    /// Teeth when the wheel last counted forward.
+    wheel_teeth: u32,
     back_counts: u32,
     fault: Option<GroundFault>,
     stand_in_frac: u64,
@@ -151,7 +166,9 @@ impl Ground {
             in_use: SourceInUse::HallGear,
             stopped_us: 0,
             rolling_us: 0,
-            moving_us: 0,
+            edge_teeth: 0,
+            since_edge_nm: 0,
+            wheel_teeth: 0,
             back_counts: 0,
             fault: None,
             stand_in_frac: 0,
@@ -239,14 +256,23 @@ impl Ground {
             .odometer
             .silent_periods()
             .saturating_mul(period_us.max(1));
-        let not_rolling = hall_moving && (backwards || silent_us >= WHEEL_SILENT_US);
+        if wheel.forward > 0 {
+            self.wheel_teeth = hall.teeth;
+        }
+        // The gear turned (an edge) while the wheel was silent, or the
+        // wheel counts backwards; once standing in, until the wheel rolls.
+        let gear_turned = hall.teeth != self.wheel_teeth && silent_us >= WHEEL_SILENT_US;
+        let not_rolling = hall_moving
+            && (backwards
+                || gear_turned
+                || (self.in_use == SourceInUse::HallStandIn && wheel.forward == 0));
         let stand_in_bits = self.stand_in_bits(hall);
         let mut distance_nm = wheel.distance_nm;
         if not_rolling {
             if self.in_use != SourceInUse::HallStandIn {
                 // From the wheel's last count: the silence before it was
                 // seen is ground too.
-                distance_nm = self.stand_in_nm(stand_in_bits, silent_us.min(WHEEL_SILENT_US));
+                distance_nm = self.stand_in_nm(stand_in_bits, silent_us);
                 self.reset_slip();
             } else {
                 distance_nm = self.stand_in_nm(stand_in_bits, elapsed_us);
@@ -284,15 +310,15 @@ impl Ground {
                 self.fault = None;
             }
         }
-        // The Hall gear judged by the wheel: silent for 1.5 gaps at the
-        // wheel's speed (counted from when the wheel began to roll).
-        if wheel_bits >= MOVING_BITS {
-            self.moving_us = self.moving_us.saturating_add(elapsed_us);
+        // The Hall gear judged by the wheel: the ground rolled since its
+        // newest edge.
+        if hall.teeth != self.edge_teeth {
+            self.edge_teeth = hall.teeth;
+            self.since_edge_nm = 0;
         } else {
-            self.moving_us = 0;
+            self.since_edge_nm = self.since_edge_nm.saturating_add(wheel.distance_nm);
         }
-        let quiet_us = hall.since_edge_us.min(self.moving_us);
-        let hall_silent = wheel_bits >= MOVING_BITS && quiet_us > hall_gap_limit_us(wheel_bits);
+        let hall_silent = self.since_edge_nm > EDGE_NM * HALL_SILENT_PITCHES_X10 / 10;
         if hall_silent && self.in_use == SourceInUse::GroundWheel {
             self.fault = Some(GroundFault::HallStopped);
             self.reset_slip();
@@ -399,18 +425,6 @@ impl Ground {
             }
         }
     }
-}
-
-/// The longest Hall silence, µs, at a wheel speed of `wheel_bits` (m/s
-/// U8F24): 1.5 gaps of the gear, at least 100 ms.
-pub fn hall_gap_limit_us(wheel_bits: u32) -> u32 {
-    // nm / (m/s) = ns; U8F24: nm · 2²⁴ / bits / 1000 = µs.
-    let gap = (EDGE_NM << 24)
-        .checked_div(u64::from(wheel_bits))
-        .map_or(u64::MAX, |v| v / 1000);
-    u32::try_from(gap.saturating_mul(3) / 2)
-        .unwrap_or(u32::MAX)
-        .max(100_000)
 }
 
 #[cfg(test)]

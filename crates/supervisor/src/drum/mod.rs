@@ -81,7 +81,7 @@ use kinematics::{
 };
 
 use crate::drive::{DriveModel, Identifier, IdentifyError, IdentifyState};
-use crate::phase::{first_plant_place_um, Phase, PlantEvent};
+use crate::phase::{first_plant_place_fine_um, first_plant_place_um, Phase, PlantEvent};
 use crate::settings::{self, Placement, Settings};
 
 use alarm::*;
@@ -470,7 +470,12 @@ impl Supervisor {
             self.distance_frac = 0;
             self.belt_counts_k3 = 0;
             self.phase.start(self.teeth, self.pitches_q16);
-            self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
+            let spacing = self.settings.spacing.raw();
+            self.realign_next_plant(if self.settings.ground_wheel.source.uses_wheel() {
+                first_plant_place_fine_um(spacing)
+            } else {
+                first_plant_place_um(spacing)
+            });
             self.start_planting();
         }
         Effect::None

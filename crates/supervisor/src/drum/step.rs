@@ -211,6 +211,7 @@ impl Supervisor {
         let k3 = self.settings.calibration.k3_at(fix_to_rpm(self.k3_speed));
         // Positions for the phase loop: the ground while running, the belt
         // always (a coasting drum still moves partitions).
+        self.phase.set_fine_ground(ground.is_some());
         if let (RunState::Running, Some(g)) = (self.run, ground) {
             self.phase.advance_ground_by(g.distance_nm, g.speed_bits);
         } else if self.run == RunState::Running {

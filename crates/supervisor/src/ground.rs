@@ -198,9 +198,12 @@ impl Ground {
         self.fault
     }
 
-    /// The live track slip, ‰ (0.1 %), once measured.
-    pub const fn slip_x10(&self) -> Option<i16> {
+    /// The live track slip, ‰ (0.1 %): measured, both sensors turning and
+    /// the wheel in use (the last value is kept for the Hall gear's stand-in,
+    /// not shown).
+    pub fn slip_x10(&self) -> Option<i16> {
         self.slip_x10
+            .filter(|_| self.in_use == SourceInUse::GroundWheel && self.fault.is_none())
     }
 
     /// Signed wheel counts since boot (after the direction setting).

@@ -63,7 +63,8 @@ pub enum Fault {
     HallLoss,
     /// The drum encoder counter stops counting (the drum still turns).
     EncoderLoss,
-    /// Profile B: the ground-wheel encoder stops counting.
+    /// The ground wheel's encoder stops counting: the wheel is lifted,
+    /// blocked or clogged (it does not turn), or its encoder is dead.
     GroundEncoderLoss,
     /// The Hall sensor's output sticks high (a broken wire or a dead
     /// sensor: the pull-up holds the line). The falling edges the firmware
@@ -180,6 +181,13 @@ pub struct Machine {
     // Profile B.
     ground_counts_seen: i64,
     ground_encoder: u16,
+    /// Ground the wheel rolled (its own slip and the clods taken off), m.
+    wheel_ground_m: f64,
+    /// Ground left of the clod under the wheel, m.
+    clod_left_m: f32,
+    /// The clods' own random stream: a wheel with clods sees the same
+    /// terrain as one without.
+    wheel_rng: Rng,
     feed_steps: f64,
     plant_steps: f64,
     feed_belt_m: f64,
@@ -265,6 +273,9 @@ impl Machine {
             hall_edges: 0,
             ground_counts_seen: 0,
             ground_encoder: 0,
+            wheel_ground_m: 0.0,
+            clod_left_m: 0.0,
+            wheel_rng: Rng::new(cfg.seed ^ 0x5EED_0F_C10D),
             feed_steps: 0.0,
             plant_steps: 0.0,
             feed_belt_m: 0.0,
@@ -327,7 +338,7 @@ impl Machine {
         if c.belt_slip_noise > 0.0 {
             self.belt_noise.tick(&mut self.rng, BELT_NOISE);
         }
-        if c.track_slip_noise > 0.0 {
+        if c.track_slip_noise > 0.0 || c.ground_wheel_slip_noise > 0.0 {
             self.slip_noise.tick(&mut self.rng, SLIP_NOISE);
         }
         if self.now_us >= self.next_terrain_step_us {
@@ -538,6 +549,7 @@ impl Machine {
             Profile::A => self.belt_drops(t0, hf, (b0, b1), (g0, g1), sink),
             Profile::B => self.profile_b(t0, hs64, inputs, (g0, g1), sink),
         }
+        self.ground_wheel(g1 - g0);
         self.now_us = t0 + u64::from(h);
     }
 
@@ -621,11 +633,48 @@ impl Machine {
             self.partitions = self.partitions.wrapping_add(1);
             self.plant(t0, hf, frac, (g0, g1), sink);
         }
-        let circ = core::f64::consts::PI * f64::from(c.ground_wheel_diameter_m);
-        let total = floor_count(g1 / circ * f64::from(c.ground_encoder_counts_per_turn));
+    }
+
+    /// The ground wheel (profile B's, machine A's optional one): it rolls
+    /// `dg` of ground less its own slip, not at all on a clod, and its
+    /// encoder counts the turns of its real circumference.
+    fn ground_wheel(&mut self, dg: f64) {
+        let c = self.cfg;
+        let mut rolled = dg;
+        if c.ground_wheel_clod_rate_per_m > 0.0 && dg > 0.0 {
+            if self.clod_left_m <= 0.0
+                && f64::from(self.wheel_rng.uniform())
+                    < dg * f64::from(c.ground_wheel_clod_rate_per_m)
+            {
+                self.clod_left_m = c.ground_wheel_clod_m;
+            }
+            if self.clod_left_m > 0.0 {
+                self.clod_left_m -= dg as f32;
+                rolled = 0.0;
+            }
+        }
+        if c.ground_wheel_slip > 0.0 {
+            let mut slip = f64::from(c.ground_wheel_slip);
+            if c.ground_wheel_slip_noise > 0.0 {
+                // The soil's: the track's slip noise process.
+                slip *= 1.0 + f64::from(c.ground_wheel_slip_noise * self.slip_noise.0);
+            }
+            rolled *= 1.0 - slip.clamp(0.0, 0.5);
+        }
+        self.wheel_ground_m += rolled;
+        let circ = core::f64::consts::PI
+            * f64::from(c.ground_wheel_diameter_m)
+            * (1.0 + f64::from(c.ground_wheel_diameter_error));
+        let total =
+            floor_count(self.wheel_ground_m / circ * f64::from(c.ground_encoder_counts_per_turn));
         let delta = total - self.ground_counts_seen;
         self.ground_counts_seen = total;
         if !self.fault_active(Fault::GroundEncoderLoss) {
+            let delta = if c.ground_wheel_reversed {
+                -delta
+            } else {
+                delta
+            };
             self.ground_encoder = self.ground_encoder.wrapping_add(delta as u16);
         }
     }
@@ -842,13 +891,22 @@ impl Machine {
         self.wheel_turns
     }
 
+    /// The track's rolling distance since build, m (its drive wheel's turns ×
+    /// its rolling circumference): `1 − Δground / Δtrack` is the track's true
+    /// slip over a span.
+    #[must_use]
+    pub fn track_position_m(&self) -> f64 {
+        self.wheel_turns * consts::ROLLING_CIRCUMFERENCE_M_F64
+    }
+
     /// Hall edges delivered since build (lost edges not counted).
     #[must_use]
     pub fn hall_edges(&self) -> u32 {
         self.hall_edges
     }
 
-    /// Profile B: ground-wheel encoder counter (wrapping u16).
+    /// The ground wheel's encoder counter (wrapping u16; profile B's wheel,
+    /// machine A's optional one).
     #[must_use]
     pub fn ground_encoder_count(&self) -> u16 {
         self.ground_encoder

@@ -97,3 +97,13 @@ impl GroundWheel {
     }
 }
 
+/// Whether TIM4 counts the ground wheel (SMCR SMS = 011, encoder mode 3,
+/// §15.4.3), read from the timer itself: then it has no step output to
+/// stop, PB6 is the wheel's input, and an update event (EGR UG, §15.4.6)
+/// would reset its count (§15.3.12: the counter is the wheel's position).
+/// A timer whose clock is off reads 0 (not the wheel's).
+#[inline(always)]
+pub(super) fn tim4_counts_the_wheel() -> bool {
+    // SAFETY: a read of TIM4_SMCR, no side effect.
+    unsafe { (*pac::TIM4::ptr()).smcr().read().sms().is_encoder_mode_3() }
+}

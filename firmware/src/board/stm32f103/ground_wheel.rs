@@ -60,9 +60,10 @@ pub struct GroundWheel {
 }
 
 impl GroundWheel {
-    /// Takes TIM4 and PB6/PB7 for the wheel: the pins first (PB6 leaves the
-    /// boot's safe-state output low; its rise to the pull-up is over before
-    /// the counter starts), then the timer.
+    /// Takes TIM4 and PB6/PB7 for the wheel: the pins, then the timer. (PB6
+    /// leaves the boot's safe-state low for the pull-up; a count its rise
+    /// may make comes before the first reading, which the odometer takes as
+    /// its reference, not as ground.)
     pub(super) fn new(mut pins: Tim4Pins) -> Self {
         let a = pins.pb6.into_pull_up_input(&mut pins.crl);
         let b = pins.pb7.into_pull_up_input(&mut pins.crl);

@@ -87,7 +87,7 @@ pub const PHASE_TIME_CONSTANT_MS: u64 = 500;
 /// wheel, [`Phase::set_fine_ground`]), ms: the ground is known every 0.33 mm
 /// and every control period, so the loop may follow it closely (tuned on
 /// bench §12).
-pub const FINE_PHASE_TIME_CONSTANT_MS: u64 = 100;
+pub const FINE_PHASE_TIME_CONSTANT_MS: u64 = 60;
 /// Largest speed-up over the feed-forward with a fine ground sensor, %: the
 /// +10 % bound keeps spacings from a Hall gear's 25 mm steps of measured
 /// ground; a ground without steps needs the room to catch up a restart from

@@ -22,10 +22,10 @@
 //!   stops both. From then the ground goes on at the Hall gear's speed (the
 //!   track's speed × (1 − the slip last measured)) from the wheel's last
 //!   count, so a clod that lifts the wheel for a moment costs no distance;
-//!   [`WHEEL_STOP_ALARM_US`] later it is a warning (within 0.5 s of the stop
-//!   at the slowest gear: up to one gap of the gear, 0.29 s, then 0.2 s), and
-//!   the machine plants on the Hall gear until the wheel rolls again for
-//!   [`WHEEL_BACK_US`];
+//!   once the Hall gear says [`WHEEL_STOP_ALARM_NM`] of ground passed since
+//!   the wheel's last count it is a warning (more than a clod lifts it for;
+//!   0.41 s after the stop at the slowest gear), and the machine plants on
+//!   the Hall gear until the wheel rolls again for [`WHEEL_BACK_US`];
 //! - **a Hall gear that stops** while the wheel rolls: a warning once the
 //!   wheel has rolled [`HALL_SILENT_PITCHES_X10`] / 10 of the gear's pitches
 //!   since its last edge (the track, slipping, moves more than the ground:
@@ -47,9 +47,10 @@ use crate::settings::wheel::GroundWheelSettings;
 /// The wheel is taken as stopped when the Hall gear gives an edge after it
 /// has not counted for this long, µs.
 pub const WHEEL_SILENT_US: u32 = 50_000;
-/// A wheel stopped this much longer raises the warning, µs (a clod lifts it
-/// for less at Low 2 and above).
-pub const WHEEL_STOP_ALARM_US: u32 = 200_000;
+/// A wheel that has not rolled while the Hall gear says this much ground
+/// passed (nm, counted from the wheel's last count) raises the warning:
+/// 35 mm, more than a clod lifts it for, 0.41 s at the slowest gear.
+pub const WHEEL_STOP_ALARM_NM: u64 = 35_000_000;
 /// A stopped wheel is trusted again after rolling this long, µs.
 pub const WHEEL_BACK_US: u32 = 200_000;
 /// Counts backwards, without a count forward between them, that make a
@@ -131,7 +132,8 @@ pub struct Ground {
     odometer: WheelOdometer,
     counter: Option<u16>,
     in_use: SourceInUse,
-    stopped_us: u32,
+    /// Ground the Hall gear stood in for since the wheel's last count, nm.
+    stood_in_nm: u64,
     rolling_us: u32,
     /// Teeth at the last step, and the wheel's ground since the newest edge.
     edge_teeth: u32,
@@ -164,7 +166,7 @@ impl Ground {
             odometer: WheelOdometer::new(),
             counter: None,
             in_use: SourceInUse::HallGear,
-            stopped_us: 0,
+            stood_in_nm: 0,
             rolling_us: 0,
             edge_teeth: 0,
             since_edge_nm: 0,
@@ -281,9 +283,9 @@ impl Ground {
                 distance_nm = self.stand_in_nm(stand_in_bits, elapsed_us);
             }
             self.in_use = SourceInUse::HallStandIn;
-            self.stopped_us = self.stopped_us.saturating_add(elapsed_us);
+            self.stood_in_nm = self.stood_in_nm.saturating_add(distance_nm);
             self.rolling_us = 0;
-            if self.stopped_us >= WHEEL_STOP_ALARM_US {
+            if self.stood_in_nm >= WHEEL_STOP_ALARM_NM {
                 self.fault = Some(if backwards {
                     GroundFault::WheelBackwards
                 } else {
@@ -300,12 +302,12 @@ impl Ground {
             };
             if self.rolling_us >= WHEEL_BACK_US {
                 self.in_use = SourceInUse::GroundWheel;
-                self.stopped_us = 0;
+                self.stood_in_nm = 0;
                 self.fault = None;
             }
         } else {
             self.in_use = SourceInUse::GroundWheel;
-            self.stopped_us = 0;
+            self.stood_in_nm = 0;
             if matches!(
                 self.fault,
                 Some(GroundFault::WheelStopped | GroundFault::WheelBackwards)

@@ -225,10 +225,15 @@ fn a_wheel_counting_backwards_stops_it_alone_and_is_stood_in_for_with_both() {
 /// with their message and change nothing.
 #[test]
 fn the_wheel_calibration_takes_a_good_run_and_refuses_bad_ones() {
-    // Drives `metres` at Low 2 with the drum stopped and types `typed_cm`
-    // (the tape's, or a wrong one); the effect and the settings after.
-    let run = |cfg: Config, metres: f64, typed: Option<i32>| {
+    // Drives `metres` at Low 2 with the drum stopped (the wheel's encoder
+    // dead from the start when `dead`) and types `typed` cm (the tape's when
+    // `None`); the effects of the distance and of Accept, and the settings
+    // before and after.
+    let run = |cfg: Config, metres: f64, typed: Option<i32>, dead: bool| {
         let mut r = Rig::new(TravelSource::HallGear, Gear::Low2, 70, cfg);
+        if dead {
+            r.m.inject_fault(Fault::GroundEncoderLoss);
+        }
         r.sup
             .command(Command::SelectCalibration(CalibrationKind::GroundWheel));
         r.run_to(1.0);
@@ -249,7 +254,7 @@ fn the_wheel_calibration_takes_a_good_run_and_refuses_bad_ones() {
         ground_wheel_diameter_error: 0.015,
         ..Config::default()
     };
-    let (effect, accept, _, after) = run(good, 30.0, None);
+    let (effect, accept, _, after) = run(good, 30.0, None, false);
     assert_eq!((effect, accept), (Effect::None, Effect::SettingsChanged));
     let truth = f64::from(model_counts_per_m_x1000(&good)) / 1.015;
     let got = f64::from(after.ground_wheel.counts_per_m_x1000);
@@ -300,29 +305,7 @@ fn the_wheel_calibration_takes_a_good_run_and_refuses_bad_ones() {
         ),
     ];
     for (what, cfg, dead, typed, text) in refusals {
-        let mut cfg = cfg;
-        if dead {
-            cfg.ground_encoder_counts_per_turn = 2400;
-        }
-        let (effect, accept, before, after) = if dead {
-            // The encoder dead from the start.
-            let mut r = Rig::new(TravelSource::HallGear, Gear::Low2, 70, cfg);
-            r.m.inject_fault(Fault::GroundEncoderLoss);
-            r.sup
-                .command(Command::SelectCalibration(CalibrationKind::GroundWheel));
-            r.run_to(1.0);
-            let before = r.sup.settings().clone();
-            r.sup.command(Command::CalibrationStart);
-            r.run_to(31.0);
-            r.sup.command(Command::CalibrationStop);
-            let effect = r.sup.command(Command::CalibrationActualDistance(
-                CalibrationDistance::new(3000).unwrap(),
-            ));
-            let accept = r.sup.command(Command::CalibrationAccept);
-            (effect, accept, before, r.sup.settings().clone())
-        } else {
-            run(cfg, 30.0, typed)
-        };
+        let (effect, accept, before, after) = run(cfg, 30.0, typed, dead);
         assert_eq!(effect, Effect::Message(text), "{what}");
         assert_ne!(accept, Effect::SettingsChanged, "{what}");
         assert_eq!(after, before, "{what}: settings changed");

@@ -421,6 +421,33 @@ pub(super) fn figures(s: &Stats, x: u16) -> Figures {
     }
 }
 
+/// The cases of §9 and §12: gear, its name, spacing mm.
+pub(super) const CASES: [(Gear, &str, u16); 4] = [
+    (Gear::Low1, "Low 1", 70),
+    (Gear::Low2, "Low 2", 70),
+    (Gear::Low1, "Low 1", 180),
+    (Gear::Low2, "Low 2", 180),
+];
+
+/// `f` over `jobs` on two threads (the rows are independent), in order; an
+/// empty result when a worker failed.
+pub(super) fn on_two_threads<J: Sync, R: Send>(
+    jobs: &[J],
+    f: impl Fn(&J) -> Result<R> + Sync,
+) -> Vec<Result<R>> {
+    let (a, b): (Vec<_>, Vec<_>) = jobs.iter().enumerate().partition(|(i, _)| i % 2 == 0);
+    let run = |js: Vec<(usize, &J)>| js.into_iter().map(|(i, j)| (i, f(j))).collect::<Vec<_>>();
+    let mut all: Vec<(usize, Result<R>)> = std::thread::scope(|sc| {
+        let ha = sc.spawn(|| run(a));
+        let hb = sc.spawn(|| run(b));
+        let mut all = ha.join().unwrap_or_default();
+        all.extend(hb.join().unwrap_or_default());
+        all
+    });
+    all.sort_by_key(|p| p.0);
+    all.into_iter().map(|p| p.1).collect()
+}
+
 /// One case of the table: profile, gear (and its name), spacing mm,
 /// placement, case index (seeds).
 type Job = (Profile, Gear, &'static str, u16, Placement, u64);
@@ -462,16 +489,10 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
          | profile | X, gear | mode | CV % | p95 spacing err % | outside ±5 % | count err (worst) | pos. err vs measured: mean / p95 / max mm | vs true: mean / p95 / max mm | ground err mm | first plant mm | drift mm | alarms |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     );
-    let cases = [
-        (Gear::Low1, "Low 1", 70u16),
-        (Gear::Low2, "Low 2", 70),
-        (Gear::Low1, "Low 1", 180),
-        (Gear::Low2, "Low 2", 180),
-    ];
     let mut jobs: Vec<Job> = Vec::new();
     let mut ci = 0u64;
     for profile in Profile::ALL {
-        for (gear, gname, x) in cases {
+        for (gear, gname, x) in CASES {
             for placement in [Placement::SpeedFollowing, Placement::DistanceLocked] {
                 jobs.push((profile, gear, gname, x, placement, ci));
             }
@@ -479,20 +500,7 @@ pub fn section(doc: &mut String, img: &std::path::Path) -> Result<f64> {
         }
     }
     // Two threads: the cases are independent.
-    let results: Vec<Result<Stats>> = std::thread::scope(|sc| {
-        let (a, b): (Vec<_>, Vec<_>) = jobs.iter().enumerate().partition(|(i, _)| i % 2 == 0);
-        let run = |js: Vec<(usize, &Job)>| {
-            js.into_iter()
-                .map(|(i, j)| (i, case(j.4, j.0, j.1, j.3, j.5, Source::HALL)))
-                .collect::<Vec<_>>()
-        };
-        let ha = sc.spawn(move || run(a));
-        let hb = sc.spawn(move || run(b));
-        let mut all: Vec<(usize, Result<Stats>)> = ha.join().unwrap_or_default();
-        all.extend(hb.join().unwrap_or_default());
-        all.sort_by_key(|p| p.0);
-        all.into_iter().map(|p| p.1).collect()
-    });
+    let results = on_two_threads(&jobs, |j| case(j.4, j.0, j.1, j.3, j.5, Source::HALL));
     if results.len() != jobs.len() {
         return Err("placement bench: a worker failed".into());
     }

@@ -8,7 +8,7 @@ use machine_sim::{Config, Inputs};
 use supervisor::drum::{Hardware, Supervisor};
 use supervisor::settings::{Placement, Settings};
 
-use super::placement::{case, figures, pct, with_wheel, Profile, Source};
+use super::placement::{case, figures, on_two_threads, pct, with_wheel, Profile, Source, CASES};
 use crate::Result;
 
 /// The wheel's calibration on page 4 as an operator does it: a run of
@@ -97,16 +97,10 @@ pub fn section(doc: &mut String) -> Result<f64> {
          |---|---|---|---|---|---|---|---|---|---|---|---|\n",
         f64::from(counts) / 1000.0
     );
-    let cases = [
-        (Gear::Low1, "Low 1", 70u16),
-        (Gear::Low2, "Low 2", 70),
-        (Gear::Low1, "Low 1", 180),
-        (Gear::Low2, "Low 2", 180),
-    ];
     let mut jobs: Vec<Job> = Vec::new();
     let mut ci = 0u64;
     for profile in Profile::ALL {
-        for (gear, gname, x) in cases {
+        for (gear, gname, x) in CASES {
             for source in [
                 TravelSource::HallGear,
                 TravelSource::GroundWheel,
@@ -117,28 +111,12 @@ pub fn section(doc: &mut String) -> Result<f64> {
             ci += 1;
         }
     }
-    let results: Vec<Result<super::placement::Stats>> = std::thread::scope(|sc| {
-        let (a, b): (Vec<_>, Vec<_>) = jobs.iter().enumerate().partition(|(i, _)| i % 2 == 0);
-        let run = |js: Vec<(usize, &Job)>| {
-            js.into_iter()
-                .map(|(i, j)| {
-                    let source = Source {
-                        travel: j.5,
-                        counts_per_m_x1000: counts,
-                    };
-                    (
-                        i,
-                        case(Placement::DistanceLocked, j.0, j.1, j.3, j.4, source),
-                    )
-                })
-                .collect::<Vec<_>>()
+    let results = on_two_threads(&jobs, |j| {
+        let source = Source {
+            travel: j.5,
+            counts_per_m_x1000: counts,
         };
-        let ha = sc.spawn(move || run(a));
-        let hb = sc.spawn(move || run(b));
-        let mut all = ha.join().unwrap_or_default();
-        all.extend(hb.join().unwrap_or_default());
-        all.sort_by_key(|p| p.0);
-        all.into_iter().map(|p| p.1).collect()
+        case(Placement::DistanceLocked, j.0, j.1, j.3, j.4, source)
     });
     if results.len() != jobs.len() {
         return Err("wheel bench: a worker failed".into());

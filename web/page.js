@@ -104,8 +104,13 @@ const PAIRS = {
   WorkSwitchLabel: ['ToggleWorkSwitch'],
   PlacementLabel: ['TogglePlacement'],
   LinkParameterLabel: ['NextLinkParameter'],
+  TravelSourceLabel: ['NextTravelSource'],
+  GroundWheelDirectionLabel: ['ToggleGroundWheelDirection'],
 };
 const NAV = /^(ShowPage|ShowHome|SelectMode)/;
+// The buttons that close a page's work: in the bottom bar, after the
+// navigation (the settings page's rows fill the screen above it).
+const CLOSING = /^SaveSettings$/;
 
 function makeComp(def) {
   const c = {
@@ -231,13 +236,17 @@ function build() {
       }
       left.append(row);
     }
-    // Other buttons: navigation at the bottom, the rest with the controls.
+    // Other buttons: navigation (and Save settings) at the bottom, the rest
+    // with the controls.
     const others = el('div', 'row buttons');
+    const closing = [];
     for (const c of comps.filter((c) => c.def.kind === 'button' && !used.has(c))) {
       used.add(c);
       if (NAV.test(c.def.detail)) nav.append(button(c, 'navb'));
+      else if (CLOSING.test(c.def.detail)) closing.push(c);
       else others.append(button(c));
     }
+    for (const c of closing) nav.append(button(c, 'navb'));
     if (others.childElementCount) left.append(others);
     // Live values and the other texts.
     const tiles = el('div', 'tiles');

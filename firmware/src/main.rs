@@ -131,11 +131,17 @@ mod app {
         let drive = build_drive(cx.local.drive_slot, machine);
         let mut drum = board.drum;
         drum.set_enabled(false);
-        let actuators = match machine {
-            Machine::DrumBelt(_) => Actuators::Drum(drum),
-            Machine::SeedlingBelt(_) => {
-                Actuators::Steppers(board::Steppers::new(drum, board.feed_step))
-            }
+        // TIM4 by machine: A counts its ground wheel, B steps its feeding
+        // motor.
+        let (sensors, actuators) = match machine {
+            Machine::DrumBelt(_) => (
+                board.sensors.with_ground_wheel(board.tim4),
+                Actuators::Drum(drum),
+            ),
+            Machine::SeedlingBelt(_) => (
+                board.sensors,
+                Actuators::Steppers(board::Steppers::new(drum, board.tim4)),
+            ),
         };
         // The boot is the deepest part of a run: checked by the QEMU tests.
         #[cfg(feature = "board-qemu")]
@@ -172,7 +178,7 @@ mod app {
                 drop_mark: DropMark::new(),
                 saves_in,
                 saves_out,
-                sensors: board.sensors,
+                sensors,
                 work_switch: board.work_switch,
                 actuators,
                 watchdog: board.watchdog,

@@ -111,6 +111,10 @@ pub fn status(t: f64) -> Status {
         drive_dead_time_x10_ms: 50,
         measured_distance_cm: 4870,
         calibration_result_x1000: 1027,
+        // The Hall gear alone (the settings' default source): no slip
+        // measured.
+        track_slip_x10: hmi_proto::screen::SLIP_UNKNOWN,
+        travel_source_in_use: hmi_proto::screen::TravelSourceInUse::HallGear,
         ..Status::default()
     }
 }
@@ -165,9 +169,7 @@ pub fn page_bytes(page: Page, t: f64) -> Vec<u8> {
 pub fn status_bytes(page: Page, t: f64) -> Vec<u8> {
     let mut out = Vec::new();
     let s = status(t);
-    for ins in status_instructions(page, &s) {
-        emit(&mut out, &ins);
-    }
+    status_instructions(page, &s, |ins| emit(&mut out, ins));
     out
 }
 

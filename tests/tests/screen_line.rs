@@ -385,3 +385,97 @@ fn the_stop_press_is_never_held_up_by_a_full_receive_queue() {
         assert!(stop - press <= 5_000, "{} µs", stop - press);
     }
 }
+
+/// Machine A's ground on the independent screen (docs/hmi.md pages 3 and
+/// 6): the run page's live slip and ground sensor land in `tslip` and
+/// `tground` as the status task writes them, each change within one status
+/// period, with no error from the screen; *Travel source* and *Wheel
+/// direction* on page 6 are taken as their commands and their labels follow
+/// the settings.
+#[test]
+fn the_ground_wheel_texts_and_buttons_with_the_independent_screen() {
+    use hmi_proto::screen::{Status, TravelSource, TravelSourceInUse, SLIP_UNKNOWN};
+    let mut rig = Rig::connected(Settings::default());
+    let t = rig.now_us();
+    tap(&mut rig, t, "badapt", 100_000);
+    rig.run_for(400_000);
+    assert_eq!(rig.screen.page(), 3);
+    assert_eq!(rig.screen.text("tslip").as_deref(), Some("Slip 0.0 %"));
+    assert_eq!(rig.screen.text("tground").as_deref(), Some("Hall gear"));
+    let cases: [(i16, TravelSourceInUse, &str, &str); 4] = [
+        (
+            SLIP_UNKNOWN,
+            TravelSourceInUse::HallGear,
+            "Slip --",
+            "Hall gear",
+        ),
+        (
+            42,
+            TravelSourceInUse::GroundWheel,
+            "Slip 4.2 %",
+            "Ground wheel",
+        ),
+        (
+            -5,
+            TravelSourceInUse::GroundWheel,
+            "Slip -0.5 %",
+            "Ground wheel",
+        ),
+        (
+            -5,
+            TravelSourceInUse::HallStandIn,
+            "Slip -0.5 %",
+            "Hall (wheel stopped)",
+        ),
+    ];
+    for (slip, in_use, slip_text, in_use_text) in cases {
+        rig.status = Status {
+            track_slip_x10: slip,
+            travel_source_in_use: in_use,
+            ..Status::default()
+        };
+        // One status period and the line time.
+        rig.run_for(230_000);
+        assert_eq!(rig.screen.text("tslip").as_deref(), Some(slip_text));
+        assert_eq!(rig.screen.text("tground").as_deref(), Some(in_use_text));
+    }
+    // The settings page.
+    let t = rig.now_us();
+    tap(&mut rig, t, "bback", 100_000);
+    tap(&mut rig, t + 400_000, "bset", 100_000);
+    rig.run_for(800_000);
+    assert_eq!(rig.screen.page(), 6);
+    assert_eq!(rig.screen.text("tsource").as_deref(), Some("Hall gear"));
+    assert_eq!(rig.screen.text("twdir").as_deref(), Some("normal"));
+    let t = rig.now_us();
+    tap(&mut rig, t, "bsource", 100_000);
+    tap(&mut rig, t + 400_000, "bwdir", 100_000);
+    rig.run_for(800_000);
+    let commands: Vec<Command> = rig
+        .events
+        .iter()
+        .filter_map(|(_, e)| match e {
+            Event::Command(
+                c @ (Command::SelectTravelSource(_) | Command::SetGroundWheelReversed(_)),
+            ) => Some(*c),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        commands,
+        vec![
+            Command::SelectTravelSource(TravelSource::GroundWheel),
+            Command::SetGroundWheelReversed(true),
+        ]
+    );
+    assert_eq!(rig.screen.text("twdir").as_deref(), Some("reversed (A/B)"));
+    // The supervisor takes the source: the firmware's settings come back.
+    let taken = Settings {
+        travel_source: TravelSource::GroundWheel,
+        ..*rig.hmi.settings()
+    };
+    rig.hmi.set_settings(taken).unwrap();
+    rig.run_for(100_000);
+    assert_eq!(rig.screen.text("tsource").as_deref(), Some("Ground wheel"));
+    assert!(rig.screen.errors().is_empty(), "{:?}", rig.screen.errors());
+}

@@ -18,7 +18,7 @@
 
 use std::time::{Duration, Instant};
 
-use hmi_proto::screen::{Kind, Page, COMPONENTS};
+use hmi_proto::screen::{Kind, Page, Role, COMPONENTS};
 use machine_sim::SpacingAccumulator;
 use qemu_tests::browser::Browser;
 use qemu_tests::screen_shots::page_bytes;
@@ -110,7 +110,8 @@ fn id_of(page: Page, name: &str) -> u8 {
 }
 
 /// The script that tells, for every component of `page`, whether it is on
-/// the page and shown, and the size of each touch target (CSS px).
+/// the page and shown (inside the window, and not cut off by a box that
+/// scrolls or clips it), and the size of each touch target (CSS px).
 fn check_script(page: Page) -> String {
     let list: Vec<String> = COMPONENTS
         .iter()
@@ -129,7 +130,12 @@ fn check_script(page: Page) -> String {
         "(() => {{ const out = []; for (const [id, name, target] of [{}]) {{ \
          const e = document.querySelector('section[data-page=\"{p}\"] [data-name=\"' + name + '\"][data-id=\"' + id + '\"]'); \
          const r = e ? e.getBoundingClientRect() : null; \
-         out.push({{name, present: !!e, shown: !!(r && r.width > 0 && r.height > 0 && r.bottom <= innerHeight + 1 && r.right <= innerWidth + 1), \
+         let clipped = false; \
+         for (let a = e && e.parentElement; a; a = a.parentElement) {{ \
+           if (getComputedStyle(a).overflowY === 'visible') continue; \
+           const q = a.getBoundingClientRect(); \
+           if (r.top < q.top - 1 || r.bottom > q.bottom + 1 || r.left < q.left - 1 || r.right > q.right + 1) clipped = true; }} \
+         out.push({{name, present: !!e, shown: !!(r && r.width > 0 && r.height > 0 && r.bottom <= innerHeight + 1 && r.right <= innerWidth + 1 && !clipped), \
          target, w: r ? r.width : 0, h: r ? r.height : 0}}); }} return out; }})()",
         list.join(","),
         p = page.id()
@@ -166,18 +172,81 @@ fn page_problems(b: &mut Browser, page: Page, viewport: (u32, u32)) -> Vec<Strin
     problems
 }
 
+/// Every text the firmware can write into a component of `role` from a
+/// fixed set (the labels of the settings, the live texts of the ground);
+/// empty for the others (messages, the version).
+fn role_texts(role: Role) -> Vec<String> {
+    use hmi_proto::screen::{
+        encoder_direction_label, placement_label, slip_text, work_switch_label, CalibrationKind,
+        Gear, LinkParameter, MachineProfile, StatusText, TravelSource, TravelSourceInUse,
+        SLIP_UNKNOWN, STATUS_TEXT_LEN,
+    };
+    let texts: Vec<&str> = match role {
+        Role::GearLabel => Gear::ALL.map(Gear::label).to_vec(),
+        Role::CalibrationLabel => {
+            let mut kinds = vec![CalibrationKind::SpeedK1];
+            while kinds.len() < 4 {
+                kinds.push(kinds[kinds.len() - 1].next());
+            }
+            kinds.into_iter().map(CalibrationKind::label).collect()
+        }
+        Role::ProfileLabel => MachineProfile::ALL.map(MachineProfile::label).to_vec(),
+        Role::EncoderDirectionLabel | Role::GroundWheelDirectionLabel => {
+            vec![
+                encoder_direction_label(false),
+                encoder_direction_label(true),
+            ]
+        }
+        Role::WorkSwitchLabel => vec![work_switch_label(false), work_switch_label(true)],
+        Role::PlacementLabel => vec![placement_label(false), placement_label(true)],
+        Role::LinkParameterLabel => LinkParameter::ALL.map(LinkParameter::label).to_vec(),
+        Role::TravelSourceLabel => [
+            TravelSource::HallGear,
+            TravelSource::GroundWheel,
+            TravelSource::Both,
+        ]
+        .map(TravelSource::label)
+        .to_vec(),
+        Role::StatusText(StatusText::TrackSlip) => {
+            return [SLIP_UNKNOWN, -1000, 1000, i16::MIN + 1, i16::MAX]
+                .map(|v| slip_text(v, &mut [0u8; STATUS_TEXT_LEN]).to_string())
+                .to_vec();
+        }
+        Role::StatusText(StatusText::TravelSourceInUse) => [
+            TravelSourceInUse::HallGear,
+            TravelSourceInUse::GroundWheel,
+            TravelSourceInUse::HallStandIn,
+        ]
+        .map(TravelSourceInUse::label)
+        .to_vec(),
+        _ => Vec::new(),
+    };
+    texts.into_iter().map(String::from).collect()
+}
+
 /// The widest value each number of `page` can show: five significant
 /// digits at its decimals (99999, 9999.9, 999.99: a pass of 10 km, 99 999
-/// plants), an input's range ends; written as the firmware writes values.
+/// plants), an input's range ends; and the longest text of each label and
+/// live text ([`role_texts`]); written as the firmware writes them.
 fn widest_values(page: Page) -> Vec<u8> {
     let mut out = Vec::new();
     for c in COMPONENTS.iter().filter(|c| c.page == page) {
+        if let Some(longest) = role_texts(c.role).iter().max_by_key(|t| t.len()) {
+            let obj = hmi_proto::ObjName::new(c.name()).unwrap();
+            let mut buf = [0u8; hmi_proto::MAX_INSTRUCTION_LEN];
+            let n = hmi_proto::Instruction::set_text(obj, longest)
+                .unwrap()
+                .emit(&mut buf)
+                .unwrap();
+            out.extend_from_slice(&buf[..n]);
+            continue;
+        }
         let values: Vec<i64> = match c.role {
-            hmi_proto::screen::Role::Input(f) => {
+            Role::Input(f) => {
                 let (min, max) = f.range();
                 vec![i64::from(min), i64::from(max)]
             }
-            hmi_proto::screen::Role::Status(_) => vec![99_999],
+            Role::Status(_) => vec![99_999],
             _ => continue,
         };
         if !matches!(c.kind(), Kind::Number | Kind::Xfloat(_)) {
@@ -387,6 +456,18 @@ fn every_component_on_its_page_and_nothing_sent_on_bad_input() {
     assert_eq!(
         page_problems(&mut b, Page::Adaptive, (1280, 800)),
         vec!["page 3 `xcv` missing".to_string()]
+    );
+    // And when a box that clips cuts a component off (the live values'
+    // column made too short for its last tiles).
+    b.eval(
+        "(() => { const v = document.querySelector('section[data-page=\"3\"] .values'); \
+         v.style.height = '120px'; v.style.overflow = 'hidden'; })()",
+    )
+    .unwrap();
+    let cut = page_problems(&mut b, Page::Adaptive, (1280, 800));
+    assert!(
+        cut.contains(&"page 3 `tground` not shown".to_string()),
+        "{cut:?}"
     );
     assert!(touches(&server).is_empty(), "the page touched by itself");
 

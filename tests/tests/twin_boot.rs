@@ -314,8 +314,12 @@ fn profile_a_boots_to_idle_with_rm0008_registers() {
     check_common(&mut twin, Machine::ProfileA);
     // Drum PWM carrier 20 kHz (docs/firmware.md: above hearing).
     check_tim1_pwm(&twin, 20e3);
-    // TIM4 is not used by profile A: reset state (RM0008 §15.4).
-    assert_eq!(twin.peek(0x4000_0800), 0, "TIM4 CR1");
+    // TIM4 counts profile A's ground wheel: encoder mode 3 (RM0008
+    // §15.4.3 SMS = 011), running; no output channel (CCER, §15.4.9).
+    // Its full set-up: tests/tests/twin_ground_wheel.rs.
+    assert_eq!(field(twin.peek(0x4000_0808), 0, 3), 0b011, "TIM4 SMS");
+    assert_eq!(twin.peek(0x4000_0800) & 1, 1, "TIM4 CEN");
+    assert_eq!(twin.peek(0x4000_0820), 0, "TIM4 CCER");
     // Outputs after init: drum stopped, PWM pin driven low, enable low.
     assert_eq!(twin.pin('A', 8), twin::Level::Low);
     assert_eq!(twin.pin('B', 12), twin::Level::Low);

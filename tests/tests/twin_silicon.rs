@@ -402,3 +402,132 @@ fn peek_reads_what_the_cpu_reads() {
     assert_eq!(cpu[2] & 0xFFF, 0x410, "DEV_ID");
     assert_eq!(peek, cpu, "SYST_CVR, SYST_CALIB, DBGMCU_IDCODE");
 }
+
+const TIM4: u32 = 0x4000_0800;
+const GPIOB_CRL: u32 = 0x4001_0C00;
+const GPIOB_ODR: u32 = 0x4001_0C0C;
+const AFIO_MAPR: u32 = 0x4001_0004;
+
+/// One way of setting up TIM4's encoder interface, changed from the
+/// RM0008 one in one respect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Tim4Setup {
+    /// RM0008 §15.3.12 with PB6/PB7 pulled-up inputs: clock on, CC1S =
+    /// CC2S = 01, IC1F = IC2F = 1111, SMS = 011, ARR = 0xFFFF, CEN.
+    Manual,
+    /// TIM4EN never set (RCC_APB1ENR, §7.3.8): the writes are lost.
+    NoClock,
+    /// TIM4 held in reset (RCC_APB1RSTR TIM4RST, §7.3.5).
+    HeldInReset,
+    /// ARR left at its reset value 0 (§15.4.12): the counter cannot move.
+    ArrAtReset,
+    /// AFIO_MAPR TIM4_REMAP = 1 (§9.3.7, §9.4.2): the channels are on
+    /// PD12/PD13, not PB6/PB7.
+    Remapped,
+    /// PB6 a push-pull output (§9.1.4: an alternate-function input wants
+    /// input mode).
+    Pb6Output,
+    /// PB7 in analog mode (§9.1.5: the Schmitt trigger is off).
+    Pb7Analog,
+    /// CC1P = 1 (§15.4.9): TI1 inverted, the count runs the other way.
+    Cc1pInverted,
+    /// CEN never set.
+    Stopped,
+}
+
+/// Runs a program that sets TIM4 up as `setup` says and halts; returns
+/// the twin (the core on the reset HSI: TIM4 clocked at 8 MHz).
+fn tim4_encoder(setup: Tim4Setup) -> Twin {
+    use Tim4Setup::*;
+    let mut p = Program::new();
+    p.label("reset")
+        // GPIOB and AFIO clocks (RCC_APB2ENR IOPBEN, AFIOEN, §7.3.7).
+        .store(RCC_APB2ENR, (1 << 3) | 1);
+    if setup != NoClock {
+        p.store(RCC_APB1ENR, 1 << 2);
+    }
+    if setup == HeldInReset {
+        p.store(RCC_APB1RSTR, 1 << 2);
+    }
+    p.dsb();
+    // PB6/PB7: CNF = 10, MODE = 00 (input with pull), ODR = 1: up (§9.2.1).
+    let mut crl = 0x8844_4444;
+    if setup == Pb6Output {
+        crl = 0x8244_4444;
+    }
+    if setup == Pb7Analog {
+        crl = 0x0844_4444;
+    }
+    p.store(GPIOB_CRL, crl).store(GPIOB_ODR, 0xC0);
+    if setup == Remapped {
+        p.store(AFIO_MAPR, 1 << 12);
+    }
+    // CCMR1: CC1S = 01, IC1F = 1111, CC2S = 01, IC2F = 1111 (§15.4.7).
+    p.store(TIM4 + 0x18, 0xF1F1);
+    if setup == Cc1pInverted {
+        p.store(TIM4 + 0x20, 1 << 1);
+    }
+    p.store(TIM4 + 0x08, 0b011);
+    if setup != ArrAtReset {
+        p.store(TIM4 + 0x2C, 0xFFFF);
+    }
+    if setup != Stopped {
+        p.store(TIM4, 1);
+    }
+    p.halt();
+    run(&mut p, 50)
+}
+
+/// `delta` quadrature counts of a wheel on PB6/PB7 over 1 ms; what TIM4
+/// took and its CNT after.
+fn wheel_moves(twin: &mut Twin, delta: i32) -> (i32, u32) {
+    let took = twin.state_mut().bus.encoder_input(
+        twin::periph::EncoderWiring::TIM4_PB6_PB7,
+        delta,
+        false,
+        TICKS_PER_S / 1000,
+    );
+    (took, twin.peek(TIM4 + 0x24))
+}
+
+/// The twin's encoder interface (TIM4 on PB6/PB7, the ground wheel's)
+/// counts only as RM0008 lets the chip count: a timer without its clock
+/// or held in reset, ARR = 0, the channels remapped away, a pin not an
+/// input or CEN = 0 count nothing; CC1P inverts the direction (DIR set,
+/// and an update event then loads ARR, §15.4.6); edges closer than the
+/// input filter's 8 samples at fDTS / 32 (§15.4.7: 32 µs at 8 MHz) never
+/// pass it.
+#[test]
+fn tim4_encoder_mode_counts_only_as_rm0008_lets_the_chip_count() {
+    use Tim4Setup::*;
+    // 20 counts in 1 ms: each channel holds its level 100 µs.
+    let mut twin = tim4_encoder(Manual);
+    assert_eq!(wheel_moves(&mut twin, 20), (20, 20), "the manual's set-up");
+    assert_eq!(wheel_moves(&mut twin, -5), (-5, 15), "backwards");
+    assert_eq!(twin.peek(TIM4) & 0x10, 0x10, "DIR after a count down");
+    for setup in [
+        NoClock,
+        HeldInReset,
+        ArrAtReset,
+        Remapped,
+        Pb6Output,
+        Pb7Analog,
+        Stopped,
+    ] {
+        let mut twin = tim4_encoder(setup);
+        assert_eq!(wheel_moves(&mut twin, 20), (0, 0), "{setup:?}");
+    }
+    let mut twin = tim4_encoder(Cc1pInverted);
+    assert_eq!(wheel_moves(&mut twin, 20), (-20, 0xFFFF - 19), "CC1P");
+    // UG while DIR = 1: the counter takes ARR (§15.4.6), not 0.
+    let now = twin.now();
+    twin.state_mut().bus.write(TIM4 + 0x14, 1, now);
+    assert_eq!(twin.peek(TIM4 + 0x24), 0xFFFF, "UG counting down");
+    // 100 counts in 1 ms: 20 µs a level, under the filter's 32 µs.
+    let mut twin = tim4_encoder(Manual);
+    assert_eq!(
+        wheel_moves(&mut twin, 100),
+        (0, 0),
+        "faster than the filter"
+    );
+}

@@ -793,7 +793,13 @@ impl Timer {
     /// The input filter delay of IC1 (IC1F, CKD), in timer clocks
     /// (RM0008 §15.4.7: N consecutive samples at fSAMPLING).
     pub fn ic1_filter_clocks(&self) -> u64 {
-        let icf = (self.ccmr[0] >> 4) & 0xF;
+        self.ic_filter_clocks(0)
+    }
+
+    /// The input filter delay of channel `ch` + 1 (ICxF in CCMR1/CCMR2,
+    /// CKD), in timer clocks.
+    pub fn ic_filter_clocks(&self, ch: usize) -> u64 {
+        let icf = (self.ccmr[ch / 2] >> (4 + 8 * (ch % 2) as u32)) & 0xF;
         let dts = 1u64 << ((self.cr1 >> 8) & 3).min(2);
         let (div, n) = match icf {
             0 => (1, 0),
@@ -849,7 +855,11 @@ impl Timer {
 
     fn write(&mut self, off: u32, v: u32) {
         match off {
-            0x00 => self.cr1 = v & 0x3FF,
+            0x00 => {
+                // DIR is read-only in encoder mode (RM0008 §15.4.1).
+                let keep = if self.encoder_mode() != 0 { 0x10 } else { 0 };
+                self.cr1 = (v & 0x3FF & !keep) | (self.cr1 & keep);
+            }
             0x04 => self.cr2 = v,
             0x08 => self.smcr = v,
             0x0C => self.dier = v,
@@ -857,8 +867,11 @@ impl Timer {
             0x10 => self.sr &= v | !0x1E7F,
             0x14 => {
                 if v & 1 != 0 {
-                    // UG: counter and prescaler restart, preloads load.
-                    self.cnt = 0;
+                    // UG: counter and prescaler restart, preloads load;
+                    // the counter is cleared, or takes ARR when DIR = 1 in
+                    // edge-aligned mode (RM0008 §15.4.6).
+                    let down = self.cr1 & 0x10 != 0 && self.cr1 & 0x60 == 0;
+                    self.cnt = if down { self.arr } else { 0 };
                     self.psc_cnt = 0;
                     let urs = self.cr1 & 4 != 0;
                     self.update_event(!urs);
@@ -1564,6 +1577,34 @@ pub struct DroppedWrite {
     pub value: u32,
 }
 
+/// A quadrature encoder's connection to a timer: the timer, its CH1/CH2
+/// pins with no remap, and the AFIO_MAPR bits that must be 0 for them
+/// (RM0008 §9.3.7, §9.4.2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EncoderWiring {
+    /// Index into [`Bus::tim`] (2 = TIM3, 3 = TIM4).
+    pub timer: usize,
+    /// (port, pin) of CH1 and CH2 (port 0 = A).
+    pub pins: [(usize, u32); 2],
+    /// AFIO_MAPR bits of the timer's remap.
+    pub remap_mask: u32,
+}
+
+impl EncoderWiring {
+    /// TIM3 CH1/CH2 on PA6/PA7: TIM3_REMAP (MAPR bits 11:10) = 00.
+    pub const TIM3_PA6_PA7: Self = Self {
+        timer: 2,
+        pins: [(0, 6), (0, 7)],
+        remap_mask: 0b11 << 10,
+    };
+    /// TIM4 CH1/CH2 on PB6/PB7: TIM4_REMAP (MAPR bit 12) = 0.
+    pub const TIM4_PB6_PB7: Self = Self {
+        timer: 3,
+        pins: [(1, 6), (1, 7)],
+        remap_mask: 1 << 12,
+    };
+}
+
 /// The RCC bits that clock and reset a peripheral (RM0008 §7.3.4–§7.3.8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Gate {
@@ -2127,6 +2168,96 @@ impl Bus {
         if falling {
             self.tim[1].capture1();
         }
+    }
+
+    /// A quadrature encoder on `wiring`'s pins moved by `delta` counts (×4,
+    /// signed; `swapped`: its A/B wires crossed) over the last `over` ticks,
+    /// with its edges evenly spaced; the timer counts them as the chip
+    /// would (RM0008 §15.3.12, encoder interface mode). Returns the counts
+    /// the timer took.
+    ///
+    /// Nothing counts unless, as on the silicon:
+    ///
+    /// - the timer is clocked and out of reset (RCC_APB1ENR TIMxEN,
+    ///   APB1RSTR TIMxRST, §7.3.8, §7.3.5), not frozen by a debug halt, and
+    ///   CR1 CEN = 1;
+    /// - SMCR SMS is an encoder mode (001, 010, 011, §15.4.3), with CC1S =
+    ///   01 and CC2S = 01 (TI1FP1 on TI1, TI2FP2 on TI2: the configuration
+    ///   §15.3.12 gives; other selections are not modelled and count
+    ///   nothing);
+    /// - both pins are inputs with their input stage on (§9.1.4: an
+    ///   alternate-function input wants input mode, floating or pull;
+    ///   analog mode cuts the Schmitt trigger, §9.1.5; an output drives
+    ///   the pin itself), and the AFIO remap routes the timer's channels to
+    ///   them (§9.3.7, AFIO_MAPR §9.4.2);
+    /// - each input holds its level for the IC1F/IC2F filter's N samples
+    ///   (§15.4.7): edges closer than that never pass it.
+    ///
+    /// Modes 1 and 2 count the edges of one channel (×2); CC1P/CC2P
+    /// invert an input, and an odd number of inversions (or crossed wires)
+    /// counts the other way. The counter runs between 0 and ARR in force
+    /// (ARR = 0, the reset value, holds it at 0, §15.4.12); CR1 DIR shows
+    /// the direction of the last count, and a wrap is an update event
+    /// (UIF, unless UDIS).
+    pub fn encoder_input(
+        &mut self,
+        wiring: EncoderWiring,
+        delta: i32,
+        swapped: bool,
+        over: Ticks,
+    ) -> i32 {
+        let i = wiring.timer;
+        if delta == 0 || self.tim_clk(i) == 0 {
+            return 0;
+        }
+        let routed = self.afio.mapr & wiring.remap_mask == 0;
+        let inputs = wiring.pins.iter().all(|&(port, pin)| {
+            let (mode, cnf) = self.gpio[port].config(pin);
+            mode == 0 && (cnf == 1 || cnf == 2)
+        });
+        let clk = self.tim_clk(i);
+        let t = &mut self.tim[i];
+        let mode = t.encoder_mode();
+        let ccmr = t.ccmr[0];
+        let selected = ccmr & 3 == 1 && (ccmr >> 8) & 3 == 1;
+        if !routed || !inputs || mode == 0 || t.cr1 & 1 == 0 || t.halted || !selected {
+            return 0;
+        }
+        if t.arr_act == 0 {
+            // "The counter is blocked while the auto-reload value is null."
+            return 0;
+        }
+        // Each channel changes level |delta| / 2 times over `over`.
+        let filter = t.ic_filter_clocks(0).max(t.ic_filter_clocks(1)) * ticks_per(clk);
+        let hold = over.saturating_mul(2) / u64::from(delta.unsigned_abs());
+        if hold < filter {
+            return 0;
+        }
+        let mut d = delta;
+        if mode != 3 {
+            d /= 2;
+        }
+        let inv = (t.ccer & 2 != 0) ^ (t.ccer & 0x20 != 0) ^ swapped;
+        if inv {
+            d = -d;
+        }
+        if d == 0 {
+            return 0;
+        }
+        // CR1 DIR (bit 4): 1 = counting down.
+        if d < 0 {
+            t.cr1 |= 0x10;
+        } else {
+            t.cr1 &= !0x10;
+        }
+        let period = i32::from(t.arr_act) + 1;
+        let sum = i32::from(t.cnt) + d;
+        let c = sum.rem_euclid(period);
+        t.cnt = c as u16;
+        if (sum < 0 || sum >= period) && t.cr1 & 2 == 0 {
+            t.update_event(true);
+        }
+        d
     }
 
     /// Reads a peripheral register (`addr` in 0x4000_0000..0x4002_4000).

@@ -2,7 +2,8 @@
 //! the real board (README pin map):
 //!
 //! - profile A: TIM1 CH1 duty on PA8 and the enable PB12 drive the drum
-//!   motor; the drum encoder counts in TIM3 (encoder mode); Hall edges are
+//!   motor; the drum encoder counts in TIM3 (encoder mode, PA6/PA7); the
+//!   ground wheel's encoder in TIM4 (encoder mode, PB6/PB7); Hall edges are
 //!   falling edges on PA0 captured by TIM2 CH1 (after the IC1F filter delay);
 //! - profile B: the step pulses on PA8 (TIM1 CH1, planting motor) and PB6
 //!   (TIM4 CH1, feeding motor), counted pulse by pulse, drive the steppers
@@ -17,7 +18,7 @@ use std::collections::VecDeque;
 
 use machine_sim::{Inputs, Machine};
 
-use crate::periph::{addr, Bus, Level, Ticks, NEVER, TICKS_PER_S};
+use crate::periph::{Bus, EncoderWiring, Level, Ticks, NEVER, TICKS_PER_S};
 
 /// Model step, µs.
 pub const STEP_US: u32 = 1000;
@@ -40,10 +41,16 @@ pub struct Plant {
     pub wiring: Wiring,
     /// Encoder A/B swapped on the machine (the count runs backwards).
     pub encoder_swapped: bool,
+    /// Profile A's ground-wheel encoder A/B swapped.
+    pub wheel_swapped: bool,
     next_step: Ticks,
     edges: VecDeque<Ticks>,
     last_count: u16,
     count_pending: Option<u16>,
+    last_wheel: u16,
+    wheel_pending: Option<u16>,
+    /// Ground-wheel counts the board's TIM4 took (profile A), signed.
+    pub wheel_counted: i64,
     pulses: (u64, u64),
     roller_turns: u32,
     /// Step pulses delivered to the steppers: (planting, feeding).
@@ -62,14 +69,19 @@ impl Plant {
             Wiring::ProfileB => machine.ground_encoder_count(),
         };
         let roller_turns = machine.feed_roller_turns();
+        let last_wheel = machine.ground_encoder_count();
         Self {
             machine,
             wiring,
             encoder_swapped: false,
+            wheel_swapped: false,
             next_step: now,
             edges: VecDeque::new(),
             last_count,
             count_pending: None,
+            last_wheel,
+            wheel_pending: None,
+            wheel_counted: 0,
             pulses: (0, 0),
             roller_turns,
             steps_delivered: (0, 0),
@@ -103,7 +115,24 @@ impl Plant {
             let ts = self.next_step;
             bus.advance(ts);
             if let Some(c) = self.count_pending.take() {
-                self.apply_count(c, bus);
+                let delta = c.wrapping_sub(self.last_count) as i16;
+                self.last_count = c;
+                bus.encoder_input(
+                    EncoderWiring::TIM3_PA6_PA7,
+                    i32::from(delta),
+                    self.encoder_swapped,
+                    STEP_TICKS,
+                );
+            }
+            if let Some(c) = self.wheel_pending.take() {
+                let delta = c.wrapping_sub(self.last_wheel) as i16;
+                self.last_wheel = c;
+                self.wheel_counted += i64::from(bus.encoder_input(
+                    EncoderWiring::TIM4_PB6_PB7,
+                    i32::from(delta),
+                    self.wheel_swapped,
+                    STEP_TICKS,
+                ));
             }
             let inputs = self.inputs(bus);
             self.last_inputs = inputs;
@@ -131,37 +160,11 @@ impl Plant {
                 Wiring::ProfileB => self.machine.ground_encoder_count(),
             };
             self.count_pending = Some(count);
+            if self.wiring == Wiring::ProfileA {
+                self.wheel_pending = Some(self.machine.ground_encoder_count());
+            }
             self.next_step = ts + STEP_TICKS;
         }
-    }
-
-    fn apply_count(&mut self, count: u16, bus: &mut Bus) {
-        let delta = count.wrapping_sub(self.last_count) as i16;
-        self.last_count = count;
-        // TIM3 counts only with its clock on (RM0008 §7.3.8) and out of reset.
-        if !bus.clock_enabled(addr::TIM3) || bus.held_in_reset(addr::TIM3) {
-            return;
-        }
-        let tim3 = &mut bus.tim[2];
-        let mode = tim3.encoder_mode();
-        if mode == 0 || tim3.cr1 & 1 == 0 {
-            return;
-        }
-        // Encoder mode 3 counts every edge of both channels (×4); modes 1
-        // and 2 count the edges of one channel (×2). CC1P/CC2P invert an
-        // input, and an odd number of inversions (or swapped wires) runs
-        // the count backwards (RM0008 §15.3.12).
-        let mut d = i32::from(delta);
-        if mode != 3 {
-            d /= 2;
-        }
-        let inv = (tim3.ccer & 2 != 0) ^ (tim3.ccer & 0x20 != 0) ^ self.encoder_swapped;
-        if inv {
-            d = -d;
-        }
-        let period = i32::from(tim3.arr_act) + 1;
-        let c = (i32::from(tim3.cnt) + d).rem_euclid(period);
-        tim3.cnt = c as u16;
     }
 
     fn inputs(&mut self, bus: &Bus) -> Inputs {

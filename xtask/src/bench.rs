@@ -13,6 +13,7 @@ mod row;
 mod speed;
 pub(crate) mod svg;
 mod tables;
+mod wheel;
 
 use crate::{cargo, ensure_tools, footprint, root, Board, Result, TARGET};
 
@@ -152,7 +153,7 @@ fn twin_section(doc: &mut String) -> Result {
     Ok(())
 }
 
-/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`, `link`, `row`) alone, printed
+/// `cargo xtask bench --only NAME`: one section (`tables`, `placement`, `link`, `row`, `wheel`) alone, printed
 /// and written to target/bench-NAME.md (its plots to target/img/);
 /// docs/PERFORMANCE.md and docs/img/ are left as they are.
 fn only(name: &str) -> Result {
@@ -171,10 +172,13 @@ fn only(name: &str) -> Result {
         "row" => {
             row::section(&mut doc)?;
         }
+        "wheel" => {
+            wheel::section(&mut doc)?;
+        }
         other => {
             return Err(format!(
-                "bench --only: unknown section `{other}` (known: tables, placement, link, row)"
-            ))
+            "bench --only: unknown section `{other}` (known: tables, placement, link, row, wheel)"
+        ))
         }
     }
     let path = root().join("target").join(format!("bench-{name}.md"));
@@ -322,6 +326,9 @@ pub fn run(args: &[String]) -> Result {
     eprintln!("xtask: bench 11 a row's checks");
     let secs = row::section(&mut doc)?;
     eprintln!("xtask: bench 11 took {secs:.0} s");
+    eprintln!("xtask: bench 12 the ground wheel");
+    let secs = wheel::section(&mut doc)?;
+    eprintln!("xtask: bench 12 took {secs:.0} s");
     let path = root().join("docs").join("PERFORMANCE.md");
     write_file(&path, &doc)?;
     eprintln!(

@@ -21,7 +21,7 @@ use std::fmt::Write as _;
 use std::string::String;
 
 use crate::screen::{
-    Action, Component, Field, Kind, MachineProfile, Page, Role, StatusField, COMPONENTS,
+    Action, Component, Field, Kind, MachineProfile, Page, Role, StatusField, StatusText, COMPONENTS,
 };
 
 /// The page's title for a person.
@@ -103,6 +103,10 @@ pub const fn text_label(role: Role) -> Option<&'static str> {
         Role::WorkSwitchLabel => Some("Work switch"),
         Role::PlacementLabel => Some("Placement"),
         Role::LinkParameterLabel => Some("Setting"),
+        Role::TravelSourceLabel => Some("Travel source"),
+        Role::GroundWheelDirectionLabel => Some("Ground wheel encoder"),
+        Role::StatusText(StatusText::TrackSlip) => Some("Track slip"),
+        Role::StatusText(StatusText::TravelSourceInUse) => Some("Ground measured by"),
         Role::AlarmText => Some("Alarm"),
         Role::Message | Role::Action(_) | Role::Input(_) | Role::Status(_) => None,
     }

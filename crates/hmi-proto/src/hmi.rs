@@ -78,14 +78,14 @@ use crate::decoder::{Decoder, DecoderStats};
 use crate::encoder::{Attr, BkCmd, Instruction, ScreenText, MAX_INSTRUCTION_LEN};
 use crate::frame::{ErrorCode, Frame, TouchEvent};
 use crate::screen::{
-    component_instruction, status_instructions, Action, Command, Component, Field, MachineProfile,
-    Page, ParamError, Role, Settings, Status, PROFILE_RESTART_MESSAGE,
+    component_instruction, status_instruction, Action, Command, Component, Field, MachineProfile,
+    Page, ParamError, Role, Settings, Status, StatusText, PROFILE_RESTART_MESSAGE, STATUS_TEXT_LEN,
 };
 
-/// Bytes the transmit queue holds (a page refresh plus a message fits: 313
+/// Bytes the transmit queue holds (a page refresh plus a message fits: 379
 /// bytes at most, the Adaptive page with every value at its widest,
 /// `tests/tx_bound.rs`).
-pub const TX_CAPACITY: usize = 320;
+pub const TX_CAPACITY: usize = 384;
 /// Touch events held while a `get` reply is awaited.
 pub const TOUCH_QUEUE: usize = 4;
 /// Events held until [`Hmi::poll_event`].
@@ -208,7 +208,7 @@ enum Link {
 
 /// The screen link: feed it received bytes and the time; drain events and bytes.
 ///
-/// Fixed size (≤ 728 bytes, asserted by a test: see the `*_QUEUE` and
+/// Fixed size (≤ 808 bytes, asserted by a test: see the `*_QUEUE` and
 /// [`TX_CAPACITY`] consts), no heap.
 #[derive(Debug, Clone)]
 pub struct Hmi {
@@ -248,6 +248,10 @@ pub struct Hmi {
     /// instruction: the screen answers them with the page it showed
     /// before, so they do not say which page is shown now.
     stale_answers: u8,
+    /// What each status text of the page shown shows
+    /// ([`StatusText::key`], by [`StatusText::index`]); `None`: not written
+    /// since the page was shown, or maybe not taken by the screen.
+    texts_shown: [Option<i16>; StatusText::ALL.len()],
 }
 
 impl Hmi {
@@ -277,6 +281,7 @@ impl Hmi {
             start_press: None,
             probes: 0,
             stale_answers: 0,
+            texts_shown: [None; StatusText::ALL.len()],
         }
     }
 
@@ -454,6 +459,8 @@ impl Hmi {
     /// Shows `page` with its settings values.
     pub fn show_page(&mut self, page: Page) -> Result<(), TxFull> {
         self.page = page;
+        // A page load resets its texts to the editor's.
+        self.texts_shown = [None; StatusText::ALL.len()];
         // Not queued: the screen may still show the page before.
         let sent = self.send(&Instruction::Page(page.id()));
         self.page_known = sent.is_ok();
@@ -497,13 +504,33 @@ impl Hmi {
         Ok(())
     }
 
-    /// Writes the live values shown on the current page.
+    /// Writes the live values shown on the current page: every number, and
+    /// each status text ([`StatusText`]) that differs from what it shows
+    /// (all of them after a page change, a screen error or a new link).
     pub fn write_status(&mut self, status: &Status) -> Result<(), TxFull> {
         if !self.is_connected() {
             return Ok(());
         }
-        for ins in status_instructions(self.page, status) {
-            self.send(&ins)?;
+        for comp in Component::on_page(self.page) {
+            let text = match comp.role {
+                Role::StatusText(t) => {
+                    let key = t.key(status);
+                    if self.texts_shown.get(t.index()) == Some(&Some(key)) {
+                        continue;
+                    }
+                    Some((t.index(), key))
+                }
+                _ => None,
+            };
+            let mut buf = [0u8; STATUS_TEXT_LEN];
+            if let Some(ins) = status_instruction(comp, status, &mut buf) {
+                self.send(&ins)?;
+                if let Some((i, key)) = text {
+                    if let Some(shown) = self.texts_shown.get_mut(i) {
+                        *shown = Some(key);
+                    }
+                }
+            }
         }
         Ok(())
     }
@@ -693,7 +720,12 @@ impl Hmi {
             Frame::Text(_) => {
                 self.stats.unexpected_replies = self.stats.unexpected_replies.wrapping_add(1);
             }
-            Frame::Error(code) => self.event(Event::ScreenError(code)),
+            Frame::Error(code) => {
+                // The failed instruction may have been a status text (a
+                // byte hit on the line): each is written again.
+                self.texts_shown = [None; StatusText::ALL.len()];
+                self.event(Event::ScreenError(code));
+            }
             _ => {}
         }
     }
@@ -859,6 +891,15 @@ impl Hmi {
             // (it refuses while the drum runs).
             Action::TogglePlacement => {
                 Some(Command::SetSpeedFollowing(!self.settings.speed_following))
+            }
+            // The label changes when the supervisor's settings come back
+            // (it refuses while the drum runs).
+            Action::NextTravelSource => Some(Command::SelectTravelSource(
+                self.settings.travel_source.next(),
+            )),
+            Action::ToggleGroundWheelDirection => {
+                s.ground_wheel_reversed = !s.ground_wheel_reversed;
+                Some(Command::SetGroundWheelReversed(s.ground_wheel_reversed))
             }
             // Its value comes back with the supervisor's settings.
             Action::NextLinkParameter => {

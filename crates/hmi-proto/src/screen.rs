@@ -210,6 +210,9 @@ pub enum CalibrationKind {
     /// k3: the drum turns counted while the belt runs; the belt length that
     /// passed is taped.
     BeltK3,
+    /// Machine A's ground wheel: its encoder counts over a taped course give
+    /// its counts per metre.
+    GroundWheel,
 }
 
 impl CalibrationKind {
@@ -219,16 +222,60 @@ impl CalibrationKind {
             Self::SpeedK1 => "k1 speed sensor",
             Self::SlipK2 => "k2 track slip",
             Self::BeltK3 => "k3 belt slip",
+            Self::GroundWheel => "ground wheel pulses/m",
         }
     }
 
-    /// The next kind (k1 → k2 → k3 → k1), for the selector button.
+    /// The next kind (k1 → k2 → k3 → ground wheel → k1), for the selector
+    /// button.
     pub const fn next(self) -> Self {
         match self {
             Self::SpeedK1 => Self::SlipK2,
             Self::SlipK2 => Self::BeltK3,
-            Self::BeltK3 => Self::SpeedK1,
+            Self::BeltK3 => Self::GroundWheel,
+            Self::GroundWheel => Self::SpeedK1,
         }
+    }
+}
+
+/// Where machine A's travel speed and ground distance come from
+/// (docs/ground-wheel.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TravelSource {
+    /// The Hall gear on the track's driving wheel (paper A; the default).
+    #[default]
+    HallGear,
+    /// The ground wheel's encoder alone.
+    GroundWheel,
+    /// The ground wheel for speed and distance, the Hall gear as its
+    /// cross-check: the live track slip, and either one stopping while the
+    /// other turns.
+    Both,
+}
+
+impl TravelSource {
+    /// The label shown on the settings page.
+    pub const fn label(self) -> &'static str {
+        match self {
+            Self::HallGear => "Hall gear",
+            Self::GroundWheel => "Ground wheel",
+            Self::Both => "Wheel + Hall",
+        }
+    }
+
+    /// The next source (Hall → wheel → both → Hall), for the selector button.
+    pub const fn next(self) -> Self {
+        match self {
+            Self::HallGear => Self::GroundWheel,
+            Self::GroundWheel => Self::Both,
+            Self::Both => Self::HallGear,
+        }
+    }
+
+    /// The ground wheel is read (alone or with the Hall gear).
+    pub const fn uses_wheel(self) -> bool {
+        matches!(self, Self::GroundWheel | Self::Both)
     }
 }
 
@@ -837,6 +884,13 @@ pub enum Command {
     /// roller turn count j (and with it the radius `r + h·j`) starts again
     /// from 0. Only with the motors stopped.
     NewRoll,
+    /// Profile A: the travel source (Hall gear, ground wheel, both). Only
+    /// with the drum stopped; persisted with *Save settings*.
+    SelectTravelSource(TravelSource),
+    /// Profile A: the ground wheel's encoder counts backwards (`true`: A/B
+    /// swapped, or the encoder mounted the other way). Persisted with *Save
+    /// settings*.
+    SetGroundWheelReversed(bool),
 }
 
 /// Profile B's parameters as the screen shows them (paper B; the defaults are
@@ -898,6 +952,10 @@ pub struct Settings {
     pub link_parameter: LinkParameter,
     /// Its value as saved (`nlval`).
     pub link_value: i32,
+    /// Machine A's travel source setting.
+    pub travel_source: TravelSource,
+    /// The ground wheel counts backwards (its direction setting).
+    pub ground_wheel_reversed: bool,
 }
 
 /// The label of the placement setting (page 6 `tplace`).
@@ -979,6 +1037,123 @@ pub struct Status {
     pub within_10_pct_x10: u16,
     /// Plants per metre planted (unit down), × 100.
     pub plants_per_m_x100: u16,
+    /// Machine A: the track's live slip measured against the ground wheel,
+    /// 0.1 % ([`SLIP_UNKNOWN`] while not measured).
+    pub track_slip_x10: i16,
+    /// Machine A: the sensor giving the ground now.
+    pub travel_source_in_use: TravelSourceInUse,
+}
+
+/// [`Status::track_slip_x10`] while no slip is measured (the Hall gear alone,
+/// or one of the two sensors failing, or before three gear turns).
+pub const SLIP_UNKNOWN: i16 = i16::MIN;
+
+/// The sensor machine A measures the ground with now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TravelSourceInUse {
+    /// The Hall gear (its setting).
+    #[default]
+    HallGear,
+    /// The ground wheel.
+    GroundWheel,
+    /// The Hall gear standing in for a ground wheel that does not roll.
+    HallStandIn,
+}
+
+impl TravelSourceInUse {
+    /// The label shown on the run page.
+    pub const fn label(self) -> &'static str {
+        match self {
+            Self::HallGear => "Hall gear",
+            Self::GroundWheel => "Ground wheel",
+            Self::HallStandIn => "Hall (wheel stopped)",
+        }
+    }
+}
+
+/// The buffer a [`StatusText`] is formatted into: the longest slip text,
+/// `"Slip -3276.7 %"`.
+pub const STATUS_TEXT_LEN: usize = 14;
+
+/// A live value shown as a text (machine A's run page). Unlike the
+/// numbers, which are written at every status write, a status text is
+/// written only when it changes (and after a page change, a screen error or
+/// a new link: [`Hmi::write_status`](crate::hmi::Hmi::write_status)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StatusText {
+    /// [`Status::track_slip_x10`] as `"Slip 4.2 %"`, `"Slip -0.5 %"`, or
+    /// `"Slip --"` while [`SLIP_UNKNOWN`] ([`slip_text`]).
+    TrackSlip,
+    /// [`Status::travel_source_in_use`]'s label
+    /// ([`TravelSourceInUse::label`]).
+    TravelSourceInUse,
+}
+
+impl StatusText {
+    /// Every status text; [`index`](Self::index) is the position here.
+    pub const ALL: [StatusText; 2] = [Self::TrackSlip, Self::TravelSourceInUse];
+
+    /// The position in [`StatusText::ALL`].
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// What the text shows of `s`: equal keys, equal texts.
+    pub fn key(self, s: &Status) -> i16 {
+        match self {
+            Self::TrackSlip => s.track_slip_x10,
+            Self::TravelSourceInUse => s.travel_source_in_use as i16,
+        }
+    }
+
+    /// The text for `s` (in `buf` or a constant).
+    pub fn text<'b>(self, s: &Status, buf: &'b mut [u8; STATUS_TEXT_LEN]) -> &'b str {
+        match self {
+            Self::TrackSlip => slip_text(s.track_slip_x10, buf),
+            Self::TravelSourceInUse => s.travel_source_in_use.label(),
+        }
+    }
+}
+
+/// The run page's slip text: `"Slip 4.2 %"` (0.1 % steps, the sign of a
+/// negative slip), `"Slip --"` for [`SLIP_UNKNOWN`]. Digits by hand:
+/// `core::fmt`'s integer formatting costs ≈ 2 KB of flash.
+pub fn slip_text(slip_x10: i16, buf: &mut [u8; STATUS_TEXT_LEN]) -> &str {
+    if slip_x10 == SLIP_UNKNOWN {
+        return "Slip --";
+    }
+    let v = slip_x10.unsigned_abs();
+    let (whole, tenth) = (v / 10, v % 10);
+    let mut len = 0usize;
+    let mut put = |b: u8| {
+        if let Some(slot) = buf.get_mut(len) {
+            *slot = b;
+            len = len.saturating_add(1);
+        }
+    };
+    for &b in b"Slip " {
+        put(b);
+    }
+    if slip_x10 < 0 {
+        put(b'-');
+    }
+    // At most 3276: four digits, no leading zeros.
+    let mut started = false;
+    for unit in [1000u16, 100, 10, 1] {
+        let digit = whole.checked_div(unit).unwrap_or(0) % 10;
+        if digit != 0 || started || unit == 1 {
+            started = true;
+            put(b'0'.saturating_add(u8::try_from(digit).unwrap_or(0)));
+        }
+    }
+    put(b'.');
+    put(b'0'.saturating_add(u8::try_from(tenth).unwrap_or(0)));
+    for &b in b" %" {
+        put(b);
+    }
+    core::str::from_utf8(buf.get(..len).unwrap_or(&[])).unwrap_or("Slip --")
 }
 
 /// Live values shown by display-only components.
@@ -1112,6 +1287,10 @@ pub enum Action {
     NextLinkParameter,
     /// [`Command::NewRoll`].
     NewRoll,
+    /// [`Command::SelectTravelSource`] with the next source.
+    NextTravelSource,
+    /// [`Command::SetGroundWheelReversed`] with the other direction.
+    ToggleGroundWheelDirection,
 }
 
 impl Action {
@@ -1153,6 +1332,14 @@ pub enum Role {
     PlacementLabel,
     /// The selected link setting's label, written with `tlpar.txt=`.
     LinkParameterLabel,
+    /// Machine A's travel source setting's label, written with
+    /// `tsource.txt=`.
+    TravelSourceLabel,
+    /// The ground wheel's direction label, written with `twdir.txt=`.
+    GroundWheelDirectionLabel,
+    /// A live value shown as a text (`tslip.txt=`, `tground.txt=`), written
+    /// only when it changes.
+    StatusText(StatusText),
     /// The alarm text, written with `talarm.txt=`.
     AlarmText,
     /// The page's message box for validation errors and notices.
@@ -1398,6 +1585,12 @@ const PACKED_TABLE: [Component; SOURCE.len()] = pack_table();
 /// Every component the MCU knows, by page and id (see `docs/hmi.md`).
 pub const COMPONENTS: &[Component] = &PACKED_TABLE;
 
+/// The screen file's static texts: components the MCU never writes nor
+/// reads (their text is the editor's), listed in docs/hmi.md §6 with their
+/// page and id. They take an id on their page, so the contract's ids skip
+/// them.
+pub const STATIC_TEXTS: &[(Page, u8, &str)] = &[(Page::Adaptive, 21, "tqlabel")];
+
 use Action as A;
 use Kind as K;
 use Page as P;
@@ -1620,6 +1813,22 @@ const SOURCE: &[Source] = &[
         K::Xfloat(2),
         R::Status(StatusField::PlantsPerMetre),
     ),
+    // Id 21 is the static text `tqlabel` ([`STATIC_TEXTS`]). Machine A's
+    // ground: the live track slip and the sensor in use.
+    c(
+        P::Adaptive,
+        22,
+        "tslip",
+        K::Text,
+        R::StatusText(StatusText::TrackSlip),
+    ),
+    c(
+        P::Adaptive,
+        23,
+        "tground",
+        K::Text,
+        R::StatusText(StatusText::TravelSourceInUse),
+    ),
     // 4 calib
     c(
         P::Calibration,
@@ -1788,6 +1997,30 @@ const SOURCE: &[Source] = &[
         R::Action(A::TogglePlacement),
     ),
     c(P::Settings, 17, "tplace", K::Text, R::PlacementLabel),
+    // Machine A's ground wheel: the travel source and the wheel's
+    // direction.
+    c(
+        P::Settings,
+        18,
+        "bsource",
+        K::Button,
+        R::Action(A::NextTravelSource),
+    ),
+    c(P::Settings, 19, "tsource", K::Text, R::TravelSourceLabel),
+    c(
+        P::Settings,
+        20,
+        "bwdir",
+        K::Button,
+        R::Action(A::ToggleGroundWheelDirection),
+    ),
+    c(
+        P::Settings,
+        21,
+        "twdir",
+        K::Text,
+        R::GroundWheelDirectionLabel,
+    ),
     // 7 belt (profile B home)
     c(P::Belt, 1, "bstart", K::Button, R::Action(A::Start)),
     c(P::Belt, 2, "bstop", K::Button, R::Action(A::Stop)),
@@ -2043,7 +2276,7 @@ const SOURCE: &[Source] = &[
 ];
 
 /// Most instructions one page refresh needs ([`page_instructions`]).
-pub const MAX_PAGE_INSTRUCTIONS: usize = 8;
+pub const MAX_PAGE_INSTRUCTIONS: usize = 9;
 
 /// The instructions that show the settings on `page`: each input's current
 /// value, the gear, calibration-kind and profile labels and the version text.
@@ -2080,6 +2313,8 @@ pub(crate) fn component_instruction(
         Role::WorkSwitchLabel => work_switch_label(settings.work_switch_fitted),
         Role::PlacementLabel => placement_label(settings.speed_following),
         Role::LinkParameterLabel => settings.link_parameter.label(),
+        Role::TravelSourceLabel => settings.travel_source.label(),
+        Role::GroundWheelDirectionLabel => encoder_direction_label(settings.ground_wheel_reversed),
         _ => return None,
     };
     Some(Instruction::SetText(
@@ -2088,16 +2323,33 @@ pub(crate) fn component_instruction(
     ))
 }
 
-/// The instructions that show `status` on `page` (only its status
-/// components), one at a time (the Adaptive page has 11: no buffer).
-pub fn status_instructions<'a>(
-    page: Page,
-    status: &'a Status,
-) -> impl Iterator<Item = Instruction<'static>> + 'a {
-    Component::on_page(page).filter_map(move |comp| match comp.role {
+/// Each instruction that shows `status` on `page` (its status numbers and
+/// status texts, whether changed or not), one at a time (the Adaptive page
+/// has 13: no buffer).
+pub fn status_instructions(page: Page, status: &Status, mut each: impl FnMut(&Instruction<'_>)) {
+    for comp in Component::on_page(page) {
+        let mut buf = [0u8; STATUS_TEXT_LEN];
+        if let Some(ins) = status_instruction(comp, status, &mut buf) {
+            each(&ins);
+        }
+    }
+}
+
+/// What shows `status` in one component (`None`: a component that shows no
+/// live value); a status text is formatted into `buf`.
+pub(crate) fn status_instruction<'b>(
+    comp: &'static Component,
+    status: &Status,
+    buf: &'b mut [u8; STATUS_TEXT_LEN],
+) -> Option<Instruction<'b>> {
+    match comp.role {
         Role::Status(f) => Some(Instruction::SetValue(comp.obj(), f.value(status))),
+        Role::StatusText(t) => Some(Instruction::SetText(
+            comp.obj(),
+            ScreenText::new(t.text(status, buf)).unwrap_or(ScreenText::EMPTY),
+        )),
         _ => None,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -2137,11 +2389,23 @@ mod tests {
                 assert!(Component::input(a.page, f).is_some(), "{a:?}");
             }
         }
-        // Ids are 1..=n without gaps on every page (creation order in the editor).
+        // Ids are 1..=n without gaps on every page (creation order in the
+        // editor), counting the static texts, which the contract skips.
+        for (page, id, name) in STATIC_TEXTS {
+            assert!(Component::lookup(page.id(), *id).is_none(), "{name}");
+            assert!(ObjName::new(name).is_ok(), "{name}");
+            assert!(Component::on_page(*page).all(|c| c.name() != *name));
+        }
         for p in Page::ALL {
-            let n = Component::on_page(p).count();
+            let statics = STATIC_TEXTS.iter().filter(|s| s.0 == p).count();
+            let n = Component::on_page(p).count() + statics;
             for id in 1..=n {
-                assert!(Component::lookup(p.id(), u8::try_from(id).unwrap()).is_some());
+                let id = u8::try_from(id).unwrap();
+                assert!(
+                    Component::lookup(p.id(), id).is_some()
+                        || STATIC_TEXTS.iter().any(|s| s.0 == p && s.1 == id),
+                    "{p:?} id {id}"
+                );
             }
             // The Adaptive page has 20 (the quality figures); the editor
             // takes up to 250 a page.
@@ -2158,6 +2422,9 @@ mod tests {
                                 | Role::EncoderDirectionLabel
                                 | Role::WorkSwitchLabel
                                 | Role::PlacementLabel
+                                | Role::LinkParameterLabel
+                                | Role::TravelSourceLabel
+                                | Role::GroundWheelDirectionLabel
                                 | Role::Version
                         )
                     })
@@ -2187,6 +2454,59 @@ mod tests {
         }
         let m = PROFILE_RESTART_MESSAGE;
         assert!(m.is_ascii() && m.len() <= crate::MAX_TEXT_LEN, "{m}");
+        let mut kind = CalibrationKind::SpeedK1;
+        let mut source = TravelSource::HallGear;
+        for _ in 0..4 {
+            let l = kind.label();
+            assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
+            let l = source.label();
+            assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
+            kind = kind.next();
+            source = source.next();
+        }
+        // Every status text, every slip and source: within the buffer
+        // and the screen's limit.
+        for slip in i16::MIN..=i16::MAX {
+            for in_use in [
+                TravelSourceInUse::HallGear,
+                TravelSourceInUse::GroundWheel,
+                TravelSourceInUse::HallStandIn,
+            ] {
+                let s = Status {
+                    track_slip_x10: slip,
+                    travel_source_in_use: in_use,
+                    ..Status::default()
+                };
+                for t in StatusText::ALL {
+                    let mut buf = [0u8; STATUS_TEXT_LEN];
+                    let l = t.text(&s, &mut buf);
+                    assert!(l.is_ascii() && l.len() <= crate::MAX_TEXT_LEN, "{l}");
+                    let l = slip_text(slip, &mut buf);
+                    assert!(l.len() <= STATUS_TEXT_LEN, "{l}");
+                }
+            }
+        }
+    }
+
+    /// The slip text against the standard library's formatting (the
+    /// reference), for every value a slip can take.
+    #[test]
+    fn the_slip_text_is_the_slip_to_a_tenth_of_a_percent() {
+        let mut buf = [0u8; STATUS_TEXT_LEN];
+        assert_eq!(slip_text(SLIP_UNKNOWN, &mut buf), "Slip --");
+        assert_eq!(slip_text(42, &mut buf), "Slip 4.2 %");
+        assert_eq!(slip_text(-5, &mut buf), "Slip -0.5 %");
+        assert_eq!(slip_text(0, &mut buf), "Slip 0.0 %");
+        assert_eq!(slip_text(i16::MIN + 1, &mut buf), "Slip -3276.7 %");
+        for v in (i16::MIN + 1)..=i16::MAX {
+            let reference = std::format!(
+                "Slip {}{}.{} %",
+                if v < 0 { "-" } else { "" },
+                v.unsigned_abs() / 10,
+                v.unsigned_abs() % 10
+            );
+            assert_eq!(slip_text(v, &mut buf), reference);
+        }
     }
 
     #[test]

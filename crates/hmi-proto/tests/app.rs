@@ -538,28 +538,306 @@ fn alarm_and_acknowledge_return_to_the_page() {
 }
 
 #[test]
-fn the_coefficient_button_cycles_k1_k2_k3_and_labels_it() {
+fn the_coefficient_button_cycles_k1_k2_k3_ground_wheel_and_labels_it() {
     let (mut hmi, mut screen) = connected();
     screen.release("bcalib").unwrap();
     pump(&mut hmi, &mut screen);
-    // The page opens on the default, k2 (docs/hmi.md page 4).
+    // The page opens on the default, k2 (docs/hmi.md page 4), and each
+    // press selects the next of the four, k2 again after the fourth.
     assert_eq!(screen.text("tkind"), Some("k2 track slip"));
-    screen.release("bkind").unwrap();
-    assert_eq!(
-        pump(&mut hmi, &mut screen),
-        vec![cmd(Command::SelectCalibration(CalibrationKind::BeltK3))]
-    );
-    assert_eq!(screen.text("tkind"), Some("k3 belt slip"));
+    let cycle = [
+        (CalibrationKind::BeltK3, "k3 belt slip"),
+        (CalibrationKind::GroundWheel, "ground wheel pulses/m"),
+        (CalibrationKind::SpeedK1, "k1 speed sensor"),
+        (CalibrationKind::SlipK2, "k2 track slip"),
+    ];
+    for (kind, label) in cycle {
+        screen.release("bkind").unwrap();
+        assert_eq!(
+            pump(&mut hmi, &mut screen),
+            vec![cmd(Command::SelectCalibration(kind))]
+        );
+        assert_eq!(screen.text("tkind"), Some(label));
+    }
+    // Two presses before the link answers: both taken, in order.
     screen.release("bkind").unwrap();
     screen.release("bkind").unwrap();
     assert_eq!(
         pump(&mut hmi, &mut screen),
         vec![
-            cmd(Command::SelectCalibration(CalibrationKind::SpeedK1)),
-            cmd(Command::SelectCalibration(CalibrationKind::SlipK2)),
+            cmd(Command::SelectCalibration(CalibrationKind::BeltK3)),
+            cmd(Command::SelectCalibration(CalibrationKind::GroundWheel)),
         ]
     );
-    assert_eq!(screen.text("tkind"), Some("k2 track slip"));
+    assert_eq!(screen.text("tkind"), Some("ground wheel pulses/m"));
+}
+
+/// Page 6: *Travel source* asks for the next source (Hall gear → ground
+/// wheel → both → Hall gear); its label follows the supervisor's settings
+/// when they come back (it refuses while the drum runs). *Wheel direction*
+/// toggles the ground wheel's direction at once.
+#[test]
+fn the_settings_page_selects_the_travel_source_and_the_wheel_direction() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("bset").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), Page::Settings.id());
+    assert_eq!(screen.text("tsource"), Some("Hall gear"));
+    assert_eq!(screen.text("twdir"), Some("normal"));
+    let cycle = [
+        (TravelSource::GroundWheel, "Ground wheel"),
+        (TravelSource::Both, "Wheel + Hall"),
+        (TravelSource::HallGear, "Hall gear"),
+    ];
+    for (source, label) in cycle {
+        screen.release("bsource").unwrap();
+        assert_eq!(
+            pump(&mut hmi, &mut screen),
+            vec![cmd(Command::SelectTravelSource(source))]
+        );
+        // Not taken yet: the label still shows the source in force.
+        assert_ne!(screen.text("tsource"), Some(label));
+        let taken = Settings {
+            travel_source: source,
+            ..*hmi.settings()
+        };
+        hmi.set_settings(taken).unwrap();
+        pump(&mut hmi, &mut screen);
+        assert_eq!(screen.text("tsource"), Some(label));
+    }
+    // Refused (the drum runs): the settings come back unchanged, and the
+    // next press asks for the same source again.
+    screen.release("bsource").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SelectTravelSource(TravelSource::GroundWheel))]
+    );
+    hmi.set_settings(*hmi.settings()).unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tsource"), Some("Hall gear"));
+    screen.release("bsource").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SelectTravelSource(TravelSource::GroundWheel))]
+    );
+
+    screen.release("bwdir").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetGroundWheelReversed(true))]
+    );
+    assert_eq!(screen.text("twdir"), Some("reversed (A/B)"));
+    // The drum encoder's direction is another setting.
+    assert_eq!(screen.text("tenc"), Some("normal"));
+    screen.release("bwdir").unwrap();
+    assert_eq!(
+        pump(&mut hmi, &mut screen),
+        vec![cmd(Command::SetGroundWheelReversed(false))]
+    );
+    assert_eq!(screen.text("twdir"), Some("normal"));
+    // Shown again after a page change, from the settings.
+    hmi.set_settings(Settings {
+        travel_source: TravelSource::Both,
+        ground_wheel_reversed: true,
+        ..*hmi.settings()
+    })
+    .unwrap();
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bset").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tsource"), Some("Wheel + Hall"));
+    assert_eq!(screen.text("twdir"), Some("reversed (A/B)"));
+}
+
+/// The instructions in `bytes` (terminator-separated) that write `name`.
+fn writes_of(bytes: &[u8], name: &str) -> Vec<String> {
+    let prefix = format!("{name}.");
+    bytes
+        .split(|&b| b == 0xFF)
+        .filter(|i| i.starts_with(prefix.as_bytes()))
+        .map(|i| String::from_utf8_lossy(i).into_owned())
+        .collect()
+}
+
+/// Moves the queued bytes to the screen; returns them.
+fn sent(hmi: &mut Hmi, screen: &mut VirtualScreen) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut buf = [0u8; 512];
+    loop {
+        let n = hmi.poll_transmit(&mut buf);
+        if n == 0 {
+            break;
+        }
+        out.extend_from_slice(&buf[..n]);
+    }
+    screen.feed(&out);
+    let back = screen.take_output();
+    hmi.push_slice(&back);
+    out
+}
+
+/// The run page's two texts: the live track slip (`tslip`) and the sensor
+/// measuring the ground (`tground`), written when they change, and again
+/// after a page change or a screen error; the numbers at every write.
+#[test]
+fn the_run_page_shows_the_slip_and_the_ground_sensor_when_they_change() {
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.page(), Page::Adaptive.id());
+    let mut status = Status {
+        track_slip_x10: SLIP_UNKNOWN,
+        travel_source_in_use: TravelSourceInUse::HallGear,
+        plants: 7,
+        ..Status::default()
+    };
+    hmi.write_status(&status).unwrap();
+    let bytes = sent(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tslip"), Some("Slip --"));
+    assert_eq!(screen.text("tground"), Some("Hall gear"));
+    assert_eq!(writes_of(&bytes, "tslip").len(), 1);
+    // Unchanged: the numbers again, the texts not.
+    hmi.write_status(&status).unwrap();
+    let bytes = sent(&mut hmi, &mut screen);
+    assert_eq!(writes_of(&bytes, "nplants"), vec!["nplants.val=7"]);
+    assert!(writes_of(&bytes, "tslip").is_empty());
+    assert!(writes_of(&bytes, "tground").is_empty());
+    // Each text when its own value changes, the slip with its sign.
+    let steps: [(i16, TravelSourceInUse, &str, &str); 6] = [
+        (
+            42,
+            TravelSourceInUse::GroundWheel,
+            "Slip 4.2 %",
+            "Ground wheel",
+        ),
+        (
+            -5,
+            TravelSourceInUse::GroundWheel,
+            "Slip -0.5 %",
+            "Ground wheel",
+        ),
+        (
+            -123,
+            TravelSourceInUse::GroundWheel,
+            "Slip -12.3 %",
+            "Ground wheel",
+        ),
+        (
+            -123,
+            TravelSourceInUse::HallStandIn,
+            "Slip -12.3 %",
+            "Hall (wheel stopped)",
+        ),
+        (
+            SLIP_UNKNOWN,
+            TravelSourceInUse::HallStandIn,
+            "Slip --",
+            "Hall (wheel stopped)",
+        ),
+        (
+            1000,
+            TravelSourceInUse::GroundWheel,
+            "Slip 100.0 %",
+            "Ground wheel",
+        ),
+    ];
+    for (slip, in_use, slip_text, in_use_text) in steps {
+        let before = status;
+        status.track_slip_x10 = slip;
+        status.travel_source_in_use = in_use;
+        hmi.write_status(&status).unwrap();
+        let bytes = sent(&mut hmi, &mut screen);
+        assert_eq!(screen.text("tslip"), Some(slip_text));
+        assert_eq!(screen.text("tground"), Some(in_use_text));
+        assert_eq!(
+            writes_of(&bytes, "tslip").len(),
+            usize::from(before.track_slip_x10 != slip),
+            "{slip}"
+        );
+        assert_eq!(
+            writes_of(&bytes, "tground").len(),
+            usize::from(before.travel_source_in_use != in_use),
+            "{in_use:?}"
+        );
+    }
+    // Another page has no such texts: nothing written there.
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("bfixed").unwrap();
+    pump(&mut hmi, &mut screen);
+    status.track_slip_x10 = 31;
+    hmi.write_status(&status).unwrap();
+    let bytes = sent(&mut hmi, &mut screen);
+    assert!(writes_of(&bytes, "tslip").is_empty());
+    assert!(writes_of(&bytes, "tground").is_empty());
+    // Back on the run page (its load resets the texts): written again,
+    // though unchanged since they were last written there.
+    screen.release("bback").unwrap();
+    pump(&mut hmi, &mut screen);
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tslip"), Some(""));
+    status.track_slip_x10 = 1000;
+    hmi.write_status(&status).unwrap();
+    sent(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tslip"), Some("Slip 100.0 %"));
+    assert_eq!(screen.text("tground"), Some("Ground wheel"));
+    // A screen error (the text hit on the line, say): both written again.
+    hmi.push_slice(&[0x1A, 0xFF, 0xFF, 0xFF]);
+    while hmi.poll_event().is_some() {}
+    hmi.write_status(&status).unwrap();
+    let bytes = sent(&mut hmi, &mut screen);
+    assert_eq!(
+        writes_of(&bytes, "tslip"),
+        vec!["tslip.txt=\"Slip 100.0 %\""]
+    );
+    assert_eq!(writes_of(&bytes, "tground").len(), 1);
+}
+
+/// A status text that did not fit the transmit queue is not taken as
+/// shown: the next status write sends it.
+#[test]
+fn a_status_text_the_queue_could_not_take_is_written_next_time() {
+    use hmi_proto::hmi::TX_CAPACITY;
+    let (mut hmi, mut screen) = connected();
+    screen.release("badapt").unwrap();
+    pump(&mut hmi, &mut screen);
+    let mut status = Status {
+        track_slip_x10: -42,
+        travel_source_in_use: TravelSourceInUse::GroundWheel,
+        plants: 12,
+        ..Status::default()
+    };
+    hmi.write_status(&status).unwrap();
+    sent(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tslip"), Some("Slip -4.2 %"));
+    // The numbers alone (the texts unchanged).
+    hmi.write_status(&status).unwrap();
+    let numbers = sent(&mut hmi, &mut screen).len();
+    // The slip changes; the queue has room for the numbers and 5 bytes
+    // more, not for `tslip.txt="Slip 7.5 %"`: messages fill the rest.
+    status.track_slip_x10 = 75;
+    let fill = TX_CAPACITY - numbers - 5;
+    while hmi.tx_pending() < fill {
+        // `tmsg.txt="…"` and its terminator: 14 bytes and the text.
+        let room = fill - hmi.tx_pending();
+        let len = if room >= 54 + 14 {
+            40
+        } else if room > 54 {
+            room / 2 - 14
+        } else {
+            room - 14
+        };
+        hmi.show_message(&"x".repeat(len)).unwrap();
+    }
+    assert_eq!(hmi.tx_pending(), fill);
+    assert!(hmi.write_status(&status).is_err());
+    sent(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tslip"), Some("Slip -4.2 %"));
+    hmi.write_status(&status).unwrap();
+    sent(&mut hmi, &mut screen);
+    assert_eq!(screen.text("tslip"), Some("Slip 7.5 %"));
 }
 
 #[test]
@@ -1134,6 +1412,19 @@ fn docs_list_every_component() {
             .filter(|&(id, _)| Component::lookup(p.id(), id).is_some())
             .collect();
         assert_eq!(known, contract, "page {p:?}: rows in the doc's order");
+        // The rest are the screen file's static texts, which the contract
+        // knows by page, id and name.
+        let statics: Vec<(u8, &str)> = listed
+            .iter()
+            .copied()
+            .filter(|&(id, _)| Component::lookup(p.id(), id).is_none())
+            .collect();
+        let expected: Vec<(u8, &str)> = STATIC_TEXTS
+            .iter()
+            .filter(|s| s.0 == p)
+            .map(|s| (s.1, s.2))
+            .collect();
+        assert_eq!(statics, expected, "page {p:?}: static texts");
         let ids: Vec<u8> = listed.iter().map(|&(id, _)| id).collect();
         let dense: Vec<u8> = (1..=u8::try_from(ids.len()).unwrap_or(u8::MAX)).collect();
         assert_eq!(ids, dense, "page {p:?}: ids 1..n in creation order");

@@ -85,7 +85,7 @@ fn stream(rng: &mut XorShift, out: &mut Vec<u8>) {
 fn a_million_random_streams() {
     assert!(core::mem::size_of::<Decoder>() <= 80);
     assert!(
-        core::mem::size_of::<Hmi>() <= 728,
+        core::mem::size_of::<Hmi>() <= 808,
         "{}",
         core::mem::size_of::<Hmi>()
     );

@@ -28,6 +28,7 @@ pub mod speed;
 pub mod table;
 pub mod travel;
 pub mod units;
+pub mod wheel;
 
 /// `⌊a·b / 2^shift⌋` from the exact 128-bit product (four 32 × 32-bit
 /// multiplies, no `u128` arithmetic on the MCU), or `None` when it does not

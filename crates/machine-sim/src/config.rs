@@ -114,11 +114,31 @@ pub struct Config {
     /// Value of the 1 MHz capture timer at t = 0 (to test the wrap). Default 0.
     pub timer_start_ticks: u32,
 
-    // ----- profile B (SPEC §8) -----
+    // ----- the ground wheel (profile B's, and machine A's optional one) -----
     /// Ground-wheel diameter, m (unpublished). Default 0.25.
     pub ground_wheel_diameter_m: f32,
     /// Ground-wheel encoder counts per turn (600 ppr × 4 in quadrature). Default 2400.
     pub ground_encoder_counts_per_turn: u32,
+    /// The wheel's real rolling diameter against
+    /// [`Config::ground_wheel_diameter_m`], fraction (−0.2 … 0.2: tyre wear,
+    /// soil on the tread, a wheel other than the one set). Default 0.
+    pub ground_wheel_diameter_error: f32,
+    /// The wheel's own slip on the soil, fraction (0 … 0.05: it rolls this
+    /// much less than the ground; a trailed wheel's 0–1 %). Default 0.
+    pub ground_wheel_slip: f32,
+    /// Relative noise of the wheel's own slip (0 … 1: its SD against the
+    /// mean), a low-pass process of 20 s (the soil under a free-rolling wheel
+    /// changes by patches). Default 0.
+    pub ground_wheel_slip_noise: f32,
+    /// Clods that lift the wheel off the soil, per metre of ground (0 … 5).
+    /// Default 0.
+    pub ground_wheel_clod_rate_per_m: f32,
+    /// Ground a clod keeps the wheel off the soil (it does not turn), m
+    /// (0 … 1). Default 0.03.
+    pub ground_wheel_clod_m: f32,
+    /// The wheel's encoder counts backwards when the machine moves forward
+    /// (A/B swapped). Default `false`.
+    pub ground_wheel_reversed: bool,
     /// Steps per revolution of both steppers. Default 1600
     /// (`ProfileBSettings::default().feeding_steps_per_rev`).
     pub stepper_steps_per_rev: u32,
@@ -181,6 +201,12 @@ impl Default for Config {
             timer_start_ticks: 0,
             ground_wheel_diameter_m: 0.25,
             ground_encoder_counts_per_turn: 2400,
+            ground_wheel_diameter_error: 0.0,
+            ground_wheel_slip: 0.0,
+            ground_wheel_slip_noise: 0.0,
+            ground_wheel_clod_rate_per_m: 0.0,
+            ground_wheel_clod_m: 0.03,
+            ground_wheel_reversed: false,
             // Profile B: the machine the firmware's defaults describe.
             stepper_steps_per_rev: pb.feeding_steps_per_rev,
             stepper_max_rate_hz: 40_000.0,
@@ -360,6 +386,26 @@ impl Config {
             1,
             1_000_000,
         )?;
+        check(
+            "ground_wheel_diameter_error",
+            self.ground_wheel_diameter_error,
+            -0.2,
+            0.2,
+        )?;
+        check("ground_wheel_slip", self.ground_wheel_slip, 0.0, 0.05)?;
+        check(
+            "ground_wheel_slip_noise",
+            self.ground_wheel_slip_noise,
+            0.0,
+            1.0,
+        )?;
+        check(
+            "ground_wheel_clod_rate_per_m",
+            self.ground_wheel_clod_rate_per_m,
+            0.0,
+            5.0,
+        )?;
+        check("ground_wheel_clod_m", self.ground_wheel_clod_m, 0.0, 1.0)?;
         check_u32(
             "stepper_steps_per_rev",
             self.stepper_steps_per_rev,

@@ -26,6 +26,10 @@ const SPEED_NOISE: (f32, f32) = (0.05, 6.244_998);
 const BELT_NOISE: (f32, f32) = (0.005, 19.974_984);
 /// Slip variation, τ = 1 s: a = 0.001, c = √1999.
 const SLIP_NOISE: (f32, f32) = (0.001, 44.710_18);
+/// The ground wheel's own slip: τ = 20 s (the soil under a free-rolling
+/// wheel changes by patches, not by the track's load swings);
+/// c = √((2 − a)/a).
+const WHEEL_SLIP_NOISE: (f32, f32) = (0.000_05, 199.997_5);
 
 /// What the controller drives during one step.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
@@ -63,7 +67,8 @@ pub enum Fault {
     HallLoss,
     /// The drum encoder counter stops counting (the drum still turns).
     EncoderLoss,
-    /// Profile B: the ground-wheel encoder stops counting.
+    /// The ground wheel's encoder stops counting: the wheel is lifted,
+    /// blocked or clogged (it does not turn), or its encoder is dead.
     GroundEncoderLoss,
     /// The Hall sensor's output sticks high (a broken wire or a dead
     /// sensor: the pull-up holds the line). The falling edges the firmware
@@ -180,6 +185,14 @@ pub struct Machine {
     // Profile B.
     ground_counts_seen: i64,
     ground_encoder: u16,
+    /// Ground the wheel rolled (its own slip and the clods taken off), m.
+    wheel_ground_m: f64,
+    /// Ground left of the clod under the wheel, m.
+    clod_left_m: f32,
+    /// The clods' own random stream: a wheel with clods sees the same
+    /// terrain as one without.
+    wheel_rng: Rng,
+    wheel_slip_noise: LpNoise,
     feed_steps: f64,
     plant_steps: f64,
     feed_belt_m: f64,
@@ -265,6 +278,10 @@ impl Machine {
             hall_edges: 0,
             ground_counts_seen: 0,
             ground_encoder: 0,
+            wheel_ground_m: 0.0,
+            clod_left_m: 0.0,
+            wheel_rng: Rng::new(cfg.seed ^ 0x05EE_D0FC_10D0),
+            wheel_slip_noise: LpNoise::default(),
             feed_steps: 0.0,
             plant_steps: 0.0,
             feed_belt_m: 0.0,
@@ -326,6 +343,10 @@ impl Machine {
         }
         if c.belt_slip_noise > 0.0 {
             self.belt_noise.tick(&mut self.rng, BELT_NOISE);
+        }
+        if c.ground_wheel_slip_noise > 0.0 {
+            self.wheel_slip_noise
+                .tick(&mut self.wheel_rng, WHEEL_SLIP_NOISE);
         }
         if c.track_slip_noise > 0.0 {
             self.slip_noise.tick(&mut self.rng, SLIP_NOISE);
@@ -538,6 +559,7 @@ impl Machine {
             Profile::A => self.belt_drops(t0, hf, (b0, b1), (g0, g1), sink),
             Profile::B => self.profile_b(t0, hs64, inputs, (g0, g1), sink),
         }
+        self.ground_wheel(g1 - g0);
         self.now_us = t0 + u64::from(h);
     }
 
@@ -621,11 +643,47 @@ impl Machine {
             self.partitions = self.partitions.wrapping_add(1);
             self.plant(t0, hf, frac, (g0, g1), sink);
         }
-        let circ = core::f64::consts::PI * f64::from(c.ground_wheel_diameter_m);
-        let total = floor_count(g1 / circ * f64::from(c.ground_encoder_counts_per_turn));
+    }
+
+    /// The ground wheel (profile B's, machine A's optional one): it rolls
+    /// `dg` of ground less its own slip, not at all on a clod, and its
+    /// encoder counts the turns of its real circumference.
+    fn ground_wheel(&mut self, dg: f64) {
+        let c = self.cfg;
+        let mut rolled = dg;
+        if c.ground_wheel_clod_rate_per_m > 0.0 && dg > 0.0 {
+            if self.clod_left_m <= 0.0
+                && f64::from(self.wheel_rng.uniform())
+                    < dg * f64::from(c.ground_wheel_clod_rate_per_m)
+            {
+                self.clod_left_m = c.ground_wheel_clod_m;
+            }
+            if self.clod_left_m > 0.0 {
+                self.clod_left_m -= dg as f32;
+                rolled = 0.0;
+            }
+        }
+        if c.ground_wheel_slip > 0.0 {
+            let mut slip = f64::from(c.ground_wheel_slip);
+            if c.ground_wheel_slip_noise > 0.0 {
+                slip *= 1.0 + f64::from(c.ground_wheel_slip_noise * self.wheel_slip_noise.0);
+            }
+            rolled *= 1.0 - slip.clamp(0.0, 0.5);
+        }
+        self.wheel_ground_m += rolled;
+        let circ = core::f64::consts::PI
+            * f64::from(c.ground_wheel_diameter_m)
+            * (1.0 + f64::from(c.ground_wheel_diameter_error));
+        let total =
+            floor_count(self.wheel_ground_m / circ * f64::from(c.ground_encoder_counts_per_turn));
         let delta = total - self.ground_counts_seen;
         self.ground_counts_seen = total;
         if !self.fault_active(Fault::GroundEncoderLoss) {
+            let delta = if c.ground_wheel_reversed {
+                -delta
+            } else {
+                delta
+            };
             self.ground_encoder = self.ground_encoder.wrapping_add(delta as u16);
         }
     }
@@ -842,13 +900,22 @@ impl Machine {
         self.wheel_turns
     }
 
+    /// The track's rolling distance since build, m (its drive wheel's turns ×
+    /// its rolling circumference): `1 − Δground / Δtrack` is the track's true
+    /// slip over a span.
+    #[must_use]
+    pub fn track_position_m(&self) -> f64 {
+        self.wheel_turns * consts::ROLLING_CIRCUMFERENCE_M_F64
+    }
+
     /// Hall edges delivered since build (lost edges not counted).
     #[must_use]
     pub fn hall_edges(&self) -> u32 {
         self.hall_edges
     }
 
-    /// Profile B: ground-wheel encoder counter (wrapping u16).
+    /// The ground wheel's encoder counter (wrapping u16; profile B's wheel,
+    /// machine A's optional one).
     #[must_use]
     pub fn ground_encoder_count(&self) -> u16 {
         self.ground_encoder

@@ -21,6 +21,10 @@ pub enum Effect {
 /// motors running (both machines).
 pub const PLACEMENT_WHILE_RUNNING: &str = "Stop first to change the placement";
 
+/// The screen's message when machine A's travel source is changed with the
+/// drum running.
+pub const SOURCE_WHILE_RUNNING: &str = "Stop first to change the travel sensor";
+
 /// The screen's message when profile B gets a command of profile A's drum
 /// (page 9's *Identify* and *Save*, page 10's link settings).
 pub const DRUM_MACHINE_ONLY: &str = "Drum machine (profile A) only";

@@ -13,6 +13,7 @@ pub mod drive;
 pub mod drive_link;
 pub mod drum;
 pub mod effect;
+pub mod ground;
 pub mod machine;
 pub mod machine_step;
 pub mod migrate;

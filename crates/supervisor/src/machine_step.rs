@@ -36,6 +36,9 @@ pub struct StepInputs {
     pub work_down: bool,
     /// The drum driver's link (profile A; the default without a driver).
     pub link: LinkSample,
+    /// Profile A: the ground wheel's encoder counter (TIM4, wraps at 2¹⁶),
+    /// `None` where the board does not read it.
+    pub ground_wheel: Option<u16>,
 }
 
 /// What one control period decided, per machine.
@@ -88,6 +91,9 @@ impl Machine {
                 // Idempotent; a change begins or ends a pass.
                 sup.set_work_switch(inputs.work_down);
                 sup.set_link_sample(inputs.link);
+                if let Some(count) = inputs.ground_wheel {
+                    sup.ground_wheel_count(count);
+                }
                 let actuation = sup.control_step(Ticks(inputs.now), inputs.encoder);
                 StepOutputs::Drum {
                     actuation,

@@ -83,6 +83,17 @@ pub fn k1k2_q30(k1: kinematics::units::Coefficient, k2: kinematics::units::Coeff
 /// fight, and short enough that a phase lost at a speed step is back within
 /// 1 mm in about two spacings at Low 2 and 7 cm.
 pub const PHASE_TIME_CONSTANT_MS: u64 = 500;
+/// The phase loop's time constant with a fine ground sensor (the ground
+/// wheel, [`Phase::set_fine_ground`]), ms: the ground is known every 0.33 mm
+/// and every control period, so the loop may follow it closely (tuned on
+/// bench §12).
+pub const FINE_PHASE_TIME_CONSTANT_MS: u64 = 60;
+/// Largest speed-up over the feed-forward with a fine ground sensor, %: the
+/// +10 % bound keeps spacings from a Hall gear's 25 mm steps of measured
+/// ground; a ground without steps needs the room to catch up a restart from
+/// rest (bench §12, stop-and-go); spacings stay above X / 1.4 = 0.71 X, far
+/// from a multiple (≤ 0.5 X).
+pub const FINE_MAX_SPEED_UP_PCT: i32 = 40;
 /// Largest speed-up of the drum over the feed-forward, % (no spacing below
 /// X / 1.1 = 0.909 X; module docs).
 pub const MAX_SPEED_UP_PCT: i32 = 10;
@@ -115,10 +126,19 @@ const MAX_EVENTS: usize = 4;
 // Note: evaluated at compile time; 60·2³²·1000 < 2⁶⁴ and the result
 // (2344) fits any integer type.
 #[allow(clippy::cast_possible_wrap, clippy::arithmetic_side_effects)]
-const GAIN_Q16: i64 = {
-    let g = (60u64 << 32) * 1000 / PHASE_TIME_CONSTANT_MS;
+const GAIN_Q16: i64 = gain_q16(PHASE_TIME_CONSTANT_MS);
+/// [`GAIN_Q16`] at [`FINE_PHASE_TIME_CONSTANT_MS`].
+const FINE_GAIN_Q16: i64 = gain_q16(FINE_PHASE_TIME_CONSTANT_MS);
+/// [`FINE_MAX_SPEED_UP_PCT`] in Q16.
+#[allow(clippy::arithmetic_side_effects)]
+const FINE_UP_Q16: i64 = (FINE_MAX_SPEED_UP_PCT as i64) * 65_536 / 100;
+
+/// `2³² · 60 / (T · π·0.070 m)` for a time constant `t_ms` (compile time).
+#[allow(clippy::cast_possible_wrap, clippy::arithmetic_side_effects)]
+const fn gain_q16(t_ms: u64) -> i64 {
+    let g = (60u64 << 32) * 1000 / t_ms;
     ((g + BELT_PER_TURN_NM / 2) / BELT_PER_TURN_NM) as i64
-};
+}
 
 /// A partition that left the drum, with the ground distance since Start at
 /// that moment (µm).
@@ -135,6 +155,14 @@ pub fn first_plant_place_um(spacing_mm: u16) -> u64 {
     u64::from(spacing_mm)
         .saturating_mul(1000)
         .saturating_add(EDGE_NM / 1000)
+}
+
+/// The place of the first plant after Start with a fine ground sensor (the
+/// ground wheel), µm of ground since its first count: one spacing. The
+/// wheel gives the travel speed within a few control periods of moving, so
+/// the drum needs no Hall pitch of allowance.
+pub fn first_plant_place_fine_um(spacing_mm: u16) -> u64 {
+    u64::from(spacing_mm).saturating_mul(1000)
 }
 
 /// The phase loop's state (module docs).
@@ -177,6 +205,9 @@ pub struct Phase {
     /// The last step's events (ground µm).
     events: [u64; MAX_EVENTS],
     n_events: u8,
+    /// The ground comes from a fine sensor (the ground wheel): the
+    /// [`FINE_PHASE_TIME_CONSTANT_MS`] and [`FINE_MAX_SPEED_UP_PCT`] tuning.
+    fine: bool,
 }
 
 impl Phase {
@@ -208,9 +239,16 @@ impl Phase {
             error_nm: 0,
             events: [0; MAX_EVENTS],
             n_events: 0,
+            fine: false,
         };
         p.set_spacing(spacing_mm);
         p
+    }
+
+    /// The ground comes from a fine sensor (the ground wheel) or from the
+    /// Hall gear: the loop's tuning (module docs, "Bounded recovery").
+    pub fn set_fine_ground(&mut self, fine: bool) {
+        self.fine = fine;
     }
 
     /// A new spacing (precomputes `Lclap / X`).
@@ -361,16 +399,8 @@ impl Phase {
         if !self.armed && new > 0 {
             // The origin: the first edge counts nothing (of several in the
             // step, the mean pitch is taken off).
-            self.armed = true;
             new_q16 = new_q16.saturating_sub(new_q16.checked_div(u64::from(new)).unwrap_or(0));
-            if self.belt_nm > ROLLING_START_NM && !self.pass_started {
-                // Started on the move: the drum ran on the feed-forward
-                // before the origin. Its phase here is kept (the next
-                // partition's place is where the matched belt puts it), so
-                // a rolling Start neither stalls nor sprints the drum.
-                let to_boundary = self.ref_belt_nm.saturating_sub(self.belt_nm);
-                self.ref_ground_nm = to_boundary.saturating_mul(self.x_nm) / PARTITION_NM;
-            }
+            self.arm();
         }
         if !self.armed {
             return;
@@ -403,6 +433,45 @@ impl Phase {
         self.reach_nm = cap;
         let g = edges_nm.saturating_add(extra).min(cap);
         self.ground_nm = self.ground_nm.max(g);
+    }
+
+    /// Advances the ground by `distance_nm` measured this step by a sensor
+    /// that resolves it finely (the ground wheel, docs/ground-wheel.md), at
+    /// the travel speed `travel` (`MetresPerSecond` bits, 0 at rest). The
+    /// first step that moves after Start is the origin (its own distance
+    /// counts nothing, as the Hall gear's first edge); the next partition's
+    /// place can always be reached (no edge to wait for).
+    #[inline(never)]
+    pub fn advance_ground_by(&mut self, distance_nm: u64, travel: u32) {
+        if !self.armed {
+            if distance_nm == 0 {
+                return;
+            }
+            self.arm();
+        } else {
+            self.ground_nm = self.ground_nm.saturating_add(distance_nm);
+        }
+        if travel == 0 {
+            // At rest: the first plant after it gets the first plant's
+            // allowance (module docs).
+            self.pass_started = false;
+        }
+        self.ground_edges_q8 = self.ground_nm << 8;
+        self.reach_nm = u64::MAX;
+    }
+
+    /// The origin: the ground from here; a rolling Start keeps the belt's
+    /// phase (module docs).
+    fn arm(&mut self) {
+        self.armed = true;
+        if self.belt_nm > ROLLING_START_NM && !self.pass_started {
+            // Started on the move: the drum ran on the feed-forward
+            // before the origin. Its phase here is kept (the next
+            // partition's place is where the matched belt puts it), so
+            // a rolling Start neither stalls nor sprints the drum.
+            let to_boundary = self.ref_belt_nm.saturating_sub(self.belt_nm);
+            self.ref_ground_nm = to_boundary.saturating_mul(self.x_nm) / PARTITION_NM;
+        }
     }
 
     /// Advances the belt by `counts` encoder counts turned at belt slip
@@ -495,10 +564,15 @@ impl Phase {
         // Before the pass's first plant: twice the gain (T/2), to absorb
         // the start lag within the first spacing.
         let shift = if self.pass_started { 16 } else { 15 };
-        let raw = e.wrapping_mul(GAIN_Q16).wrapping_neg() >> shift;
+        let (gain, up_q16) = if self.fine {
+            (FINE_GAIN_Q16, FINE_UP_Q16)
+        } else {
+            (GAIN_Q16, UP_Q16)
+        };
+        let raw = e.wrapping_mul(gain).wrapping_neg() >> shift;
         let ff = i64::from(n_ff.to_bits());
         let up = if self.pass_started {
-            ff.wrapping_mul(UP_Q16) >> 16
+            ff.wrapping_mul(up_q16) >> 16
         } else {
             ff
         };

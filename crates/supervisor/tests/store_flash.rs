@@ -300,6 +300,11 @@ fn settings_b() -> Settings {
                 offline_time_ms: 800,
             },
         },
+        ground_wheel: supervisor::settings::wheel::GroundWheelSettings {
+            source: hmi_proto::screen::TravelSource::Both,
+            counts_per_m_x1000: 3_001_000,
+            reversed: true,
+        },
     }
 }
 
@@ -443,9 +448,9 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&a).unwrap();
     let only_a = st.into_inner();
     let total = sweep(&only_a, &a, &b);
-    // One erase + 332 bytes / 2 = 166 half-word programs (311-byte payload,
-    // format 6: header 12, payload 311 + 1 padding, CRC 4, commit 4).
-    assert_eq!(total, 167);
+    // One erase + 340 bytes / 2 = 170 half-word programs (317-byte payload,
+    // format 7: header 12, payload 317 + 3 padding, CRC 4, commit 4).
+    assert_eq!(total, 171);
 
     // 2. X (seq 1) in slot 0, A (seq 2) in slot 1; B overwrites X's slot.
     //    X must never come back, whatever the torn erase leaves of it.
@@ -453,30 +458,30 @@ fn power_cut_at_every_step_recovers_old_or_new() {
     st.save(&x).unwrap();
     st.save(&a).unwrap();
     let x_then_a = st.into_inner();
-    assert_eq!(sweep(&x_then_a, &a, &b), 167);
+    assert_eq!(sweep(&x_then_a, &a, &b), 171);
 
     // 3. Sequence wrap: X at u32::MAX − 1 in slot 0, A at u32::MAX in slot 1;
     //    B gets sequence 0 in slot 0.
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(u32::MAX - 1, &x.encode()));
     put_raw(&mut f, 1, &raw_record(u32::MAX, &a.encode()));
-    assert_eq!(sweep(&f, &a, &b), 167);
+    assert_eq!(sweep(&f, &a, &b), 171);
 }
 
 #[test]
 fn power_cut_with_wider_program_units() {
     // A flash with 8-byte program units (and 8-byte reads): the commit word
-    // takes its own unit at 328, the record ends at 336 = 42 units.
+    // takes its own unit at 336, the record ends at 344 = 43 units.
     let (a, b) = (settings_a(), settings_b());
     let mut st = store(SimFlash::<8>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 42);
-    // And 1-byte units: 332 programs.
+    assert_eq!(sweep(&f, &a, &b), 1 + 43);
+    // And 1-byte units: 340 programs.
     let mut st = store(SimFlash::<1>::new());
     st.save(&a).unwrap();
     let f = st.into_inner();
-    assert_eq!(sweep(&f, &a, &b), 1 + 332);
+    assert_eq!(sweep(&f, &a, &b), 1 + 340);
 }
 
 #[test]
@@ -528,26 +533,26 @@ fn record_bytes_follow_the_documented_layout() {
     assert_eq!(st.save(&settings_b()), Ok(1));
     let f = st.into_inner();
     let rec = raw_record(1, &settings_b().encode());
-    assert_eq!(rec.len(), 332);
+    assert_eq!(rec.len(), 340);
     let slot0 = slot_bytes(&f, 0);
-    assert_eq!(&slot0[..332], &rec[..]);
-    assert!(slot0[332..].iter().all(|&b| b == 0xFF));
+    assert_eq!(&slot0[..340], &rec[..]);
+    assert!(slot0[340..].iter().all(|&b| b == 0xFF));
     assert!(slot_bytes(&f, 1).iter().all(|&b| b == 0xFF));
-    // Header bytes spelled out: "TPS1", seq 1, n = 311 = 0x0137, !n = 0xFEC8.
+    // Header bytes spelled out: "TPS1", seq 1, n = 317 = 0x013D, !n = 0xFEC2.
     assert_eq!(
         &slot0[..12],
-        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0x37, 0x01, 0xC8, 0xFE]
+        &[b'T', b'P', b'S', b'1', 1, 0, 0, 0, 0x3D, 0x01, 0xC2, 0xFE]
     );
-    assert_eq!(SETTINGS_BYTES, 311);
+    assert_eq!(SETTINGS_BYTES, 317);
 }
 
 #[test]
-fn one_save_costs_one_erase_and_166_programs() {
+fn one_save_costs_one_erase_and_170_programs() {
     let mut st = store(SimFlash::<2>::new());
     st.save(&settings_a()).unwrap();
     let f = st.into_inner();
-    // 1 erase + 332 / 2 half-words (record layout: end of commit word at 332).
-    assert_eq!(f.ops, 167);
+    // 1 erase + 340 / 2 half-words (record layout: end of commit word at 340).
+    assert_eq!(f.ops, 171);
     assert_eq!(f.erases, [0, 1, 0, 0]);
 }
 
@@ -557,15 +562,15 @@ fn erase_first_then_body_in_order_then_commit_word_last() {
     st.save(&settings_a()).unwrap();
     st.save(&settings_b()).unwrap(); // into slot 1 at offset 2048
     let log = st.into_inner().log;
-    let second = &log[167..];
+    let second = &log[171..];
     assert_eq!(second[0], (true, 2 * PAGE));
-    // Half-words 0, 2, …, 326 of the page: header, payload, padding, CRC.
-    let body: Vec<_> = (0..164).map(|i| (false, 2 * PAGE + 2 * i)).collect();
-    assert_eq!(&second[1..165], &body[..]);
-    // Then, and only then, the commit word "DONE" at 328 and 330.
+    // Half-words 0, 2, …, 334 of the page: header, payload, padding, CRC.
+    let body: Vec<_> = (0..168).map(|i| (false, 2 * PAGE + 2 * i)).collect();
+    assert_eq!(&second[1..169], &body[..]);
+    // Then, and only then, the commit word "DONE" at 336 and 338.
     assert_eq!(
-        &second[165..],
-        &[(false, 2 * PAGE + 328), (false, 2 * PAGE + 330)]
+        &second[169..],
+        &[(false, 2 * PAGE + 336), (false, 2 * PAGE + 338)]
     );
 }
 
@@ -740,6 +745,7 @@ fn a_record_written_before_profile_b_still_loads() {
         work_switch_fitted: false,
         first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
         drive_link: Default::default(),
+        ground_wheel: Default::default(),
         ..b.clone()
     };
     assert_eq!(
@@ -777,6 +783,7 @@ fn a_record_written_before_the_work_switch_still_loads() {
         work_switch_fitted: false,
         first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
         drive_link: Default::default(),
+        ground_wheel: Default::default(),
         ..b.clone()
     };
     assert_eq!(
@@ -801,7 +808,7 @@ fn a_record_written_before_the_work_switch_still_loads() {
 fn a_record_written_before_the_drive_link_still_loads() {
     // Format 4: the first 252 bytes of today's payload, version byte 4. It
     // loads with today's behaviour (encoder feedback, PWM, no driver); the
-    // next save writes format 6.
+    // next save writes format 7.
     let b = settings_b();
     let mut v4 = b.encode()[..252].to_vec();
     v4[0] = 4;
@@ -809,6 +816,7 @@ fn a_record_written_before_the_drive_link_still_loads() {
     put_raw(&mut f, 0, &raw_record(3, &v4));
     let expected = Settings {
         drive_link: Default::default(),
+        ground_wheel: Default::default(),
         ..b.clone()
     };
     assert_ne!(expected, b);
@@ -835,7 +843,7 @@ fn a_record_written_before_the_link_timing_still_loads() {
     // Format 5: the first 283 bytes of a payload whose link block holds
     // only what format 5 had (a generic driver: command in the feedback's
     // scale, none of the optional registers, the default timing), version
-    // byte 5. It loads as saved; the next save writes format 6, and a
+    // byte 5. It loads as saved; the next save writes format 7, and a
     // changed setting is saved with it.
     let mut b = settings_b();
     b.drive_link.kind = supervisor::drive_link::DriverKind::Generic;
@@ -850,6 +858,7 @@ fn a_record_written_before_the_link_timing_still_loads() {
         max_speed_register: None,
         ..b.drive_link.generic
     };
+    b.ground_wheel = Default::default();
     let mut v5 = b.encode()[..283].to_vec();
     v5[0] = 5;
     let mut f = SimFlash::new();
@@ -865,7 +874,7 @@ fn a_record_written_before_the_link_timing_still_loads() {
     b.drive_link.timing.reply_timeout_ms = 50;
     assert_eq!(st.save(&b), Ok(8));
     let f = st.into_inner();
-    assert_eq!(slot_bytes(&f, 1)[12], 6, "format byte of the new record");
+    assert_eq!(slot_bytes(&f, 1)[12], 7, "format byte of the new record");
     assert_eq!(
         boot(&f),
         Loaded::Saved {
@@ -879,7 +888,7 @@ fn a_record_written_before_the_link_timing_still_loads() {
 fn saving_what_an_older_record_decodes_to_upgrades_it() {
     // Records are compared as bytes in today's format: a format-4 record
     // that decodes to exactly the settings being saved is still rewritten
-    // once as format 6 (sequence 4, version byte 6 in the new slot), and a
+    // once as format 7 (sequence 4, version byte 7 in the new slot), and a
     // second save of the same settings then writes nothing.
     let b = settings_b();
     let mut v4 = b.encode()[..252].to_vec();
@@ -893,7 +902,7 @@ fn saving_what_an_older_record_decodes_to_upgrades_it() {
     assert_eq!(st.save(&old), Ok(4));
     assert_eq!(st.save(&old), Ok(4));
     let f = st.into_inner();
-    assert_eq!(slot_bytes(&f, 1)[12], 6, "format byte of the new record");
+    assert_eq!(slot_bytes(&f, 1)[12], 7, "format byte of the new record");
     // One erase, of slot 1 (pages: sentinel, slot 0, slot 1, sentinel).
     assert_eq!(f.erases, [0, 0, 1, 0]);
 }
@@ -916,6 +925,7 @@ fn a_record_written_before_the_drive_model_still_loads() {
         work_switch_fitted: false,
         first_plant_distance: hmi_proto::screen::FirstPlantDistance::DEFAULT,
         drive_link: Default::default(),
+        ground_wheel: Default::default(),
         ..b.clone()
     };
     assert_eq!(
@@ -939,9 +949,9 @@ fn a_record_written_before_the_drive_model_still_loads() {
 #[test]
 fn unsupported_version_falls_back_or_is_reported() {
     let a = settings_a();
-    // A record of a future format 7 (payload version byte 7, longer payload).
-    let mut v2 = vec![7u8; 330];
-    v2[1] = 7;
+    // A record of a future format 8 (payload version byte 8, longer payload).
+    let mut v2 = vec![8u8; 340];
+    v2[1] = 8;
     // Alone: defaults, reason UnsupportedVersion.
     let mut f = SimFlash::new();
     put_raw(&mut f, 1, &raw_record(40, &v2));
@@ -970,7 +980,7 @@ fn unsupported_version_falls_back_or_is_reported() {
     let mut f = SimFlash::new();
     put_raw(&mut f, 0, &raw_record(5, &a.encode()));
     let mut same_len = settings_b().encode();
-    same_len[0] = 7;
+    same_len[0] = 8;
     put_raw(&mut f, 1, &raw_record(6, &same_len));
     assert_eq!(
         boot(&f),
@@ -1141,6 +1151,15 @@ fn settings() -> impl Strategy<Value = Settings> {
                 first_plant_distance: hmi_proto::screen::FirstPlantDistance::new(i32::from(first))
                     .unwrap(),
                 drive_link: Default::default(),
+                ground_wheel: supervisor::settings::wheel::GroundWheelSettings {
+                    source: if work {
+                        hmi_proto::screen::TravelSource::GroundWheel
+                    } else {
+                        hmi_proto::screen::TravelSource::HallGear
+                    },
+                    counts_per_m_x1000: 2_500_000 + u32::from(sp) * 1000,
+                    reversed: rev,
+                },
             },
         )
 }

@@ -68,6 +68,9 @@ pub struct SensorSample {
     /// simulated machine produces these; the real board's edges arrive in
     /// [`HallCapture::on_interrupt`]).
     pub hall_edges: heapless::Vec<u32, MAX_EDGES_PER_SAMPLE>,
+    /// Machine A: the ground wheel's encoder counter (wraps at 2¹⁶), `None`
+    /// where the board does not read one.
+    pub ground_wheel: Option<u16>,
 }
 
 /// The settings store's two 1 KB pages (both boards).

@@ -105,6 +105,7 @@ fn read_sensors(cx: &mut control::Context<'_>, work: &mut WorkSwitch) -> Sensed 
             stop_latched,
             work_down: work.is_down(),
             link,
+            ground_wheel: sample.ground_wheel,
         },
         sample,
         stop_change,

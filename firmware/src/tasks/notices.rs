@@ -6,6 +6,7 @@
 use hmi_proto::hmi::Hmi;
 use rtic::Mutex as _;
 use supervisor::drum::{Alarm, RunState};
+use supervisor::ground::SourceInUse;
 use supervisor::machine::Machine;
 use supervisor::machine_step::StepOutputs;
 use supervisor::planter::{PlanterAlarm, PlanterState};
@@ -24,6 +25,8 @@ pub struct Notices {
     run: RunState,
     belt_alarm: Option<PlanterAlarm>,
     belt_state: PlanterState,
+    travel_source: SourceInUse,
+    track_slip_x10: Option<i16>,
 }
 
 impl Default for Notices {
@@ -33,6 +36,8 @@ impl Default for Notices {
             run: RunState::Stopped,
             belt_alarm: None,
             belt_state: PlanterState::Stopped,
+            travel_source: SourceInUse::HallGear,
+            track_slip_x10: None,
         }
     }
 }
@@ -76,6 +81,14 @@ impl Notices {
                         .machine
                         .lock(|m| log_work_change(m, change, running));
                 }
+                let (source, slip) = cx.shared.machine.lock(|m| match m {
+                    Machine::DrumBelt(sup) => {
+                        let s = sup.snapshot();
+                        (s.travel_source, s.track_slip_x10)
+                    }
+                    Machine::SeedlingBelt(_) => (SourceInUse::HallGear, None),
+                });
+                self.report_ground(source, slip);
                 if run != self.run {
                     defmt::info!("drum: {}", run);
                     if self.run == RunState::Running {
@@ -107,6 +120,24 @@ impl Notices {
         }
         #[cfg(feature = "board-qemu")]
         log_truth(cx, outputs);
+    }
+
+    /// Machine A's travel source in use and the track's live slip, when
+    /// they change (`supervisor::ground`): `travel source: GroundWheel`
+    /// (`HallGear`, `HallStandIn`: the Hall gear standing in for a wheel
+    /// that does not turn), and each new slip the ground wheel measures
+    /// against the Hall gear, `track slip: N x0.1%`.
+    fn report_ground(&mut self, source: SourceInUse, slip: Option<i16>) {
+        if source != self.travel_source {
+            defmt::info!("travel source: {}", source);
+            self.travel_source = source;
+        }
+        if slip != self.track_slip_x10 {
+            if let Some(s) = slip {
+                defmt::info!("track slip: {=i16} x0.1%", s);
+            }
+            self.track_slip_x10 = slip;
+        }
     }
 }
 

@@ -61,6 +61,25 @@ pub enum Alarm {
     /// margin for its hold time ([`drive_link::cross_check`]): a lost
     /// encoder, or a driver reporting wrong. Latched.
     SpeedMismatch,
+    /// The ground wheel (both sensors fitted) does not roll while the Hall
+    /// gear turns: lifted, blocked or clogged. A warning: the machine plants
+    /// on the Hall gear until the wheel rolls again ([`crate::ground`]).
+    GroundWheelStopped,
+    /// The ground wheel counts backwards while the machine moves forward.
+    /// With both sensors a warning (the Hall gear stands in); with the wheel
+    /// alone latched: the drum stops.
+    GroundWheelBackwards {
+        /// The wheel is the only source (latched).
+        alone: bool,
+    },
+    /// The Hall gear (both sensors fitted) is silent while the ground wheel
+    /// rolls: the track slip is not measured. A warning: the wheel carries
+    /// on.
+    HallGearStopped,
+    /// No ground-wheel count for [`NO_PULSES_US`] while the drum runs in
+    /// Speed-Adaptive mode with the unit down (the wheel the source): as
+    /// [`Alarm::NoTravelPulses`] for the wheel.
+    NoWheelPulses,
 }
 
 impl Alarm {
@@ -76,6 +95,7 @@ impl Alarm {
                 | Self::LinkRefused
                 | Self::DriverSetup(_)
                 | Self::SpeedMismatch
+                | Self::GroundWheelBackwards { alone: true }
         )
     }
 
@@ -109,6 +129,15 @@ impl Alarm {
                 w.write_str("Driver speed resolution unusable")
             }
             Self::SpeedMismatch => w.write_str("Encoder or driver speed wrong"),
+            Self::GroundWheelStopped => w.write_str(WHEEL_STOPPED_TEXT),
+            Self::GroundWheelBackwards { alone: false } => {
+                w.write_str("Wheel counts backwards: on Hall gear")
+            }
+            Self::GroundWheelBackwards { alone: true } => {
+                w.write_str("Wheel counts backwards: set direction")
+            }
+            Self::HallGearStopped => w.write_str(HALL_STOPPED_TEXT),
+            Self::NoWheelPulses => w.write_str(NO_WHEEL_PULSES_TEXT),
             Self::TooFast { max_kmh_x100 } => {
                 // Digits by hand: `write!` with integers would pull in
                 // `core::fmt`'s number formatting (~2 KB of flash), and
@@ -147,6 +176,21 @@ pub const IDENTIFY_MESSAGE: &str = "Identifying drive: keep belt empty";
 /// The warning text of [`Alarm::NoTravelPulses`] (the screen's 40
 /// characters).
 pub const NO_PULSES_TEXT: &str = "No travel pulses: check Hall, or Stop";
+
+/// Page 4: a ground-wheel calibration run in which the wheel did not count.
+pub const WHEEL_NO_PULSES_TEXT: &str = "No wheel pulses: check the wheel sensor";
+/// Page 4: a ground-wheel calibration run that counted backwards.
+pub const WHEEL_BACKWARDS_RUN_TEXT: &str = "Wheel counted backwards: set direction";
+/// Page 4: a ground-wheel calibration result beyond ±20 % of the nominal
+/// wheel.
+pub const WHEEL_TOLERANCE_TEXT: &str = "Wheel off nominal by >20 %: not saved";
+
+/// The warning text of [`Alarm::GroundWheelStopped`].
+pub const WHEEL_STOPPED_TEXT: &str = "Ground wheel not turning: on Hall gear";
+/// The warning text of [`Alarm::HallGearStopped`].
+pub const HALL_STOPPED_TEXT: &str = "Hall gear silent: slip not measured";
+/// The warning text of [`Alarm::NoWheelPulses`].
+pub const NO_WHEEL_PULSES_TEXT: &str = "No travel pulses: check wheel, or Stop";
 
 /// The warning text of [`Alarm::DrumUnstable`].
 pub const DRUM_UNSTABLE_TEXT: &str = "Drum unstable: safe mode, identify";

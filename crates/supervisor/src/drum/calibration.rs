@@ -1,6 +1,7 @@
 //! The on-screen calibration of k1, k2 and k3 (page 4).
 
 use super::*;
+use crate::settings::wheel::NOMINAL_COUNTS_PER_M_X1000;
 
 impl Supervisor {
     /// Page 4: chooses the coefficient (k1, k2 or k3) to calibrate.
@@ -16,6 +17,7 @@ impl Supervisor {
             start_edges: self.edges,
             start_steps: self.snapshot.steps,
             start_drum_counts: self.drum_counts_total,
+            start_wheel_counts: self.ground.wheel_counts(),
         };
         Effect::None
     }
@@ -26,19 +28,43 @@ impl Supervisor {
             start_edges,
             start_steps,
             start_drum_counts,
+            start_wheel_counts,
         } = self.calibration_run
         {
             self.calibration_run = CalibrationRun::Measured {
                 edges: self.edges.wrapping_sub(start_edges),
                 steps: self.snapshot.steps.wrapping_sub(start_steps),
                 drum_counts: self.drum_counts_total.saturating_sub(start_drum_counts),
+                wheel_counts: self
+                    .ground
+                    .wheel_counts()
+                    .saturating_sub(start_wheel_counts),
             };
         }
         Effect::None
     }
 
     /// Page 4: a coefficient typed by hand, at the selected gear's speed.
+    /// For the ground wheel it is the wheel's counts per metre as a factor
+    /// of the nominal wheel's (0.800–1.200: within the ±20 % a calibration
+    /// run may give).
     pub(super) fn set_coefficient_by_hand(&mut self, k: screen::CalibrationCoefficient) -> Effect {
+        if self.calibration_kind == CalibrationKind::GroundWheel {
+            let v = u64::from(NOMINAL_COUNTS_PER_M_X1000)
+                .saturating_mul(u64::from(k.raw()))
+                .saturating_add(500)
+                / 1000;
+            return match u32::try_from(v)
+                .ok()
+                .map(crate::settings::wheel::checked_counts)
+            {
+                Some(Ok(v)) => {
+                    self.settings.ground_wheel.counts_per_m_x1000 = v;
+                    Effect::SettingsChanged
+                }
+                _ => Effect::Message("Coefficient rejected"),
+            };
+        }
         let k = kinematics::units::Coefficient::from_ratio(u32::from(k.raw()), 1000);
         let at = self.hand_set_abscissa();
         match k.map(|k| self.set_table_point(self.calibration_kind, at, k)) {
@@ -55,6 +81,7 @@ impl Supervisor {
         match self.calibration_kind {
             CalibrationKind::SpeedK1 => gear.monitored().table_x(),
             CalibrationKind::SlipK2 => gear.actual().table_x(),
+            CalibrationKind::GroundWheel => U16F16::ZERO,
             CalibrationKind::BeltK3 => {
                 U16F16::saturating_from_num(self.settings.fixed_drum_speed.raw())
                     .checked_div_int(100)
@@ -77,10 +104,23 @@ impl Supervisor {
             edges,
             steps,
             drum_counts,
+            wheel_counts,
         } = self.calibration_run
         else {
             return Effect::Message("Run a calibration first");
         };
+        if self.calibration_kind == CalibrationKind::GroundWheel {
+            use crate::settings::wheel::{calibrate, WheelCalibrationError as E};
+            return match calibrate(wheel_counts, taped_cm.saturating_mul(10)) {
+                Ok(counts_per_m_x1000) => {
+                    self.calibration_run = CalibrationRun::WheelComputed { counts_per_m_x1000 };
+                    Effect::None
+                }
+                Err(E::NoPulses) => Effect::Message(WHEEL_NO_PULSES_TEXT),
+                Err(E::Backwards) => Effect::Message(WHEEL_BACKWARDS_RUN_TEXT),
+                Err(E::OutOfTolerance(_)) => Effect::Message(WHEEL_TOLERANCE_TEXT),
+            };
+        }
         let us = self.run_us(steps);
         let taped_um = taped_cm.saturating_mul(10_000);
         let kind = self.calibration_kind;
@@ -123,6 +163,8 @@ impl Supervisor {
                         .map(|r| (monitored.table_x(), r.k1))
                 })
             }
+            // Handled above.
+            CalibrationKind::GroundWheel => None,
             CalibrationKind::BeltK3 => {
                 // Mean drum speed: counts · 60 / (counts per turn · s).
                 let rpm_x1000 = drum_counts
@@ -154,6 +196,11 @@ impl Supervisor {
     }
 
     pub(super) fn accept_coefficient(&mut self) -> Effect {
+        if let CalibrationRun::WheelComputed { counts_per_m_x1000 } = self.calibration_run {
+            self.settings.ground_wheel.counts_per_m_x1000 = counts_per_m_x1000;
+            self.calibration_run = CalibrationRun::Idle;
+            return Effect::SettingsChanged;
+        }
         let CalibrationRun::Computed { kind, at, k } = self.calibration_run else {
             return Effect::Message("Nothing to accept");
         };
@@ -181,6 +228,7 @@ impl Supervisor {
             CalibrationKind::SpeedK1 => &mut cal.k1,
             CalibrationKind::SlipK2 => &mut cal.k2,
             CalibrationKind::BeltK3 => &mut cal.k3,
+            CalibrationKind::GroundWheel => return Err(()),
         };
         let near = const { U16F16::lit("0.05") };
         let mut points: heapless::Vec<TablePoint, 8> = heapless::Vec::new();

@@ -90,6 +90,19 @@ impl Supervisor {
             Command::AcceptDriveModel => self.accept_drive_model(),
             // Applies from the next control step (the counter's raw value
             // is kept, only the sign of its delta changes).
+            // Only with the drum stopped: the ground of a pass comes from
+            // one source (docs/ground-wheel.md).
+            Command::SelectTravelSource(source) => {
+                if self.run == RunState::Running {
+                    return Effect::Message(crate::effect::SOURCE_WHILE_RUNNING);
+                }
+                self.settings.ground_wheel.source = source;
+                Effect::SettingsChanged
+            }
+            Command::SetGroundWheelReversed(reversed) => {
+                self.settings.ground_wheel.reversed = reversed;
+                Effect::SettingsChanged
+            }
             Command::SetDrumEncoderReversed(reversed) => {
                 self.settings.drum_encoder_reversed = reversed;
                 Effect::SettingsChanged

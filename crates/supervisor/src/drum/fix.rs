@@ -59,6 +59,24 @@ pub(super) fn centi_to_fix(raw: u16) -> I16F16 {
         .unwrap_or(0);
     I16F16::from_bits(i32::try_from(bits).unwrap_or(i32::MAX))
 }
+/// A ground speed measured directly (the ground wheel, `MetresPerSecond`
+/// bits) as the travel speed eq. 7 takes: the gear speed that gives it with
+/// k1 = k2 = 1.
+pub(super) fn wheel_travel(bits: u32) -> Option<kinematics::travel::TravelSpeed> {
+    use kinematics::travel;
+    use kinematics::units::{Coefficient, MetresPerSecond};
+    let v = MetresPerSecond::from_bits(bits);
+    let gear_speed = travel::gear_speed_for(v).ok()?;
+    Some(travel::TravelSpeed {
+        raw_gear_speed: gear_speed,
+        monitored: v.to_kmh().ok()?,
+        k1: Coefficient::ONE,
+        gear_speed,
+        k2: Coefficient::ONE,
+        travel_speed: v,
+    })
+}
+
 #[cfg(test)]
 #[allow(
     clippy::unwrap_used,

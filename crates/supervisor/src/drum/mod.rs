@@ -81,7 +81,7 @@ use kinematics::{
 };
 
 use crate::drive::{DriveModel, Identifier, IdentifyError, IdentifyState};
-use crate::phase::{first_plant_place_um, Phase, PlantEvent};
+use crate::phase::{first_plant_place_fine_um, first_plant_place_um, Phase, PlantEvent};
 use crate::settings::{self, Placement, Settings};
 
 use alarm::*;
@@ -187,6 +187,9 @@ pub struct Supervisor {
     /// The drum driver's link: its newest sample, the read-back's
     /// integration, the cross-check ([`crate::drive_link`]).
     pub(crate) link: crate::drive_link::Feedback,
+    /// The travel source: the ground wheel, its cross-check with the Hall
+    /// gear, the live slip ([`crate::ground`]).
+    pub(crate) ground: crate::ground::Ground,
 }
 
 /// The drum controller, or the drive identification in its place.
@@ -288,6 +291,7 @@ impl Supervisor {
             work: Work::new(),
             quality: crate::quality::Quality::new(),
             link: crate::drive_link::Feedback::default(),
+            ground: crate::ground::Ground::new(),
         })
     }
 
@@ -405,6 +409,13 @@ impl Supervisor {
         }
     }
 
+    /// The ground wheel's encoder counter (wraps at 2¹⁶), read once a control
+    /// period before [`Supervisor::control_step`] (machine A with a ground
+    /// wheel, docs/ground-wheel.md).
+    pub fn ground_wheel_count(&mut self, counter: u16) {
+        self.ground.wheel_count(counter);
+    }
+
     /// Says that Hall edges were lost before the next one (the capture
     /// timer's overcapture flag): the interval ending at the next edge is not
     /// measured ([`kinematics::speed::MtEstimator::edges_lost`]).
@@ -459,7 +470,12 @@ impl Supervisor {
             self.distance_frac = 0;
             self.belt_counts_k3 = 0;
             self.phase.start(self.teeth, self.pitches_q16);
-            self.realign_next_plant(first_plant_place_um(self.settings.spacing.raw()));
+            let spacing = self.settings.spacing.raw();
+            self.realign_next_plant(if self.settings.ground_wheel.source.uses_wheel() {
+                first_plant_place_fine_um(spacing)
+            } else {
+                first_plant_place_um(spacing)
+            });
             self.start_planting();
         }
         Effect::None

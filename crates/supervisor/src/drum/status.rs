@@ -11,9 +11,18 @@ impl Supervisor {
         let x100 = |v: u32| u16::try_from(v.saturating_add(5) / 10).unwrap_or(u16::MAX);
         let (measured_distance_cm, calibration_result_x1000) = match self.calibration_run {
             CalibrationRun::Measured {
-                edges, drum_counts, ..
+                edges,
+                drum_counts,
+                wheel_counts,
+                ..
             } => {
                 let um = match self.calibration_kind {
+                    // The wheel's counts at its counts per metre in force.
+                    CalibrationKind::GroundWheel => u64::try_from(wheel_counts)
+                        .unwrap_or(0)
+                        .saturating_mul(1_000_000_000)
+                        .checked_div(u64::from(self.settings.ground_wheel.counts_per_m_x1000))
+                        .unwrap_or(0),
                     // The Hall teeth counted, as track.
                     CalibrationKind::SpeedK1 | CalibrationKind::SlipK2 => {
                         u64::from(edges).saturating_mul(EDGE_UM)
@@ -28,6 +37,9 @@ impl Supervisor {
             }
             CalibrationRun::Computed { k, .. } => {
                 (0, u16::try_from(coefficient_milli(k)).unwrap_or(u16::MAX))
+            }
+            CalibrationRun::WheelComputed { counts_per_m_x1000 } => {
+                (0, wheel_factor_milli(counts_per_m_x1000))
             }
             _ => (0, 0),
         };
@@ -60,10 +72,28 @@ impl Supervisor {
             precision_cv_x10: q.cv_x10,
             within_10_pct_x10: q.within_10_pct_x10,
             plants_per_m_x100: u16::try_from(q.plants_per_m_x100).unwrap_or(u16::MAX),
+            track_slip_x10: s.track_slip_x10.unwrap_or(screen::SLIP_UNKNOWN),
+            travel_source_in_use: match s.travel_source {
+                crate::ground::SourceInUse::HallGear => screen::TravelSourceInUse::HallGear,
+                crate::ground::SourceInUse::GroundWheel => screen::TravelSourceInUse::GroundWheel,
+                crate::ground::SourceInUse::HallStandIn => screen::TravelSourceInUse::HallStandIn,
+            },
             // Profile B's live values: not this machine's.
             ..screen::Status::default()
         }
     }
+}
+
+/// The ground wheel's counts per metre as a factor of the nominal wheel's,
+/// thousandths, rounded (page 4 shows it as the wheel's coefficient).
+fn wheel_factor_milli(counts_per_m_x1000: u32) -> u16 {
+    let n = u64::from(crate::settings::wheel::NOMINAL_COUNTS_PER_M_X1000);
+    let m = u64::from(counts_per_m_x1000)
+        .saturating_mul(1000)
+        .saturating_add(n / 2)
+        .checked_div(n)
+        .unwrap_or(0);
+    u16::try_from(m).unwrap_or(u16::MAX)
 }
 
 /// A coefficient in thousandths, rounded to the nearest (the screen's
@@ -85,12 +115,15 @@ impl Supervisor {
     pub fn screen_settings(&self) -> screen::Settings {
         let settings = &self.settings;
         let at = self.hand_set_abscissa();
-        let table = match self.calibration_kind {
-            CalibrationKind::SpeedK1 => &settings.calibration.k1,
-            CalibrationKind::SlipK2 => &settings.calibration.k2,
-            CalibrationKind::BeltK3 => &settings.calibration.k3,
+        let k_x1000 = match self.calibration_kind {
+            CalibrationKind::SpeedK1 => coefficient_milli(settings.calibration.k1.eval(at)),
+            CalibrationKind::SlipK2 => coefficient_milli(settings.calibration.k2.eval(at)),
+            CalibrationKind::BeltK3 => coefficient_milli(settings.calibration.k3.eval(at)),
+            CalibrationKind::GroundWheel => {
+                u32::from(wheel_factor_milli(settings.ground_wheel.counts_per_m_x1000))
+            }
         };
-        let k_x1000 = i32::try_from(coefficient_milli(table.eval(at))).unwrap_or(i32::MAX);
+        let k_x1000 = i32::try_from(k_x1000).unwrap_or(i32::MAX);
         screen::Settings {
             spacing: settings.spacing,
             fixed_drum_speed: settings.fixed_drum_speed,
@@ -109,6 +142,8 @@ impl Supervisor {
             speed_following: settings.placement == Placement::SpeedFollowing,
             link_parameter: self.link_parameter,
             link_value: settings.drive_link.value(self.link_parameter),
+            travel_source: settings.ground_wheel.source,
+            ground_wheel_reversed: settings.ground_wheel.reversed,
         }
     }
 }

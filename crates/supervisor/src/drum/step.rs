@@ -2,6 +2,8 @@
 //! report.
 
 use super::*;
+use crate::ground::GroundFault;
+use hmi_proto::screen::TravelSource;
 
 /// Smoothing of the reported drum speed: `Ts / (Ts + τ)` with `τ` = 0.5 s.
 /// The seedlings load the drum once per partition (1.5 Hz at 20 r/min), a
@@ -42,6 +44,8 @@ struct Estimate {
     travel_mps: u32,
     /// k3 at the drum's speed.
     k3: kinematics::units::Coefficient,
+    /// The ground wheel's step (a wheel source), or `None` (the Hall gear).
+    ground: Option<crate::ground::GroundStep>,
 }
 
 impl Supervisor {
@@ -179,7 +183,18 @@ impl Supervisor {
         let gear_speed = self.predictor.predict(&m, now);
         self.snapshot.measured_gear_rpm_x1000 = m.gear_speed.to_milli();
         self.snapshot.predicted_gear_rpm_x1000 = gear_speed.to_milli();
-        let travel = travel::travel_speed(gear_speed, &self.settings.calibration).ok();
+        let hall_travel = travel::travel_speed(gear_speed, &self.settings.calibration).ok();
+        // The ground wheel, when it is the source (crate::ground): its speed
+        // in place of the Hall gear's, as the gear speed that gives it with
+        // k1 = k2 = 1 (eq. 7 then needs nothing else).
+        let ground = self.ground_step(&m, hall_travel.as_ref(), sensed.elapsed_us);
+        let travel = match ground {
+            Some(g) if g.in_use != crate::ground::SourceInUse::HallStandIn => {
+                wheel_travel(g.speed_bits)
+            }
+            Some(g) => wheel_travel(g.speed_bits).or(hall_travel),
+            None => hall_travel,
+        };
         // Shown to a person: rounded to m/h. The distance below integrates
         // the speed itself.
         let travel_kmh_x1000 = travel
@@ -196,7 +211,10 @@ impl Supervisor {
         let k3 = self.settings.calibration.k3_at(fix_to_rpm(self.k3_speed));
         // Positions for the phase loop: the ground while running, the belt
         // always (a coasting drum still moves partitions).
-        if self.run == RunState::Running {
+        self.phase.set_fine_ground(ground.is_some());
+        if let (RunState::Running, Some(g)) = (self.run, ground) {
+            self.phase.advance_ground_by(g.distance_nm, g.speed_bits);
+        } else if self.run == RunState::Running {
             let k1k2 = travel.map(|t| crate::phase::k1k2_q30(t.k1, t.k2));
             // The ground moves on between edges at the M/T speed (the last
             // tooth gap's), not at the predictor's: the slope between two
@@ -221,7 +239,43 @@ impl Supervisor {
             travel_kmh_x1000,
             travel_mps,
             k3,
+            ground,
         }
+    }
+
+    /// The travel source's step (crate::ground): the Hall side's view in,
+    /// the wheel's ground (or its stand-in's) out; `None` with the Hall gear
+    /// as the source.
+    fn ground_step(
+        &mut self,
+        m: &kinematics::speed::TravelMeasurement,
+        hall: Option<&travel::TravelSpeed>,
+        elapsed_us: u32,
+    ) -> Option<crate::ground::GroundStep> {
+        let view = crate::ground::HallView {
+            teeth: self.teeth,
+            pitches_q16: self.pitches_q16,
+            travel_bits: hall.map_or(0, |t| t.travel_speed.to_bits()),
+            track_bits: hall
+                .and_then(|t| travel::wheel_surface_speed(t.gear_speed).ok())
+                .map_or(0, |v| v.to_bits()),
+            k1_q30: hall.map(|t| u64::from(t.k1.to_bits())),
+            since_edge_us: if self.edges == 0 {
+                u32::MAX
+            } else {
+                m.since_edge_ticks
+            },
+        };
+        let step = self.ground.step(
+            &self.settings.ground_wheel,
+            &view,
+            self.hw.control_period_us,
+            elapsed_us,
+        );
+        self.snapshot.track_slip_x10 = self.ground.slip_x10().filter(|_| step.is_some());
+        self.snapshot.travel_source = self.ground.in_use();
+        self.snapshot.wheel_counts = self.ground.wheel_counts();
+        step
     }
 
     /// Plan: the drum target of the mode in force (Fixed, or eq. 7 times
@@ -332,16 +386,52 @@ impl Supervisor {
         } else {
             est.m.since_edge_ticks
         };
-        let quiet = since_edge.min(now.0.wrapping_sub(self.quiet_from));
+        // With the ground wheel: its silence (alone), or the silence of
+        // both (with the Hall gear: either one turning is travel).
+        let source = self.settings.ground_wheel.source;
+        let wheel_quiet = self
+            .ground
+            .wheel_silent_periods()
+            .saturating_mul(self.hw.control_period_us);
+        let since_pulse = match source {
+            TravelSource::HallGear => since_edge,
+            TravelSource::GroundWheel => wheel_quiet,
+            TravelSource::Both => since_edge.min(wheel_quiet),
+        };
+        let quiet = since_pulse.min(now.0.wrapping_sub(self.quiet_from));
+        let ground_fault = est.ground.and(self.ground.fault()).map(|f| match f {
+            GroundFault::WheelStopped => Alarm::GroundWheelStopped,
+            GroundFault::WheelBackwards => Alarm::GroundWheelBackwards {
+                alone: source == TravelSource::GroundWheel,
+            },
+            GroundFault::HallStopped => Alarm::HallGearStopped,
+        });
         let warning = if watching && quiet > NO_PULSES_US {
-            Some(Alarm::NoTravelPulses)
+            Some(if source == TravelSource::HallGear {
+                Alarm::NoTravelPulses
+            } else {
+                Alarm::NoWheelPulses
+            })
+        } else if ground_fault.is_some() {
+            ground_fault
         } else {
             too_fast
         };
         match (self.alarm, warning) {
             (Some(a), _) if a.is_latched() || a == Alarm::DrumUnstable => {}
+            (_, Some(w)) if w.is_latched() && self.run == RunState::Running => self.latch(w),
             (_, Some(w)) if self.run == RunState::Running => self.alarm = Some(w),
-            (Some(Alarm::TooFast { .. } | Alarm::NoTravelPulses), _) => self.alarm = None,
+            (
+                Some(
+                    Alarm::TooFast { .. }
+                    | Alarm::NoTravelPulses
+                    | Alarm::NoWheelPulses
+                    | Alarm::GroundWheelStopped
+                    | Alarm::GroundWheelBackwards { .. }
+                    | Alarm::HallGearStopped,
+                ),
+                _,
+            ) => self.alarm = None,
             _ => {}
         }
     }
@@ -365,7 +455,10 @@ impl Supervisor {
             // than any stop the chassis can make allows. Without such
             // evidence the silence is a stop: the estimator's speed decays
             // to zero and the drum with it.
+            // (With a ground wheel the Hall gear is not the source: its
+            // silence is the cross-check's, crate::ground.)
             let hall_lost = self.settings.mode == Mode::SpeedAdaptive
+                && est.ground.is_none()
                 && self
                     .estimator
                     .next_edge_overdue(est.m.since_edge_ticks, &self.hall_silence);
@@ -453,7 +546,13 @@ impl Supervisor {
         self.snapshot.hall_edges = self.edges;
         let partitions_x1e6 = self.partitions_x1e6();
         self.snapshot.plants = u32::try_from(partitions_x1e6 / 1_000_000).unwrap_or(u32::MAX);
-        if self.run == RunState::Running {
+        if let (RunState::Running, Some(g)) = (self.run, est.ground) {
+            // The ground wheel's distance (its stand-in's), nm; the
+            // remainder below a µm carried.
+            let nm = g.distance_nm.saturating_add(self.distance_frac);
+            self.distance_um = self.distance_um.wrapping_add(nm / 1000);
+            self.distance_frac = nm % 1000;
+        } else if self.run == RunState::Running {
             // ∫ V1 dt: m/s (U8F24) · µs = µm · 2²⁴, the fraction (< 2²⁴)
             // carried: < 2⁶⁴. µm since Start wrap after 1.8·10¹³ m.
             let acc = u64::from(est.travel_mps)

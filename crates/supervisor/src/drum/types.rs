@@ -105,6 +105,13 @@ pub struct Snapshot {
     pub hall_edges: u32,
     /// Control steps since boot.
     pub steps: u32,
+    /// The track's live slip against the ground wheel, 0.1 % (both sensors
+    /// fitted and turning).
+    pub track_slip_x10: Option<i16>,
+    /// The sensor giving the ground now.
+    pub travel_source: crate::ground::SourceInUse,
+    /// Ground wheel counts since boot (after its direction setting).
+    pub wheel_counts: i64,
 }
 
 /// State of the on-screen calibration run (k1, k2 or k3, docs/hmi.md page 4).
@@ -120,6 +127,8 @@ pub enum CalibrationRun {
         start_steps: u32,
         /// Drum encoder counts at the start.
         start_drum_counts: u64,
+        /// Ground wheel counts at the start (signed, after its direction).
+        start_wheel_counts: i64,
     },
     /// Run ended: what it counted and how long it took.
     Measured {
@@ -129,6 +138,8 @@ pub enum CalibrationRun {
         steps: u32,
         /// Drum encoder counts in the run.
         drum_counts: u64,
+        /// Ground wheel counts in the run (signed, after its direction).
+        wheel_counts: i64,
     },
     /// The operator entered the taped length; the coefficient is computed.
     Computed {
@@ -139,6 +150,11 @@ pub enum CalibrationRun {
         at: U16F16,
         /// The coefficient.
         k: kinematics::units::Coefficient,
+    },
+    /// The ground wheel's run and its taped length: its counts per metre.
+    WheelComputed {
+        /// Counts per metre × 1000.
+        counts_per_m_x1000: u32,
     },
 }
 

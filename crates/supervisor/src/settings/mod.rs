@@ -1,8 +1,10 @@
 //! The persisted settings and their versioned byte format.
 //!
 //! [`Settings::encode`] produces exactly [`SETTINGS_BYTES`] bytes; every
-//! multi-byte number is little endian. Format version 6. [`decode`] still
-//! reads the older formats: version 5 has the drive link block's first 31
+//! multi-byte number is little endian. Format version 7. [`decode`] still
+//! reads the older formats: version 6 is version 7 without its last 6 bytes
+//! (written before machine A's ground wheel; read with the Hall gear as the
+//! travel source and the nominal wheel), version 5 has the drive link block's first 31
 //! bytes only (written before the link's timing settings and the generic
 //! profile's command scale and optional registers; read with the default
 //! timing and a generic profile that does what it did: the command in the
@@ -20,7 +22,7 @@
 //!
 //! | offset | size | field | encoding |
 //! |---|---|---|---|
-//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 6 |
+//! | 0 | 1 | format version | [`SETTINGS_FORMAT_VERSION`] = 7 |
 //! | 1 | 1 | [`Settings::mode`] | 1 = Fixed, 2 = Speed-Adaptive |
 //! | 2 | 2 | [`Settings::spacing`] | u16, mm, 30–500 |
 //! | 4 | 2 | [`Settings::fixed_drum_speed`] | u16, r/min × 100, 0–4470 |
@@ -35,7 +37,9 @@
 //! | 250 | 2 | [`Settings::first_plant_distance`] | u16, mm, 0–1000 ([`FirstPlantDistance`], default 100) |
 //! | 252 | 59 | [`Settings::drive_link`] (format 6; 31 bytes in format 5) | [`DriveLinkSettings::to_bytes`]: feedback, command path, driver kind, slave id, baud (u32), speed register, scale (i32, micro-r/min per count), fault register, six fault masks, speed command register (presence byte + u16); then (format 6) reply timeout, retry gap, offline time (ms, u16 each), command scale (i32), control register and its three values, mode register and value, offline-time, resolution and maximum-speed registers (u16 each, register 0: none) |
 //!
-//! Total 311 bytes (version 5: 283, version 4: 252, version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
+//! | 311 | 6 | [`Settings::ground_wheel`] (format 7) | [`GroundWheelSettings::to_bytes`]: travel source (1 Hall gear, 2 ground wheel, 3 both), flags (bit 0: the wheel counts backwards), counts per metre × 1000 (u32) |
+//!
+//! Total 317 bytes (version 6: 311, version 5: 283, version 4: 252, version 3: 250, version 2: 243, version 1: 209). Neither `0x00` nor `0xFF` is a valid mode or gear byte, so
 //! an erased (all `0xFF`) or zeroed buffer never decodes.
 //!
 //! [`decode`] checks the version first (so a record written by a newer
@@ -51,12 +55,12 @@
 //! s.spacing = Spacing::new(120).unwrap();
 //! let bytes = s.encode();
 //! assert_eq!(bytes.len(), SETTINGS_BYTES);
-//! // version 6, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
+//! // version 7, Speed-Adaptive (2), spacing 120 = 0x0078 LE, drum speed
 //! // 2521 = 0x09D9 LE, motor coefficient 100 = 0x0064 LE, gear Low 1 (1),
 //! // brightness 100 (0x64).
 //! assert_eq!(
 //!     bytes[..10],
-//!     [6, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
+//!     [7, 2, 0x78, 0x00, 0xD9, 0x09, 0x64, 0x00, 1, 0x64]
 //! );
 //! assert_eq!(decode(&bytes).unwrap(), s);
 //! ```
@@ -64,6 +68,7 @@
 pub mod belt;
 pub mod crc;
 pub mod store;
+pub mod wheel;
 
 use core::fmt;
 
@@ -78,9 +83,10 @@ use kinematics::travel::{Calibration, CALIBRATION_BYTES};
 use crate::drive::{DriveModel, DriveModelError, DRIVE_MODEL_BYTES};
 use crate::drive_link::{DriveLinkError, DriveLinkSettings, DRIVE_LINK_BYTES, DRIVE_LINK_V5_BYTES};
 use crate::planter::{ProfileBConfig, CONFIG_BYTES};
+use wheel::{GroundWheelError, GroundWheelSettings, GROUND_WHEEL_BYTES};
 
 /// Version byte (offset 0) of the format [`Settings::encode`] writes.
-pub const SETTINGS_FORMAT_VERSION: u8 = 6;
+pub const SETTINGS_FORMAT_VERSION: u8 = 7;
 
 /// Bytes before the calibration block: version, mode, spacing, drum speed,
 /// motor coefficient, gear, brightness.
@@ -101,8 +107,11 @@ pub const SETTINGS_V4_BYTES: usize = SETTINGS_V3_BYTES + 2;
 /// Size of a format-5 record: 252 + 31 = 283.
 pub const SETTINGS_V5_BYTES: usize = SETTINGS_V4_BYTES + DRIVE_LINK_V5_BYTES;
 
-/// Size of an encoded [`Settings`] (format version 6): 252 + 59 = 311.
-pub const SETTINGS_BYTES: usize = SETTINGS_V4_BYTES + DRIVE_LINK_BYTES;
+/// Size of a format-6 record: 252 + 59 = 311.
+pub const SETTINGS_V6_BYTES: usize = SETTINGS_V4_BYTES + DRIVE_LINK_BYTES;
+
+/// Size of an encoded [`Settings`] (format version 7): 311 + 6 = 317.
+pub const SETTINGS_BYTES: usize = SETTINGS_V6_BYTES + GROUND_WHEEL_BYTES;
 
 /// Flags byte (offset 243), bit 0: the drum encoder counts backwards.
 const FLAG_ENCODER_REVERSED: u8 = 1;
@@ -201,6 +210,9 @@ pub struct Settings {
     /// path, driver profile. Default: encoder, PWM, no driver (the
     /// behaviour before the link).
     pub drive_link: DriveLinkSettings,
+    /// Machine A's travel source and ground wheel (format 7). Default: the
+    /// Hall gear, the nominal wheel.
+    pub ground_wheel: GroundWheelSettings,
 }
 
 impl Default for Settings {
@@ -221,6 +233,7 @@ impl Default for Settings {
             work_switch_fitted: false,
             first_plant_distance: FirstPlantDistance::DEFAULT,
             drive_link: DriveLinkSettings::default(),
+            ground_wheel: GroundWheelSettings::default(),
         }
     }
 }
@@ -256,6 +269,8 @@ pub enum SettingsError {
     Drive(DriveModelError),
     /// The drive link block (offset 252, format 5 and 6) failed validation.
     DriveLink(DriveLinkError),
+    /// The ground-wheel block (offset 311, format 7) failed validation.
+    GroundWheel(GroundWheelError),
 }
 
 impl fmt::Display for SettingsError {
@@ -274,6 +289,7 @@ impl fmt::Display for SettingsError {
             Self::Flags(b) => write!(f, "invalid flags byte {b}"),
             Self::Drive(e) => write!(f, "{e}"),
             Self::DriveLink(e) => write!(f, "{e}"),
+            Self::GroundWheel(e) => write!(f, "{e}"),
         }
     }
 }
@@ -326,11 +342,13 @@ const fn mode_from_byte(b: u8) -> Option<Mode> {
 }
 
 impl Settings {
-    /// Serialises in format version 6 (layout in the [module docs](self)).
+    /// Serialises in format version 7 (layout in the [module docs](self)).
     #[must_use]
     pub fn encode(&self) -> [u8; SETTINGS_BYTES] {
         let mut out = [0u8; SETTINGS_BYTES];
-        let (v4, v5) = out.split_at_mut(SETTINGS_V4_BYTES);
+        let (v6, v7) = out.split_at_mut(SETTINGS_V6_BYTES);
+        v7.copy_from_slice(&self.ground_wheel.to_bytes());
+        let (v4, v5) = v6.split_at_mut(SETTINGS_V4_BYTES);
         v5.copy_from_slice(&self.drive_link.to_bytes());
         let (v3, v4) = v4.split_at_mut(SETTINGS_V3_BYTES);
         v4.copy_from_slice(&self.first_plant_distance.raw().to_le_bytes());
@@ -420,6 +438,7 @@ pub fn decode_into_unchecked_link(bytes: &[u8], out: &mut Settings) -> Result<()
         work_switch_fitted: _,
         first_plant_distance: _,
         drive_link: _,
+        ground_wheel: _,
     } = out;
     let length = SettingsError::Length {
         expected: SETTINGS_BYTES,
@@ -432,6 +451,7 @@ pub fn decode_into_unchecked_link(bytes: &[u8], out: &mut Settings) -> Result<()
         3 => SETTINGS_V3_BYTES,
         4 => SETTINGS_V4_BYTES,
         5 => SETTINGS_V5_BYTES,
+        6 => SETTINGS_V6_BYTES,
         SETTINGS_FORMAT_VERSION => SETTINGS_BYTES,
         other => return Err(SettingsError::UnsupportedVersion(other)),
     };
@@ -441,7 +461,8 @@ pub fn decode_into_unchecked_link(bytes: &[u8], out: &mut Settings) -> Result<()
             found: bytes.len(),
         });
     }
-    let (v4, v5) = bytes.split_at(bytes.len().min(SETTINGS_V4_BYTES));
+    let (v6, v7) = bytes.split_at(bytes.len().min(SETTINGS_V6_BYTES));
+    let (v4, v5) = v6.split_at(v6.len().min(SETTINGS_V4_BYTES));
     // Parsed here, checked by the caller (`decode_into`, the store).
     let drive_link = if v5.is_empty() {
         DriveLinkSettings::default()
@@ -519,6 +540,12 @@ pub fn decode_into_unchecked_link(bytes: &[u8], out: &mut Settings) -> Result<()
             )
         }
     };
+    // The last block (format 7), checked after the ones before it.
+    let ground_wheel = match <&[u8; GROUND_WHEEL_BYTES]>::try_from(v7) {
+        Ok(block) => GroundWheelSettings::from_bytes(block).map_err(SettingsError::GroundWheel)?,
+        Err(_) if v7.is_empty() => GroundWheelSettings::default(),
+        Err(_) => return Err(length),
+    };
     out.mode = mode;
     out.spacing = spacing;
     out.fixed_drum_speed = fixed_drum_speed;
@@ -535,6 +562,7 @@ pub fn decode_into_unchecked_link(bytes: &[u8], out: &mut Settings) -> Result<()
         .is_some_and(|&flags| flags & FLAG_WORK_SWITCH != 0);
     out.first_plant_distance = first_plant_distance;
     out.drive_link = drive_link;
+    out.ground_wheel = ground_wheel;
     Ok(())
 }
 
@@ -586,7 +614,9 @@ mod tests {
         // Format 6: + 3 timings u16, command scale i32, control register
         // and 3 values u16, mode register and value u16, 3 registers u16.
         assert_eq!(DRIVE_LINK_BYTES, DRIVE_LINK_V5_BYTES + 6 + 4 + 8 + 4 + 6);
-        assert_eq!(SETTINGS_BYTES, 311);
+        assert_eq!(SETTINGS_V6_BYTES, 311);
+        // Format 7: + the ground-wheel block (source, flags, u32).
+        assert_eq!(SETTINGS_BYTES, 317);
     }
 
     #[test]
@@ -645,10 +675,15 @@ mod tests {
                     offline_time_ms: 400,
                 },
             },
+            ground_wheel: GroundWheelSettings {
+                source: screen::TravelSource::Both,
+                counts_per_m_x1000: 3_100_000,
+                reversed: true,
+            },
         };
         let b = s.encode();
         // 500 = 0x01F4, 4470 = 0x1176, 200 = 0x00C8; High 3 is wire index 6.
-        assert_eq!(b[..10], [6, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
+        assert_eq!(b[..10], [7, 1, 0xF4, 0x01, 0x76, 0x11, 0xC8, 0x00, 6, 10]);
         assert_eq!(b[10..209], Calibration::identity().to_bytes());
         // Profile B (2) and its parameters.
         assert_eq!(b[209], 2);
@@ -668,8 +703,11 @@ mod tests {
         // register (0) with the ZLAC8015D's values 8, 7, 6 stored; mode
         // register 0x0300 = 2; no offline register; resolution register
         // 0x0400; no maximum-speed register.
+        // The ground wheel (format 7): both (3), reversed (bit 0),
+        // 3 100 000 = 0x002F4D60.
+        assert_eq!(b[311..], [3, 1, 0x60, 0x4D, 0x2F, 0x00]);
         assert_eq!(
-            b[252..],
+            b[252..311],
             [
                 2, 1, 2, 17, 0x80, 0x25, 0, 0, 0x34, 0x12, 0x3C, 0xF6, 0xFF, 0xFF, 0x00, 0x01, 1,
                 0, 2, 0, 4, 0, 8, 0, 0x10, 0, 0x00, 0x80, 1, 0x00, 0x02, 50, 0, 10, 0, 0x90, 0x01,
@@ -993,7 +1031,21 @@ mod tests {
             b[i] = v;
             decode(&b)
         };
-        assert_eq!(with(0, 7), Err(SettingsError::UnsupportedVersion(7)));
+        assert_eq!(with(0, 8), Err(SettingsError::UnsupportedVersion(8)));
+        assert_eq!(
+            with(311, 0),
+            Err(SettingsError::GroundWheel(GroundWheelError::Source(0)))
+        );
+        assert_eq!(
+            with(312, 2),
+            Err(SettingsError::GroundWheel(GroundWheelError::Flags(2)))
+        );
+        assert_eq!(
+            with(316, 0xFF),
+            Err(SettingsError::GroundWheel(
+                GroundWheelError::CountsPerMetre(0xFF2E_A09F)
+            ))
+        );
         assert_eq!(with(0, 0xFF), Err(SettingsError::UnsupportedVersion(0xFF)));
         assert_eq!(with(1, 0), Err(SettingsError::Mode(0)));
         assert_eq!(with(1, 3), Err(SettingsError::Mode(3)));
@@ -1035,19 +1087,19 @@ mod tests {
         assert_eq!(
             decode(&[]),
             Err(SettingsError::Length {
-                expected: 311,
+                expected: 317,
                 found: 0
             })
         );
         assert_eq!(
-            decode(&good[..310]),
+            decode(&good[..316]),
             Err(SettingsError::Length {
-                expected: 311,
-                found: 310
+                expected: 317,
+                found: 316
             })
         );
-        let mut long = [0u8; 312];
-        long[..311].copy_from_slice(&good);
+        let mut long = [0u8; 318];
+        long[..317].copy_from_slice(&good);
         assert!(matches!(decode(&long), Err(SettingsError::Length { .. })));
         // A version-1 record must be 209 bytes long.
         let mut v1_short = good;
@@ -1056,7 +1108,7 @@ mod tests {
             decode(&v1_short),
             Err(SettingsError::Length {
                 expected: 209,
-                found: 311
+                found: 317
             })
         );
         assert_eq!(
@@ -1183,6 +1235,17 @@ mod tests {
                             }
                         } else {
                             DriveLinkSettings::default()
+                        },
+                        ground_wheel: GroundWheelSettings {
+                            source: if rev {
+                                screen::TravelSource::Both
+                            } else if sf {
+                                screen::TravelSource::GroundWheel
+                            } else {
+                                screen::TravelSource::HallGear
+                            },
+                            counts_per_m_x1000: 100_000 + u32::from(sp) * 1000,
+                            reversed: work,
                         },
                     }
                 },

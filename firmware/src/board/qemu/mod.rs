@@ -18,8 +18,9 @@
 //!   address ([`usart1`]), and to the drum driver over USART2 (the F1's
 //!   address on both);
 //! - replaces the registers the real board reads and writes — TIM1's compare
-//!   value, the driver enable pin, TIM3's encoder counter, TIM2's Hall
-//!   captures and counter — by atomics and a simulated machine
+//!   value, the driver enable pin, TIM3's encoder counter, machine A's
+//!   ground-wheel counter (TIM4), TIM2's Hall captures and counter — by
+//!   atomics and a simulated machine
 //!   ([`machine_sim`]) that the control task steps every period, so the same
 //!   control code runs against it;
 //! - keeps the settings in a host file through semihosting (`flash=PATH` on
@@ -112,8 +113,9 @@ pub struct Board {
     pub work_switch: WorkSwitchInput,
     /// The watchdog stand-in.
     pub watchdog: Watchdog,
-    /// Profile B's feeding step output stand-in.
-    pub feed_step: FeedStep,
+    /// TIM4's stand-in: machine B's feeding step output or machine A's
+    /// ground wheel.
+    pub tim4: Tim4Pins,
     /// The settings flash stand-in, if the command line named a file.
     pub settings_flash: Option<SettingsFlash>,
     /// Run limit from the command line.
@@ -272,6 +274,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         roller_turns_seen: 0,
         stop_watch: StopWatch::default(),
         work_fired: 0,
+        ground_wheel: false,
         gate,
         gate_in,
         drive,
@@ -289,7 +292,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         stop_input: StopInput,
         work_switch: WorkSwitchInput,
         watchdog: Watchdog,
-        feed_step: FeedStep,
+        tim4: Tim4Pins,
         settings_flash,
         run_limit_ms: cmd.run_ms,
         sysclk_hz: SYSCLK_HZ,

@@ -24,7 +24,9 @@ const GATE_PATH_MAX: usize = 32;
 /// `stop=T` stops the tractor at T ms; `stopgo=MS` drives it stop-and-go
 /// (MS/2 of travel, MS/2 of rest, from boot); `stop_input=T` opens the stop
 /// input's contact at T ms and `stop_input_close=T` closes it; `stall=T`, `hall_loss=T`,
-/// `enc_loss=T` inject faults at T ms; `noise=0` makes the model noiseless;
+/// `enc_loss=T` inject faults at T ms; `wheel_loss=T` stops machine A's
+/// ground wheel's counts at T ms (lifted, blocked or clogged while the
+/// track moves on) and `wheel_back=T` lets it turn again; `noise=0` makes the model noiseless;
 /// `seed=N` seeds it; `slip=P` scales the track slip of paper A's Table 12
 /// to P % (a machine whose calibration is not the paper's); `plant_log=1`
 /// logs every plant the model drops (`sim: plant N at P um`, the main job's
@@ -58,6 +60,10 @@ pub(super) struct Scenario {
     pub(super) stall: Option<u32>,
     pub(super) hall_loss: Option<u32>,
     pub(super) enc_loss: Option<u32>,
+    /// The ground wheel stops counting (`wheel_loss=T`).
+    pub(super) wheel_loss: Option<u32>,
+    /// It counts again (`wheel_back=T`).
+    pub(super) wheel_back: Option<u32>,
     pub(super) noiseless: bool,
     pub(super) seed: Option<u32>,
     /// Profile B machine (`profile=b`).
@@ -164,6 +170,8 @@ pub(super) fn read_cmdline(cmd: &mut CmdLine, path: &mut [u8]) -> usize {
             b"stall" => s.stall = parse_u32(value),
             b"hall_loss" => s.hall_loss = parse_u32(value),
             b"enc_loss" => s.enc_loss = parse_u32(value),
+            b"wheel_loss" => s.wheel_loss = parse_u32(value),
+            b"wheel_back" => s.wheel_back = parse_u32(value),
             b"noise" => s.noiseless = value == b"0",
             b"seed" => s.seed = parse_u32(value),
             b"slip" => s.slip_pct = parse_u32(value),

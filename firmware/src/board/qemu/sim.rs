@@ -30,6 +30,8 @@ pub struct Sensors {
     pub(super) stop_watch: StopWatch,
     /// The scenario's work switch changes done (bit i: entry i).
     pub(super) work_fired: u8,
+    /// Machine A reads its ground wheel (the real board's TIM4).
+    pub(super) ground_wheel: bool,
     /// The lock-step gate: a host FIFO read once per control period.
     pub(super) gate: Option<usize>,
     /// Screen bytes from the gate, to [`HmiRx`](super::HmiRx).
@@ -54,6 +56,13 @@ fn due(at: Option<u32>, from: u32, to: u32) -> bool {
 }
 
 impl Sensors {
+    /// Machine A: the simulated machine's ground-wheel counter stands in
+    /// for TIM4's from now on.
+    pub fn with_ground_wheel(&'static mut self, _tim4: super::Tim4Pins) -> &'static mut Self {
+        self.ground_wheel = true;
+        self
+    }
+
     /// Advances the machine to `now_ms` under the current PWM output and
     /// reads the encoder and the Hall edges that happened meanwhile.
     ///
@@ -162,6 +171,14 @@ impl Sensors {
             self.machine.inject_fault(Fault::EncoderLoss);
             defmt::warn!("sim: encoder loss injected");
         }
+        if due(s.wheel_loss, from, to) {
+            self.machine.inject_fault(Fault::GroundEncoderLoss);
+            defmt::warn!("sim: ground wheel stops turning");
+        }
+        if due(s.wheel_back, from, to) {
+            self.machine.clear_fault(Fault::GroundEncoderLoss);
+            defmt::info!("sim: ground wheel turns again");
+        }
         let hz = |bits: u32| bits as f32 / 65_536.0;
         let steppers_on = DRIVER_ENABLE.load(Relaxed);
         let mut drum_duty = f32::from(DRUM_CCR.load(Relaxed)) / f32::from(DRUM_PERIOD);
@@ -246,11 +263,16 @@ impl Sensors {
             return SensorSample {
                 drum_encoder: self.machine.ground_encoder_count(),
                 hall_edges: edges,
+                ground_wheel: None,
             };
         }
         SensorSample {
             drum_encoder: self.machine.drum_encoder_count(),
             hall_edges: edges,
+            // Machine A's wheel, on TIM4 on the real board.
+            ground_wheel: self
+                .ground_wheel
+                .then(|| self.machine.ground_encoder_count()),
         }
     }
 }

@@ -12,15 +12,16 @@ pub(super) static PLANT_STEP_BITS: AtomicU32 = AtomicU32::new(0);
 /// and the drivers' enable.
 pub struct Steppers {
     _drum: DrumDrive,
-    _feed: FeedStep,
+    _feed: Tim4Pins,
 }
 
-/// Profile B's feeding step output stand-in (TIM4 is not emulated).
-pub struct FeedStep;
+/// TIM4 and its pins' stand-in (TIM4 is not emulated): machine B's feeding
+/// step output or machine A's ground wheel, as the settings choose.
+pub struct Tim4Pins;
 
 impl Steppers {
     /// Takes over the drum PWM's timer for step pulses (profile B).
-    pub fn new(drum: DrumDrive, feed: FeedStep) -> Self {
+    pub fn new(drum: DrumDrive, feed: Tim4Pins) -> Self {
         FEED_STEP_BITS.store(0, Relaxed);
         PLANT_STEP_BITS.store(0, Relaxed);
         Self {

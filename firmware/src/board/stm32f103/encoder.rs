@@ -2,9 +2,11 @@
 
 use super::*;
 
-/// Polled sensors: the drum encoder counter.
+/// Polled sensors: the drum encoder counter and, on machine A, the ground
+/// wheel's.
 pub struct Sensors {
     pub(super) tim3: TIM3,
+    pub(super) ground_wheel: Option<GroundWheel>,
 }
 
 impl Sensors {
@@ -31,7 +33,17 @@ impl Sensors {
         // ARR (§15.4.12) non-zero before CEN: the counter wraps at 2^16.
         tim3.arr().write(|w| w.arr().set(u16::MAX));
         tim3.cr1().write(|w| w.cen().set_bit());
-        Self { tim3 }
+        Self {
+            tim3,
+            ground_wheel: None,
+        }
+    }
+
+    /// Machine A: TIM4 counts the ground wheel on PB6/PB7 from now on
+    /// ([`GroundWheel`]); [`Sensors::sample`] reads it every period.
+    pub fn with_ground_wheel(mut self, tim4: Tim4Pins) -> Self {
+        self.ground_wheel = Some(GroundWheel::new(tim4));
+        self
     }
 
     /// Reads the sensors for one control period.
@@ -39,6 +51,7 @@ impl Sensors {
         SensorSample {
             drum_encoder: self.tim3.cnt().read().cnt().bits(),
             hall_edges: heapless::Vec::new(),
+            ground_wheel: self.ground_wheel.as_ref().map(GroundWheel::count),
         }
     }
 }

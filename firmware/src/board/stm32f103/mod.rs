@@ -9,6 +9,7 @@
 //! | PB12 | drum driver enable (high = run) |
 //! | PB13 | drum driver direction (low = forward) |
 //! | PA6 / PA7 | drum motor encoder A/B, TIM3 encoder mode |
+//! | PB6 / PB7 | machine A: ground-wheel encoder A/B, TIM4 encoder mode, internal pull-ups (FT pins); machine B: PB6 the feeding motor's STEP, TIM4 CH1 |
 //! | PA9 / PA10 | USART1 TX/RX, touchscreen, 115200 8N1 |
 //! | PA2 / PA3 / PA1 | USART2 TX/RX and driver-enable (high while sending, low after TC), RS-485 to the motor driver, Modbus RTU at the settings' baud rate, 8N1 |
 //! | PB10 | stop input: NC contact to ground, internal pull-up (FT pin), EXTI10 on both edges |
@@ -26,7 +27,8 @@
 //! One module per peripheral, each with a small API: `clocks` (the HSE
 //! start), `system` (debug freeze, exception-frame alignment), `drum_pwm`
 //! (TIM1 CH1), `steppers` (profile B's step timers), `hall_capture`
-//! (TIM2 CH1), `encoder` (TIM3), `rs485` (USART2 and DE),
+//! (TIM2 CH1), `encoder` (TIM3), `ground_wheel` (machine A's TIM4),
+//! `rs485` (USART2 and DE),
 //! `watchdog` (IWDG), `settings_flash`, `pins` (stop input, work
 //! switch, LED), `outputs` (the outputs' safe states). Registers are
 //! written through the PAC's field writers.
@@ -50,6 +52,7 @@ use defmt_rtt as _;
 mod clocks;
 mod drum_pwm;
 mod encoder;
+mod ground_wheel;
 mod hall_capture;
 mod outputs;
 mod pins;
@@ -61,6 +64,7 @@ mod watchdog;
 pub use clocks::*;
 pub use drum_pwm::*;
 pub use encoder::*;
+pub use ground_wheel::*;
 pub use hall_capture::*;
 pub use outputs::*;
 pub use pins::*;
@@ -82,7 +86,7 @@ pub type HmiRx = Rx<USART1>;
 
 /// System clock.
 pub const SYSCLK_HZ: u32 = 72_000_000;
-/// TIM1 runs from PCLK2 = 72 MHz, TIM2/TIM3 from 2 × PCLK1 = 72 MHz.
+/// TIM1 runs from PCLK2 = 72 MHz, TIM2–TIM4 from 2 × PCLK1 = 72 MHz.
 const TIMER_CLOCK_HZ: u32 = 72_000_000;
 
 /// Everything the application owns after [`init`].
@@ -109,9 +113,10 @@ pub struct Board {
     pub work_switch: WorkSwitchInput,
     /// The independent watchdog (running).
     pub watchdog: Watchdog,
-    /// Profile B's feeding-motor step output (TIM4 CH1 on PB6) and the
-    /// direction pins, in their reset state until profile B takes them.
-    pub feed_step: FeedStepPins,
+    /// TIM4 and its pins, in their reset state until the settings' machine
+    /// takes them: machine B's feeding-motor step output (TIM4 CH1 on PB6)
+    /// and direction pins, or machine A's ground wheel (PB6/PB7).
+    pub tim4: Tim4Pins,
     /// The settings pages of the MCU's flash.
     pub settings_flash: Option<SettingsFlash>,
     /// The real board runs until it is switched off.
@@ -230,8 +235,11 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let drum = DrumDrive::new(tim1, enable, direction);
     let _pwm_pin = gpioa.pa8.into_alternate_push_pull(&mut gpioa.crh);
 
-    // Profile B's feeding STEP (TIM4 CH1 on PB6) and directions (PB14,
-    // PB15): clocked here, set up only for profile B (`Steppers::new`).
+    // TIM4: clocked here (RCC_APB1ENR TIM4EN, RM0008 §7.3.8, and a reset
+    // pulse), set up once the settings name the machine: profile B's
+    // feeding STEP on PB6 with the directions on PB14/PB15
+    // (`Steppers::new`), or machine A's ground wheel on PB6/PB7
+    // (`Sensors::with_ground_wheel`).
     let tim4 = Timer::new(dp.TIM4, &mut rcc).release();
 
     // Hall input capture, TIM2 CH1 on PA0 (NPN switch: pull-up, falling edge).
@@ -262,11 +270,12 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let work_switch = WorkSwitchInput {
         pin: gpiob.pb11.into_pull_up_input(&mut gpiob.crh),
     };
-    let feed_step = FeedStepPins {
+    let tim4 = Tim4Pins {
         tim: tim4,
-        step: gpiob.pb6,
-        feed_dir: gpiob.pb14,
-        plant_dir: gpiob.pb15,
+        pb6: gpiob.pb6,
+        pb7: gpiob.pb7,
+        pb14: gpiob.pb14,
+        pb15: gpiob.pb15,
         crl: gpiob.crl,
         crh: gpiob.crh,
     };
@@ -298,7 +307,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         stop_input,
         work_switch,
         watchdog,
-        feed_step,
+        tim4,
         settings_flash: Some(SettingsFlash { flash }),
         run_limit_ms: None,
         sysclk_hz: SYSCLK_HZ,

@@ -5,6 +5,8 @@ use super::*;
 /// The stop input's response, from its interrupt: drum PWM compare 0 now
 /// (the preloaded CCR1 = 0 is loaded at once by an update event, UG), the
 /// drivers' enable PB12 low; profile B's feed step timer (TIM4) likewise.
+/// On machine A TIM4 counts the ground wheel and is left alone: an update
+/// event would reset the wheel's count.
 /// Unlike [`safe_state`], the outputs stay armed: the control task drives
 /// them again once the operator restarts.
 pub fn stop_outputs() {
@@ -18,7 +20,7 @@ pub fn stop_outputs() {
         let tim1 = &*TIM1::ptr();
         tim1.ccr1().write(|w| w.ccr().set(0));
         tim1.egr().write(|w| w.ug().set_bit());
-        {
+        if !tim4_counts_the_wheel() {
             let tim4 = &*pac::TIM4::ptr();
             tim4.ccr1().write(|w| w.ccr().set(0));
             tim4.egr().write(|w| w.ug().set_bit());
@@ -51,6 +53,14 @@ pub fn stop_outputs() {
 /// Either step alone holds the pins low; the GPIO one does not depend on
 /// any timer setting and the timer one keeps the pins low if a pin is ever
 /// handed back to its timer.
+///
+/// Once machine A has made TIM4 the ground wheel's counter (encoder mode,
+/// read from TIM4_SMCR), PB6 is the wheel's input and TIM4 has no output:
+/// both are left alone, so that the MCU does not drive the wheel sensor's
+/// line low against it. (From reset until `init` has read the settings,
+/// a few milliseconds, PB6 is driven low on either machine: the sensor's
+/// output must stand that, as an open-collector one does; a push-pull one
+/// wants a series resistor, README pin map.)
 #[inline(always)]
 pub fn safe_state() {
     // SAFETY: single writes (and read-modify-writes of registers no
@@ -64,7 +74,14 @@ pub fn safe_state() {
         let gpioa = &*pac::GPIOA::ptr();
         let gpiob = &*pac::GPIOB::ptr();
         gpioa.brr().write(|w| w.br8().set_bit().br1().set_bit());
-        gpiob.brr().write(|w| w.br12().set_bit().br6().set_bit());
+        let wheel = tim4_counts_the_wheel();
+        gpiob.brr().write(|w| {
+            w.br12().set_bit();
+            if !wheel {
+                w.br6().set_bit();
+            }
+            w
+        });
         // CRL/CRH nibbles: CNF = 00 (general-purpose push-pull), MODE = 10
         // (output, 2 MHz).
         gpioa
@@ -76,9 +93,11 @@ pub fn safe_state() {
         gpiob
             .crh()
             .modify(|_, w| w.mode12().output2().cnf12().push_pull());
-        gpiob
-            .crl()
-            .modify(|_, w| w.mode6().output2().cnf6().push_pull());
+        if !wheel {
+            gpiob
+                .crl()
+                .modify(|_, w| w.mode6().output2().cnf6().push_pull());
+        }
         // CCMR1: OC1M = 100 (forced inactive), OC1PE = 1; BDTR: OSSR =
         // OSSI = 1, MOE = 0 (the whole register written: no break, no lock).
         let tim1 = &*TIM1::ptr();
@@ -86,7 +105,7 @@ pub fn safe_state() {
             .write(|w| w.oc1m().force_inactive().oc1pe().enabled());
         tim1.ccr1().write(|w| w.ccr().set(0));
         tim1.bdtr().write(|w| w.ossr().set_bit().ossi().set_bit());
-        {
+        if !wheel {
             let tim4 = &*pac::TIM4::ptr();
             tim4.ccmr1_output()
                 .write(|w| w.oc1m().force_inactive().oc1pe().enabled());

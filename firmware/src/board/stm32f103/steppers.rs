@@ -68,24 +68,14 @@ macro_rules! set_step_rate {
     }};
 }
 
-/// TIM4 and the pins of profile B's feeding-motor step output and both
-/// motors' directions, as the reset left them (profile A leaves them so).
-pub struct FeedStepPins {
-    pub(super) tim: pac::TIM4,
-    pub(super) step: stm32f1xx_hal::gpio::PB6,
-    pub(super) feed_dir: stm32f1xx_hal::gpio::PB14,
-    pub(super) plant_dir: stm32f1xx_hal::gpio::PB15,
-    pub(super) crl: stm32f1xx_hal::gpio::Cr<'B', false>,
-    pub(super) crh: stm32f1xx_hal::gpio::Cr<'B', true>,
-}
-
-impl FeedStepPins {
-    /// The step output, idle, and the direction pins, forward.
+impl Tim4Pins {
+    /// Profile B: the step output, idle, and the direction pins, forward
+    /// (PB7 stays in its reset state).
     pub(super) fn into_feed_step(mut self) -> FeedStep {
-        let feed_dir = self.feed_dir.into_push_pull_output(&mut self.crh);
-        let plant_dir = self.plant_dir.into_push_pull_output(&mut self.crh);
+        let feed_dir = self.pb14.into_push_pull_output(&mut self.crh);
+        let plant_dir = self.pb15.into_push_pull_output(&mut self.crh);
         let feed_step = FeedStep::new(self.tim, feed_dir, plant_dir);
-        let _step_pin = self.step.into_alternate_push_pull(&mut self.crl);
+        let _step_pin = self.pb6.into_alternate_push_pull(&mut self.crl);
         feed_step
     }
 }
@@ -141,7 +131,7 @@ pub struct Steppers {
 impl Steppers {
     /// Takes over the drum PWM's timer for step pulses (profile B), forced
     /// inactive (no pulses) until a rate is set.
-    pub fn new(drum: DrumDrive, feed: FeedStepPins) -> Self {
+    pub fn new(drum: DrumDrive, feed: Tim4Pins) -> Self {
         set_step_rate!(drum.tim, 0);
         Self {
             drum,

@@ -212,6 +212,8 @@ pub static PAGES: &[PageSpec] = &[
             xfloat(3, 19, "xwithin", 1),
             xfloat(3, 20, "xperm", 2),
             text(3, 21, "tqlabel", "Control figures, not seedling fall"),
+            text(3, 22, "tslip", ""),
+            text(3, 23, "tground", ""),
         ],
     },
     PageSpec {
@@ -260,6 +262,10 @@ pub static PAGES: &[PageSpec] = &[
             button(6, 15, "bfirst", "Apply"),
             button(6, 16, "bplace", "Placement"),
             text(6, 17, "tplace", ""),
+            button(6, 18, "bsource", "Travel source"),
+            text(6, 19, "tsource", ""),
+            button(6, 20, "bwdir", "Wheel direction"),
+            text(6, 21, "twdir", ""),
         ],
     },
     PageSpec {

@@ -9,15 +9,15 @@
 //! |---|---|---|
 //! | 0 | 4 | magic [`MAGIC`] = `"TPS1"` |
 //! | 4 | 4 | sequence, u32; the newer record has the higher sequence, compared with wrap-around |
-//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 311 for settings format 6; 283, 252, 250, 243 and 209 for formats 5, 4, 3, 2 and 1) |
+//! | 8 | 2 | payload length `n`, u16 ([`SETTINGS_BYTES`] = 317 for settings format 7; 311, 283, 252, 250, 243 and 209 for formats 6, 5, 4, 3, 2 and 1) |
 //! | 10 | 2 | `!n` (guards the length before the CRC is known) |
 //! | 12 | `n` | payload: [`Settings::encode`] |
 //! | 12 + n | 0–3 | zero padding to a multiple of 4 |
 //! | `c` = 12 + ⌈n⌉₄ | 4 | CRC-32 ([`super::crc`]) of bytes 4 .. `c`: sequence, length, `!n`, payload, padding |
 //! | ⌈c + 4⌉_W | max(4, W) | commit word [`COMMIT`] = `"DONE"` (then zeros up to `W`, the flash's `WRITE_SIZE`) |
 //!
-//! With the STM32F1 (`WRITE_SIZE` = 2) a record of settings format 6 is 332
-//! bytes: header at 0, payload at 12, CRC at 324, commit word at 328.
+//! With the STM32F1 (`WRITE_SIZE` = 2) a record of settings format 7 is 340
+//! bytes: header at 0, payload at 12, CRC at 332, commit word at 336.
 //!
 //! A save ([`SettingsStore::save`]) targets the slot that does **not** hold
 //! the newest valid record: it erases that page, programs everything up to
@@ -77,10 +77,10 @@
 //!
 //! // The bytes in flash follow the documented layout.
 //! let flash = store.into_inner();
-//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\x37\x01\xC8\xFE"); // magic, seq 1, n = 311, !n
-//! assert_eq!(flash.0[12], 6); // settings format version
-//! assert_eq!(&flash.0[328..332], b"DONE");
-//! assert_eq!(flash.0[332], 0xFF); // the record ends there
+//! assert_eq!(&flash.0[0..12], b"TPS1\x01\x00\x00\x00\x3D\x01\xC2\xFE"); // magic, seq 1, n = 317, !n
+//! assert_eq!(flash.0[12], 7); // settings format version
+//! assert_eq!(&flash.0[336..340], b"DONE");
+//! assert_eq!(flash.0[340], 0xFF); // the record ends there
 //! # Ok::<(), supervisor::settings::store::StoreError<NorFlashErrorKind>>(())
 //! ```
 
@@ -108,7 +108,7 @@ pub const MAX_ACCESS_SIZE: usize = 32;
 
 const CRC_BYTES: usize = 4;
 /// Write buffer: header + padded payload + CRC, rounded up for any supported
-/// `WRITE_SIZE` (12 + 312 + 4 = 328 → 352 for format 6's 311 bytes).
+/// `WRITE_SIZE` (12 + 320 + 4 = 336 → 352 for format 7's 317 bytes).
 const BODY_BUF: usize = (HEADER_BYTES + SETTINGS_BYTES.next_multiple_of(4) + CRC_BYTES)
     .next_multiple_of(MAX_ACCESS_SIZE);
 
@@ -733,17 +733,17 @@ mod tests {
 
     #[test]
     fn f1_layout() {
-        // 311-byte payload (format 6), WRITE_SIZE 2: CRC at 12 + 312 (the
-        // payload padded to a word) = 324, commit at 328, end 332 = 166
+        // 317-byte payload (format 7), WRITE_SIZE 2: CRC at 12 + 320 (the
+        // payload padded to a word) = 332, commit at 336, end 340 = 170
         // half-words.
         let l = layout(SETTINGS_BYTES, 2).unwrap();
         assert_eq!(
             (l.crc_off, l.commit_off, l.commit_len, l.end),
-            (324, 328, 4, 332)
+            (332, 336, 4, 340)
         );
-        // WRITE_SIZE 8: the commit gets its own double word at 328.
+        // WRITE_SIZE 8: the commit gets its own double word at 336.
         let l = layout(SETTINGS_BYTES, 8).unwrap();
-        assert_eq!((l.commit_off, l.commit_len, l.end), (328, 8, 336));
+        assert_eq!((l.commit_off, l.commit_len, l.end), (336, 8, 344));
     }
 
     #[test]

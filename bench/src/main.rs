@@ -201,7 +201,7 @@ fn control_step_cost(slot: &mut Slot, baseline_per_call_x10: u64) {
 /// (Speed-Adaptive on page 1), the page change it makes (page 3 with its
 /// settings values), the live status of that page at its widest, and every
 /// byte moved out of the link (as `firmware/src/screen_line.rs` moves them
-/// to the transmit ring): 313 bytes; plus the page change back to page 1
+/// to the transmit ring): 379 bytes; plus the page change back to page 1
 /// that sets up the next call. The link is built in a frame of its own
 /// (≈ 0.7 KB).
 #[inline(never)]

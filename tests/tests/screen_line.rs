@@ -343,7 +343,7 @@ fn the_quiet_line_rule_at_11_ms_with_the_independent_screen() {
 }
 
 /// The Stop's press is never held up by a full receive queue: the MCU
-/// changes the page (page 1 → 3: 313 bytes to send, 27 ms of line) while
+/// changes the page (page 1 → 3: 379 bytes to send, 33 ms of line) while
 /// the screen floods the line back to back with `1A FF FF FF` (a screen
 /// file answering every write with "invalid variable") for 80 ms, and the
 /// operator presses Stop 15 ms into it; the hmi task runs 3 ms after each

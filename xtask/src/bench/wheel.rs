@@ -242,7 +242,8 @@ pub fn section(doc: &mut String) -> Result<f64> {
          plant off when a clod comes at the start, and the count when several come in a \
          row); **both sensors** ride over clods on the Hall gear's speed and lose nothing \
          and raise no warning (the wheel's warning waits for 35 mm of ground without it, \
-         more than a clod lifts it for). **The live slip** is within \
+         more than a clod lifts it for; the one row with an alarm among them met two clods \
+         within 0.2 s, and the warning told it). **The live slip** is within \
          {s95_lo:.2}–{s95_hi:.2} points (p95) of the model's over the same three gear turns, \
          and its mean over a pass within {sp_lo:.2}–{sp_hi:.2} points of the pass's true slip: \
          the wheel's own slip, which varies around the value its calibration took in, is in \

@@ -140,11 +140,29 @@ impl DriveBench {
     /// answers them, and returns the driver's part of the next gate record.
     pub fn period(&mut self, truth: &Truth) -> io::Result<Vec<u8>> {
         let mut chunk = [0u8; 256];
+        // The truth record announces the requests that ended in the period:
+        // their bytes are on their way through QEMU's serial socket, and on
+        // a busy host they may not be readable yet. Wait for them (in host
+        // time, a guard only: firmware time does not move meanwhile), so a
+        // loaded host never drops a request.
+        let expected = 8 * truth.request_ends_us.len();
+        let guard = std::time::Instant::now() + std::time::Duration::from_secs(60);
         loop {
             match self.usart2.read(&mut chunk) {
                 Ok(0) => break,
                 Ok(n) => self.rx.extend_from_slice(&chunk[..n]),
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    if self.rx.len() >= expected {
+                        break;
+                    }
+                    if std::time::Instant::now() > guard {
+                        return Err(io::Error::other(format!(
+                            "USART2: {} of the {expected} request bytes the firmware sent",
+                            self.rx.len()
+                        )));
+                    }
+                    std::thread::sleep(std::time::Duration::from_micros(50));
+                }
                 Err(e) => return Err(e),
             }
         }

@@ -563,6 +563,16 @@ impl Firmware {
         Ok(())
     }
 
+    /// Lock-step: the firmware's time, ms: the control periods the test
+    /// has allowed since boot × 10 ms (exact: the firmware takes each period
+    /// only when allowed, whatever the host's load). `None` without
+    /// lock-step.
+    pub fn now_ms(&self) -> Option<u32> {
+        self.gate.as_ref()?;
+        let allowed = self.allowed.load(std::sync::atomic::Ordering::Relaxed);
+        Some(u32::try_from(allowed.saturating_mul(10)).unwrap_or(u32::MAX))
+    }
+
     /// Lock-step: control periods allowed and not yet taken (0 without
     /// lock-step).
     pub fn pending_periods(&self) -> usize {
@@ -947,20 +957,30 @@ impl Bench {
         Ok(())
     }
 
-    /// Pumps until `pred` holds for the screen, or `timeout`.
+    /// Pumps until `pred` holds for the screen, or `timeout`. In lock-step
+    /// the firmware gets at least `timeout` of its own time, however long
+    /// a busy host takes for it (the host's clock never cuts it short).
     pub fn pump_until(
         &mut self,
         timeout: Duration,
         mut pred: impl FnMut(&hmi_proto::virtual_screen::VirtualScreen) -> bool,
     ) -> io::Result<bool> {
         let deadline = Instant::now() + timeout;
-        while Instant::now() < deadline {
+        let timeout_ms = u32::try_from(timeout.as_millis()).unwrap_or(u32::MAX);
+        let until_ms = self.fw.now_ms().map(|now| now.saturating_add(timeout_ms));
+        loop {
             if pred(&self.screen) {
                 return Ok(true);
             }
+            let firmware_left = match (until_ms, self.fw.now_ms()) {
+                (Some(until), Some(now)) => now < until,
+                _ => false,
+            };
+            if Instant::now() >= deadline && !firmware_left {
+                return Ok(pred(&self.screen));
+            }
             self.pump(Duration::from_millis(10))?;
         }
-        Ok(pred(&self.screen))
     }
 
     /// The operator taps a button. Like an operator, it waits for the

@@ -68,22 +68,14 @@ fn boot(name: &str, s: &Settings, baud: u32, scenario: &[&str], run_ms: u32) -> 
     (bench, flash)
 }
 
-/// Pumps until the firmware's log reaches `t_ms` of firmware time.
+/// Pumps to `t_ms` of firmware time (lock-step: exactly, whatever the
+/// host's load).
 fn pump_to(bench: &mut Bench, t_ms: u32) {
-    let deadline = std::time::Instant::now() + Duration::from_secs(600);
-    loop {
-        let now = bench
-            .fw
-            .logs()
-            .iter()
-            .rev()
-            .find_map(|l| log_time_ms(l))
-            .unwrap_or(0);
-        if now >= t_ms {
-            return;
-        }
-        assert!(std::time::Instant::now() < deadline, "stuck at {now} ms");
-        bench.pump(Duration::from_millis(500)).unwrap();
+    let now = bench.fw.now_ms().expect("lock-step");
+    if t_ms > now {
+        bench
+            .pump(Duration::from_millis(u64::from(t_ms - now)))
+            .unwrap();
     }
 }
 
@@ -97,7 +89,17 @@ fn run_to_end(mut bench: Bench) -> (Vec<String>, Vec<qemu_tests::drive::Transact
             break;
         }
     }
-    let log = bench.fw.drive().map(|d| d.log.clone()).unwrap_or_default();
+    let (log, unmatched) = bench
+        .fw
+        .drive()
+        .map(|d| (d.log.clone(), d.unmatched))
+        .unwrap_or_default();
+    // Every request the firmware sent met its end in the truth records (a
+    // busy host must not drop one).
+    assert_eq!(
+        unmatched, 0,
+        "requests without their end, or ends without their request"
+    );
     let (status, logs) = bench.fw.wait_exit(Duration::from_secs(60)).unwrap();
     assert!(status.success(), "QEMU: {status}");
     (logs, log)

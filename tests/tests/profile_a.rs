@@ -543,15 +543,18 @@ fn worst_tracking_error(samples: &[SimSample], from: u32, to: u32, spacing_m: f6
         .fold(0.0, f64::max)
 }
 
-/// The firmware time of the newest log line, ms.
+/// The firmware's time, ms (lock-step: the periods allowed, exact; else
+/// the newest log line's stamp).
 fn firmware_now(bench: &Bench) -> u32 {
-    bench
-        .fw
-        .logs()
-        .iter()
-        .rev()
-        .find_map(|l| log_time_ms(l))
-        .unwrap_or(0)
+    bench.fw.now_ms().unwrap_or_else(|| {
+        bench
+            .fw
+            .logs()
+            .iter()
+            .rev()
+            .find_map(|l| log_time_ms(l))
+            .unwrap_or(0)
+    })
 }
 
 /// Pumps the screen until the simulator's log has reached `t_ms` of

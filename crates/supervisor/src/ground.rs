@@ -38,7 +38,7 @@
 //! alarm (the supervisor's), and a silent one is the "no travel pulses"
 //! warning, as a silent Hall gear is with the Hall gear alone.
 
-use hmi_proto::screen::TravelSource;
+use hmi_proto::screen::{TravelSource, TravelSourceInUse};
 use kinematics::wheel::{WheelOdometer, WheelStep};
 
 use crate::phase::EDGE_NM;
@@ -68,20 +68,6 @@ pub const HALL_SILENT_PITCHES_X10: u64 = 15;
 pub const SLIP_REVOLUTIONS: usize = 3;
 /// The Hall gear's teeth (one turn).
 const TEETH: u32 = kinematics::consts::Z1 as u32;
-
-/// Which sensor gives the ground now.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum SourceInUse {
-    /// The Hall gear (its setting).
-    #[default]
-    HallGear,
-    /// The ground wheel.
-    GroundWheel,
-    /// The Hall gear standing in for a wheel that does not roll (both
-    /// fitted).
-    HallStandIn,
-}
 
 /// A failure one source shows of the other, or of the wheel alone.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -117,7 +103,7 @@ pub struct HallView {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GroundStep {
     /// The sensor in use.
-    pub in_use: SourceInUse,
+    pub in_use: TravelSourceInUse,
     /// Ground this period, nm.
     pub distance_nm: u64,
     /// The travel speed to plan with, m/s U8F24.
@@ -131,7 +117,7 @@ pub struct GroundStep {
 pub struct Ground {
     odometer: WheelOdometer,
     counter: Option<u16>,
-    in_use: SourceInUse,
+    in_use: TravelSourceInUse,
     /// Ground the Hall gear stood in for since the wheel's last count, nm.
     stood_in_nm: u64,
     rolling_us: u32,
@@ -165,7 +151,7 @@ impl Ground {
         Self {
             odometer: WheelOdometer::new(),
             counter: None,
-            in_use: SourceInUse::HallGear,
+            in_use: TravelSourceInUse::HallGear,
             stood_in_nm: 0,
             rolling_us: 0,
             edge_teeth: 0,
@@ -191,7 +177,7 @@ impl Ground {
     }
 
     /// The sensor in use after the last step.
-    pub const fn in_use(&self) -> SourceInUse {
+    pub const fn in_use(&self) -> TravelSourceInUse {
         self.in_use
     }
 
@@ -205,7 +191,7 @@ impl Ground {
     /// not shown).
     pub fn slip_x10(&self) -> Option<i16> {
         self.slip_x10
-            .filter(|_| self.in_use == SourceInUse::GroundWheel && self.fault.is_none())
+            .filter(|_| self.in_use == TravelSourceInUse::GroundWheel && self.fault.is_none())
     }
 
     /// Signed wheel counts since boot (after the direction setting).
@@ -233,7 +219,7 @@ impl Ground {
             None => WheelStep::default(),
         };
         if !settings.source.uses_wheel() {
-            self.in_use = SourceInUse::HallGear;
+            self.in_use = TravelSourceInUse::HallGear;
             self.fault = None;
             self.reset_slip();
             return None;
@@ -246,7 +232,7 @@ impl Ground {
         let backwards = self.back_counts >= BACKWARD_COUNTS;
         let wheel_bits = self.odometer.speed_bits(period_us, cpm);
         if settings.source == TravelSource::GroundWheel {
-            self.in_use = SourceInUse::GroundWheel;
+            self.in_use = TravelSourceInUse::GroundWheel;
             self.fault = backwards.then_some(GroundFault::WheelBackwards);
             return Some(GroundStep {
                 in_use: self.in_use,
@@ -270,11 +256,11 @@ impl Ground {
         let not_rolling = hall_moving
             && (backwards
                 || gear_turned
-                || (self.in_use == SourceInUse::HallStandIn && wheel.forward == 0));
+                || (self.in_use == TravelSourceInUse::HallStandIn && wheel.forward == 0));
         let stand_in_bits = self.stand_in_bits(hall);
         let mut distance_nm = wheel.distance_nm;
         if not_rolling {
-            if self.in_use != SourceInUse::HallStandIn {
+            if self.in_use != TravelSourceInUse::HallStandIn {
                 // From the wheel's last count: the silence before it was
                 // seen is ground too.
                 distance_nm = self.stand_in_nm(stand_in_bits, silent_us);
@@ -282,7 +268,7 @@ impl Ground {
             } else {
                 distance_nm = self.stand_in_nm(stand_in_bits, elapsed_us);
             }
-            self.in_use = SourceInUse::HallStandIn;
+            self.in_use = TravelSourceInUse::HallStandIn;
             self.stood_in_nm = self.stood_in_nm.saturating_add(distance_nm);
             self.rolling_us = 0;
             if self.stood_in_nm >= WHEEL_STOP_ALARM_NM {
@@ -292,7 +278,7 @@ impl Ground {
                     GroundFault::WheelStopped
                 });
             }
-        } else if self.in_use == SourceInUse::HallStandIn && hall_moving {
+        } else if self.in_use == TravelSourceInUse::HallStandIn && hall_moving {
             // Back on the wheel once it rolls for a while; meanwhile its
             // counts are ground and the Hall gear's time is not.
             self.rolling_us = if wheel.forward > 0 {
@@ -301,12 +287,12 @@ impl Ground {
                 0
             };
             if self.rolling_us >= WHEEL_BACK_US {
-                self.in_use = SourceInUse::GroundWheel;
+                self.in_use = TravelSourceInUse::GroundWheel;
                 self.stood_in_nm = 0;
                 self.fault = None;
             }
         } else {
-            self.in_use = SourceInUse::GroundWheel;
+            self.in_use = TravelSourceInUse::GroundWheel;
             self.stood_in_nm = 0;
             if matches!(
                 self.fault,
@@ -324,18 +310,18 @@ impl Ground {
             self.since_edge_nm = self.since_edge_nm.saturating_add(wheel.distance_nm);
         }
         let hall_silent = self.since_edge_nm > EDGE_NM * HALL_SILENT_PITCHES_X10 / 10;
-        if hall_silent && self.in_use == SourceInUse::GroundWheel {
+        if hall_silent && self.in_use == TravelSourceInUse::GroundWheel {
             self.fault = Some(GroundFault::HallStopped);
             self.reset_slip();
         } else if self.fault == Some(GroundFault::HallStopped) && !hall_silent {
             self.fault = None;
         }
-        if self.in_use == SourceInUse::GroundWheel && self.fault.is_none() {
+        if self.in_use == TravelSourceInUse::GroundWheel && self.fault.is_none() {
             self.measure_slip(hall, wheel.distance_nm, wheel_bits);
         } else {
             self.last_teeth = None;
         }
-        let speed_bits = if self.in_use == SourceInUse::HallStandIn {
+        let speed_bits = if self.in_use == TravelSourceInUse::HallStandIn {
             stand_in_bits
         } else {
             wheel_bits
@@ -536,7 +522,7 @@ mod tests {
         for _ in 0..100 {
             assert_eq!(r.period(), None);
         }
-        assert_eq!(r.g.in_use(), SourceInUse::HallGear);
+        assert_eq!(r.g.in_use(), TravelSourceInUse::HallGear);
     }
 
     #[test]
@@ -577,7 +563,7 @@ mod tests {
             }
             let said = said.expect("said");
             assert!(said <= 0.5, "v {v}: {said} s");
-            assert_eq!(r.g.in_use(), SourceInUse::HallStandIn);
+            assert_eq!(r.g.in_use(), TravelSourceInUse::HallStandIn);
             // The ground went on at the Hall gear's speed × (1 − slip): the
             // stand-in's 10 s are within 1 % of the true ground.
             let err = r.measured_nm as f64 / 1e9 - r.ground_m;
@@ -612,7 +598,7 @@ mod tests {
             }
             let said = said.expect("said");
             assert!(said <= 0.5, "v {v}: {said} s");
-            assert_eq!(r.g.in_use(), SourceInUse::GroundWheel);
+            assert_eq!(r.g.in_use(), TravelSourceInUse::GroundWheel);
         }
     }
 

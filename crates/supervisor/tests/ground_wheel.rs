@@ -13,6 +13,7 @@
     clippy::cast_precision_loss
 )]
 
+use hmi_proto::screen::TravelSourceInUse;
 use hmi_proto::screen::{
     CalibrationCoefficient, CalibrationDistance, CalibrationKind, Command, Mode, Spacing,
     TravelSource,
@@ -21,7 +22,6 @@ use kinematics::consts::Gear;
 use kinematics::units::Ticks;
 use machine_sim::{Config, Event, Fault, Inputs, Machine};
 use supervisor::drum::{Actuation, Alarm, Effect, Hardware, RunState, Supervisor};
-use supervisor::ground::SourceInUse;
 use supervisor::settings::wheel::{GroundWheelSettings, NOMINAL_COUNTS_PER_M_X1000};
 use supervisor::settings::Settings;
 
@@ -134,14 +134,20 @@ fn a_wheel_that_stops_while_the_hall_gear_turns_is_said_within_half_a_second() {
         let mut r = Rig::new(TravelSource::Both, gear, x_mm, cfg);
         r.sup.command(Command::Start);
         r.run_to(30.0);
-        assert_eq!(r.sup.snapshot().travel_source, SourceInUse::GroundWheel);
+        assert_eq!(
+            r.sup.snapshot().travel_source,
+            TravelSourceInUse::GroundWheel
+        );
         r.m.inject_fault(Fault::GroundEncoderLoss);
         let said = r
             .until(2000, |r| r.sup.alarm() == Some(Alarm::GroundWheelStopped))
             .unwrap_or_else(|| panic!("{gear:?} {x_mm}: not said, {:?}", r.sup.alarm()));
         assert!(said <= 500, "{gear:?} {x_mm}: said after {said} ms");
         eprintln!("wheel stop {gear:?} {x_mm}: said after {said} ms");
-        assert_eq!(r.sup.snapshot().travel_source, SourceInUse::HallStandIn);
+        assert_eq!(
+            r.sup.snapshot().travel_source,
+            TravelSourceInUse::HallStandIn
+        );
         let from = r.m.ground_position_m();
         r.run_to(from + 10.0);
         let planted = r.plants_between(from, from + 10.0) as f64;
@@ -154,7 +160,10 @@ fn a_wheel_that_stops_while_the_hall_gear_turns_is_said_within_half_a_second() {
         r.m.clear_fault(Fault::GroundEncoderLoss);
         let back = r.until(2000, |r| r.sup.alarm().is_none());
         assert!(back.is_some(), "{gear:?} {x_mm}: the warning stays");
-        assert_eq!(r.sup.snapshot().travel_source, SourceInUse::GroundWheel);
+        assert_eq!(
+            r.sup.snapshot().travel_source,
+            TravelSourceInUse::GroundWheel
+        );
     }
 }
 
@@ -215,7 +224,10 @@ fn a_wheel_counting_backwards_stops_it_alone_and_is_stood_in_for_with_both() {
     assert!(said.is_some(), "{:?}", both.sup.alarm());
     both.run_to(10.0);
     assert_eq!(both.sup.run_state(), RunState::Running);
-    assert_eq!(both.sup.snapshot().travel_source, SourceInUse::HallStandIn);
+    assert_eq!(
+        both.sup.snapshot().travel_source,
+        TravelSourceInUse::HallStandIn
+    );
     assert!(both.plants_between(2.0, 10.0) as f64 >= 8.0 / 0.07 - 2.0);
 }
 

@@ -4,9 +4,9 @@
 //! and on the QEMU board the simulated machine's own view.
 
 use hmi_proto::hmi::Hmi;
+use hmi_proto::screen::TravelSourceInUse;
 use rtic::Mutex as _;
 use supervisor::drum::{Alarm, RunState};
-use supervisor::ground::SourceInUse;
 use supervisor::machine::Machine;
 use supervisor::machine_step::StepOutputs;
 use supervisor::planter::{PlanterAlarm, PlanterState};
@@ -25,7 +25,7 @@ pub struct Notices {
     run: RunState,
     belt_alarm: Option<PlanterAlarm>,
     belt_state: PlanterState,
-    travel_source: SourceInUse,
+    travel_source: TravelSourceInUse,
     track_slip_x10: Option<i16>,
 }
 
@@ -36,7 +36,7 @@ impl Default for Notices {
             run: RunState::Stopped,
             belt_alarm: None,
             belt_state: PlanterState::Stopped,
-            travel_source: SourceInUse::HallGear,
+            travel_source: TravelSourceInUse::HallGear,
             track_slip_x10: None,
         }
     }
@@ -86,7 +86,7 @@ impl Notices {
                         let s = sup.snapshot();
                         (s.travel_source, s.track_slip_x10)
                     }
-                    Machine::SeedlingBelt(_) => (SourceInUse::HallGear, None),
+                    Machine::SeedlingBelt(_) => (TravelSourceInUse::HallGear, None),
                 });
                 self.report_ground(source, slip);
                 if run != self.run {
@@ -127,7 +127,7 @@ impl Notices {
     /// (`HallGear`, `HallStandIn`: the Hall gear standing in for a wheel
     /// that does not turn), and each new slip the ground wheel measures
     /// against the Hall gear, `track slip: N x0.1%`.
-    fn report_ground(&mut self, source: SourceInUse, slip: Option<i16>) {
+    fn report_ground(&mut self, source: TravelSourceInUse, slip: Option<i16>) {
         if source != self.travel_source {
             defmt::info!("travel source: {}", source);
             self.travel_source = source;

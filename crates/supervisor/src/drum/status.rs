@@ -73,11 +73,7 @@ impl Supervisor {
             within_10_pct_x10: q.within_10_pct_x10,
             plants_per_m_x100: u16::try_from(q.plants_per_m_x100).unwrap_or(u16::MAX),
             track_slip_x10: s.track_slip_x10.unwrap_or(screen::SLIP_UNKNOWN),
-            travel_source_in_use: match s.travel_source {
-                crate::ground::SourceInUse::HallGear => screen::TravelSourceInUse::HallGear,
-                crate::ground::SourceInUse::GroundWheel => screen::TravelSourceInUse::GroundWheel,
-                crate::ground::SourceInUse::HallStandIn => screen::TravelSourceInUse::HallStandIn,
-            },
+            travel_source_in_use: s.travel_source,
             // Profile B's live values: not this machine's.
             ..screen::Status::default()
         }

@@ -189,7 +189,7 @@ impl Supervisor {
         // k1 = k2 = 1 (eq. 7 then needs nothing else).
         let ground = self.ground_step(&m, hall_travel.as_ref(), sensed.elapsed_us);
         let travel = match ground {
-            Some(g) if g.in_use != crate::ground::SourceInUse::HallStandIn => {
+            Some(g) if g.in_use != hmi_proto::screen::TravelSourceInUse::HallStandIn => {
                 wheel_travel(g.speed_bits)
             }
             Some(g) => wheel_travel(g.speed_bits).or(hall_travel),
@@ -252,19 +252,25 @@ impl Supervisor {
         hall: Option<&travel::TravelSpeed>,
         elapsed_us: u32,
     ) -> Option<crate::ground::GroundStep> {
-        let view = crate::ground::HallView {
-            teeth: self.teeth,
-            pitches_q16: self.pitches_q16,
-            travel_bits: hall.map_or(0, |t| t.travel_speed.to_bits()),
-            track_bits: hall
-                .and_then(|t| travel::wheel_surface_speed(t.gear_speed).ok())
-                .map_or(0, |v| v.to_bits()),
-            k1_q30: hall.map(|t| u64::from(t.k1.to_bits())),
-            since_edge_us: if self.edges == 0 {
-                u32::MAX
-            } else {
-                m.since_edge_ticks
-            },
+        // The Hall side's view only where the wheel is read: with the Hall
+        // gear as the source the step only counts the wheel (calibration).
+        let view = if !self.settings.ground_wheel.source.uses_wheel() {
+            crate::ground::HallView::default()
+        } else {
+            crate::ground::HallView {
+                teeth: self.teeth,
+                pitches_q16: self.pitches_q16,
+                travel_bits: hall.map_or(0, |t| t.travel_speed.to_bits()),
+                track_bits: hall
+                    .and_then(|t| travel::wheel_surface_speed(t.gear_speed).ok())
+                    .map_or(0, |v| v.to_bits()),
+                k1_q30: hall.map(|t| u64::from(t.k1.to_bits())),
+                since_edge_us: if self.edges == 0 {
+                    u32::MAX
+                } else {
+                    m.since_edge_ticks
+                },
+            }
         };
         let step = self.ground.step(
             &self.settings.ground_wheel,

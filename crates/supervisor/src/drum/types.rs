@@ -109,7 +109,7 @@ pub struct Snapshot {
     /// fitted and turning).
     pub track_slip_x10: Option<i16>,
     /// The sensor giving the ground now.
-    pub travel_source: crate::ground::SourceInUse,
+    pub travel_source: hmi_proto::screen::TravelSourceInUse,
     /// Ground wheel counts since boot (after its direction setting).
     pub wheel_counts: i64,
 }

@@ -4,6 +4,7 @@
 //! * [`consts`]: machine constants and gear presets (typed and `f64`).
 //! * [`units`]: typed units (m/s, km/h, r/min, metres, ticks, …).
 //! * [`speed`]: M-method, [`speed::CaptureExtender`], [`speed::MtEstimator`].
+//! * [`harmonic`]: the once-per-revolution part of a learnt tooth table.
 //! * [`travel`]: k1/k2 correction, travel speed V1, [`travel::Calibration`].
 //! * [`drum`]: target drum speed, duty, CCR and the feasibility limit.
 //! * [`table`]: validated piecewise-linear coefficient tables and their bytes.
@@ -23,6 +24,7 @@ pub mod calib;
 pub mod consts;
 pub mod drum;
 mod fx;
+pub mod harmonic;
 pub mod profile_b;
 pub mod speed;
 pub mod table;

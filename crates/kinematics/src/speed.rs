@@ -47,7 +47,11 @@
 //! change is reported ([`TravelMeasurement::trend`]). It
 //! assumes no real edge is lost (a lost edge shifts the tooth index; the
 //! table is then dropped and re-learnt). [`MtEstimator::gap_pitches_q16`]
-//! gives the same shares to the ground distance.
+//! gives the shares to the ground distance without the table's first
+//! harmonic ([`crate::harmonic`]): a ripple of the speed once a revolution
+//! reads as that harmonic of the teeth, so the learning cannot pin it down,
+//! and summed over several teeth it would move the ground more than the
+//! teeth's true errors do.
 //!
 //! *Zero speed*: when no edge came for longer than the next gap should take,
 //! the speed can be at most that gap's angle over the elapsed time, so the
@@ -412,6 +416,7 @@ impl EstimatorSettings {
             samples: [0; MAX_TEETH],
             weights: [0; MAX_TEETH],
             weight_sum: u32::from(self.teeth).saturating_mul(ONE_Q16),
+            harmonic: [0; MAX_TEETH],
             held: 0,
             history: [0; 3],
             history_len: 0,
@@ -649,6 +654,11 @@ pub struct MtEstimator {
     /// so `i16` holds it exactly (64 bytes instead of 128).
     weights: [i16; MAX_TEETH],
     weight_sum: u32,
+    /// The first harmonic of `weights` (Q16 offsets,
+    /// [`crate::harmonic::first_harmonic_q16`]): the part of the table the
+    /// learning cannot tell from a speed ripple, left out of the ground's
+    /// pitches ([`MtEstimator::gap_pitches_q16`]).
+    harmonic: [i16; MAX_TEETH],
     /// Last measurement, U12F20 bits.
     held: u32,
     history: [u32; 3],
@@ -745,7 +755,7 @@ impl MtEstimator {
     /// ```
     #[must_use]
     pub fn newest_gap_pitches_q16(&self) -> u32 {
-        self.pitches_q16_of(self.tooth)
+        self.ground_pitches_q16_of(self.tooth)
     }
 
     /// The gap after the newest edge (the one the gear is in now) in
@@ -758,7 +768,7 @@ impl MtEstimator {
             .checked_add(1)
             .filter(|&i| i < self.z)
             .unwrap_or(0);
-        self.pitches_q16_of(next)
+        self.ground_pitches_q16_of(next)
     }
 
     /// Gap `idx`'s learned share in pitches, Q16 (a revolution's gaps add
@@ -772,6 +782,14 @@ impl MtEstimator {
             .checked_div(u64::from(self.weight_sum))
             .and_then(|v| u32::try_from(v).ok())
             .unwrap_or(ONE_Q16)
+    }
+
+    /// Gap `idx` in pitches of ground, Q16: its learned share without the
+    /// table's first harmonic (module docs, "Tooth-pitch compensation").
+    fn ground_pitches_q16_of(&self, idx: usize) -> u32 {
+        let h = self.harmonic.get(idx).copied().unwrap_or(0);
+        self.pitches_q16_of(idx)
+            .saturating_add_signed(i32::from(h).saturating_neg())
     }
 
     /// Learned share of gap `idx`, Q16 (nominal outside the table).
@@ -1029,7 +1047,7 @@ impl MtEstimator {
     /// pitches, Q16 (`back` = 0: [`MtEstimator::newest_gap_pitches_q16`]).
     #[must_use]
     pub fn gap_pitches_q16(&self, back: usize) -> u32 {
-        self.pitches_q16_of(self.tooth_back(back, self.z.max(1)))
+        self.ground_pitches_q16_of(self.tooth_back(back, self.z.max(1)))
     }
 
     /// Accepts edge `t` (the glitch rules passed): a new gap, or a restart
@@ -1100,6 +1118,7 @@ impl MtEstimator {
         self.valid_run = 1;
         self.gaps = [0; 3];
         self.weights = [0; MAX_TEETH];
+        self.harmonic = [0; MAX_TEETH];
         self.weight_sum = u32::try_from(self.z).unwrap_or(0).saturating_mul(ONE_Q16);
         self.samples = [0; MAX_TEETH];
         self.learned_upto = self.edges_total;
@@ -1262,6 +1281,7 @@ impl MtEstimator {
         let fresh = self.edges_total.wrapping_sub(self.learned_upto);
         self.learned_upto = self.edges_total;
         let z = self.z;
+        let mut learnt = false;
         for b in 0..usize::try_from(fresh.min(4)).unwrap_or(0) {
             // The centre gap ends `b + LEARN_HALF` edges back; its farthest
             // neighbour starts `b + 2·LEARN_HALF + 1` back.
@@ -1269,13 +1289,16 @@ impl MtEstimator {
             if reach >= RING || u32::try_from(reach).map_or(true, |r| r >= self.valid_run) {
                 break;
             }
-            self.learn_gap(b.saturating_add(LEARN_HALF), z);
+            learnt |= self.learn_gap(b.saturating_add(LEARN_HALF), z);
+        }
+        if learnt {
+            self.harmonic = crate::harmonic::first_harmonic_q16(&self.weights, z);
         }
     }
 
     /// One sample for the gap ending `c` edges back: its time against the
     /// parabola through its neighbours' per-pitch times.
-    fn learn_gap(&mut self, c: usize, z: usize) {
+    fn learn_gap(&mut self, c: usize, z: usize) -> bool {
         let (mut sum, mut lo, mut hi) = (0i64, i32::MAX, 0i32);
         for back in c.saturating_sub(LEARN_HALF)..=c.saturating_add(LEARN_HALF) {
             let Some(&w) = LEARN_WEIGHTS.get(back.abs_diff(c).wrapping_sub(1)) else {
@@ -1288,7 +1311,7 @@ impl MtEstimator {
         }
         // sum = reference · LEARN_DIVISOR (< 2⁴⁷: 12 · 2¹³ · 2³¹).
         let Ok(reference) = u64::try_from(sum) else {
-            return;
+            return false;
         };
         // (< 2³¹: × SPREAD_GATE × LEARN_DIVISOR < 2⁴⁹.)
         let spread = u64::from(hi.wrapping_sub(lo).unsigned_abs());
@@ -1304,7 +1327,7 @@ impl MtEstimator {
         if sample.abs_diff(one) > ONE_Q16 / 25
             || spread.wrapping_mul(SPREAD_GATE * LEARN_DIVISOR) > reference
         {
-            return;
+            return false;
         }
         let tooth = self.tooth_back(c, z);
         let n = self.samples.get(tooth).copied().unwrap_or(0);
@@ -1345,6 +1368,7 @@ impl MtEstimator {
             sum_w = sum_w.saturating_add(weight_from_offset(*d));
         }
         self.weight_sum = sum_w;
+        true
     }
 
     /// The gap that ended `back` accepted edges before the newest one, ticks.

@@ -908,6 +908,15 @@ impl Machine {
         self.wheel_turns * consts::ROLLING_CIRCUMFERENCE_M_F64
     }
 
+    /// Where the Hall gear's edge `k` lies, in pitches of the gear (the
+    /// edges numbered from 1 at build, as delivered while the sensor has no
+    /// fault): `k` plus that tooth's position error. The difference of two
+    /// is the true ground between those edges, in pitches.
+    #[must_use]
+    pub fn hall_edge_place_pitches(&self, k: u64) -> f64 {
+        k as f64 + self.pitch_error(k)
+    }
+
     /// Hall edges delivered since build (lost edges not counted).
     #[must_use]
     pub fn hall_edges(&self) -> u32 {

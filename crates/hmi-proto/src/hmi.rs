@@ -97,6 +97,11 @@ pub const HANDSHAKE_RETRY_MS: u32 = 500;
 /// A connected screen that has sent nothing for this long is asked
 /// `sendme`, and again every this long while it stays quiet.
 pub const HEARTBEAT_MS: u32 = 1_000;
+/// While the screen shows its numeric keyboard over the MCU's page, it is
+/// asked its page this often (one `sendme`, 10 bytes): the page it loads
+/// again when the keyboard closes is back to its design values until the
+/// MCU writes them.
+pub const COVER_POLL_MS: u32 = 200;
 /// A connected screen that has sent nothing for this long is lost
 /// ([`Event::Disconnected`]): two heartbeats went unanswered.
 pub const LINK_TIMEOUT_MS: u32 = 2_500;
@@ -252,6 +257,11 @@ pub struct Hmi {
     /// ([`StatusText::key`], by [`StatusText::index`]); `None`: not written
     /// since the page was shown, or maybe not taken by the screen.
     texts_shown: [Option<i16>; StatusText::ALL.len()],
+    /// The screen answered `sendme` with a page of its own (the numeric
+    /// keyboard, `keybdB`) over [`page`](Self::page): no status is written
+    /// (its components are not shown), and the screen is asked its page
+    /// every [`COVER_POLL_MS`] until it shows the MCU's page again.
+    covered: bool,
 }
 
 impl Hmi {
@@ -282,6 +292,7 @@ impl Hmi {
             probes: 0,
             stale_answers: 0,
             texts_shown: [None; StatusText::ALL.len()],
+            covered: false,
         }
     }
 
@@ -394,6 +405,9 @@ impl Hmi {
                     probe_ms: now_ms,
                 };
                 self.ask_page();
+            } else if self.covered {
+                // Is the keyboard still over the page?
+                self.probe_page_at_most_every(COVER_POLL_MS);
             }
         }
         if let Link::Connecting { last_try_ms } = self.link {
@@ -459,6 +473,8 @@ impl Hmi {
     /// Shows `page` with its settings values.
     pub fn show_page(&mut self, page: Page) -> Result<(), TxFull> {
         self.page = page;
+        // A `page` instruction also closes the screen's keyboard.
+        self.covered = false;
         // A page load resets its texts to the editor's.
         self.texts_shown = [None; StatusText::ALL.len()];
         // Not queued: the screen may still show the page before.
@@ -508,7 +524,7 @@ impl Hmi {
     /// each status text ([`StatusText`]) that differs from what it shows
     /// (all of them after a page change, a screen error or a new link).
     pub fn write_status(&mut self, status: &Status) -> Result<(), TxFull> {
-        if !self.is_connected() {
+        if !self.is_connected() || self.covered {
             return Ok(());
         }
         for comp in Component::on_page(self.page) {
@@ -565,6 +581,27 @@ impl Hmi {
         Ok(())
     }
 
+    /// The screen's keyboard closed and loaded the MCU's page again: its
+    /// local components are back to their design values, so each is
+    /// written again (the status texts at the next status write). The
+    /// numeric entry fields are global in the screen file (the Nextion
+    /// Editor requires it for a keyboard): they keep their values, and the
+    /// one just typed must stay until its Apply reads it.
+    fn uncover(&mut self) {
+        self.covered = false;
+        self.texts_shown = [None; StatusText::ALL.len()];
+        for comp in Component::on_page(self.page) {
+            if matches!(comp.role, Role::Input(_)) {
+                continue;
+            }
+            if let Some(ins) = component_instruction(comp, &self.settings, self.version) {
+                if self.send(&ins).is_err() {
+                    break;
+                }
+            }
+        }
+    }
+
     fn send(&mut self, ins: &Instruction<'_>) -> Result<(), TxFull> {
         let mut buf = [0u8; MAX_INSTRUCTION_LEN];
         let n = match ins.emit(&mut buf) {
@@ -592,6 +629,21 @@ impl Hmi {
         } else {
             self.probes = self.probes.saturating_sub(1);
             false
+        }
+    }
+
+    /// Asks the screen its page (connected, no `sendme` unanswered) unless
+    /// it was asked less than `period_ms` ago: the heartbeat's clock, so a
+    /// flood of screen errors costs one `sendme` a period.
+    fn probe_page_at_most_every(&mut self, period_ms: u32) {
+        if let Link::Connected { heard_ms, probe_ms } = self.link {
+            if self.probes == 0 && self.now_ms.wrapping_sub(probe_ms) >= period_ms {
+                self.link = Link::Connected {
+                    heard_ms,
+                    probe_ms: self.now_ms,
+                };
+                self.ask_page();
+            }
         }
     }
 
@@ -636,6 +688,7 @@ impl Hmi {
         self.page_known = false;
         self.probes = 0;
         self.stale_answers = 0;
+        self.covered = false;
         self.stats.link_losses = self.stats.link_losses.wrapping_add(1);
         self.event(Event::Disconnected);
     }
@@ -686,7 +739,12 @@ impl Hmi {
                     // frame came first: the screen restarted and its `0x88`
                     // was lost.
                     Some(Page::Boot) if self.restart_seen => self.connect(),
-                    Some(Page::Boot) | None => {}
+                    Some(Page::Boot) => {}
+                    // A page of the screen's own (the numeric keyboard):
+                    // the MCU's page is covered until the screen loads it
+                    // again.
+                    None if !stale && self.page_known => self.covered = true,
+                    None => {}
                     // An answer to a `sendme` queued before the last `page`
                     // instruction names the page shown before it: not the
                     // page now.
@@ -695,6 +753,10 @@ impl Hmi {
                             self.stats.stale_page_answers.wrapping_add(1);
                     }
                     Some(page) => {
+                        if self.covered && page == self.page {
+                            self.uncover();
+                        }
+                        self.covered = false;
                         self.page = page;
                         self.page_known = true;
                         self.restart_seen = false;
@@ -724,6 +786,11 @@ impl Hmi {
                 // The failed instruction may have been a status text (a
                 // byte hit on the line): each is written again.
                 self.texts_shown = [None; StatusText::ALL.len()];
+                // Or the screen shows a page of its own (the numeric
+                // keyboard): asked, it says so.
+                if self.page_known && !self.covered {
+                    self.probe_page_at_most_every(COVER_POLL_MS);
+                }
                 self.event(Event::ScreenError(code));
             }
             _ => {}
@@ -751,6 +818,11 @@ impl Hmi {
         }
         let starts_motor = matches!(role, Some(Role::Action(a)) if a.starts_motor());
         let shown = self.page_known && page == self.page.id();
+        if shown && self.covered {
+            // The keyboard closed: its page is back (the touch came from
+            // it).
+            self.uncover();
+        }
         if event == TouchEvent::Press {
             // Other buttons act on their release; their press is ignored.
             if starts_motor && shown && self.is_connected() {

@@ -35,6 +35,8 @@ pub const STATUS_PERIOD_US: u64 = 200_000;
 const BYTE_NS: u64 = 10 * 1_000_000_000 / 115_200;
 
 /// An operator action at a time.
+// Each test file that includes the rig uses some of them.
+#[allow(dead_code)]
 #[derive(Clone, Debug)]
 pub enum Act {
     /// A finger down on the component of the page shown.
@@ -43,6 +45,11 @@ pub enum Act {
     Release(&'static str),
     /// Raw bytes on the line towards the MCU (noise), arriving back to back.
     Noise(Vec<u8>),
+    /// On the open numeric keyboard (the editor's popup page): this value
+    /// typed and OK pressed (the field's page is loaded again).
+    KeyboardEnter(i32),
+    /// On the open numeric keyboard: left without a value.
+    KeyboardCancel,
 }
 
 /// The rig.
@@ -179,6 +186,12 @@ impl Rig {
                 }
                 Act::Release(name) => {
                     self.screen.release(t_us, name);
+                }
+                Act::KeyboardEnter(value) => {
+                    let _ = self.screen.keyboard_enter(t_us, value);
+                }
+                Act::KeyboardCancel => {
+                    let _ = self.screen.keyboard_cancel(t_us);
                 }
                 Act::Noise(bytes) => {
                     let start = self.from_screen.back().map_or(t_us, |&(a, _)| a).max(t_us);

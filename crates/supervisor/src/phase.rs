@@ -46,6 +46,17 @@
 //! crowd that plant only by the phase error the belt had when the tractor
 //! came to rest.
 //!
+//! **Holding at the boundary.** The ground is never known beyond the next
+//! Hall edge's place. When the next partition's place lies beyond it (the
+//! edge is late: the tractor slows, stops, or the sensor died) and the belt
+//! would reach that partition's boundary within [`HOLD_LOOKAHEAD_MS`] at
+//! the drum's speed, the drum is commanded to rest ([`Phase::must_hold`]):
+//! the plant waits at the boundary until the edge shows the ground there,
+//! and is not dropped at a place the machine may never reach. The phase
+//! loop alone may only slow the drum by 33 %, and on a decaying speed the
+//! belt crept past the frozen ground and dropped the plant up to 28 mm late
+//! when the sensor had died while moving.
+//!
 //! **First plant.** Start calls [`Phase::realign`] with the place of the
 //! first plant, [`first_plant_place_um`]: `X` plus one Hall pitch past the
 //! origin, i.e. `X` after the second Hall edge after Start — the first point
@@ -117,6 +128,17 @@ const ROLLING_START_NM: u64 = 1_000_000;
 /// last edge before it, and the rest's lag then deserves the same allowance
 /// (bench §9: stop-and-go at Low 2 phase p95 16.6 / 15.5 → 12.0 / 8.2 mm).
 const REST_US: u32 = 1_000_000;
+/// How far ahead of the belt a partition boundary counts as reached, ms
+/// of the drum's measured speed: a control period, the drive's dead time
+/// and the drum's run-down after a zero command (τ 25 ms) with room to
+/// spare ([`Phase::must_hold`]).
+pub const HOLD_LOOKAHEAD_MS: u64 = 50;
+/// Belt per r/min over [`HOLD_LOOKAHEAD_MS`], nm: 219 911 486 nm / 60 000 ms
+/// × 50 ms = 183 260 nm.
+const HOLD_NM_PER_RPM: u64 = BELT_PER_TURN_NM * HOLD_LOOKAHEAD_MS / 60_000;
+/// A standing drum holds this short of the boundary, nm (the encoder's
+/// jitter and a few counts of run-down: 0.5 mm).
+const HOLD_MARGIN_NM: u64 = 500_000;
 /// Events kept per control step: at most one partition leaves per 10 ms
 /// below 150 r/min; four leave room for a step released late.
 const MAX_EVENTS: usize = 4;
@@ -208,6 +230,8 @@ pub struct Phase {
     /// The ground comes from a fine sensor (the ground wheel): the
     /// [`FINE_PHASE_TIME_CONSTANT_MS`] and [`FINE_MAX_SPEED_UP_PCT`] tuning.
     fine: bool,
+    /// The next partition waits at its boundary ([`Phase::must_hold`]).
+    holding: bool,
 }
 
 impl Phase {
@@ -240,6 +264,7 @@ impl Phase {
             events: [0; MAX_EVENTS],
             n_events: 0,
             fine: false,
+            holding: false,
         };
         p.set_spacing(spacing_mm);
         p
@@ -289,6 +314,7 @@ impl Phase {
             error_nm: 0,
             events: [0; MAX_EVENTS],
             n_events: 0,
+            holding: false,
             ..*other
         }
     }
@@ -344,6 +370,33 @@ impl Phase {
     /// ground cannot be known there before that edge comes.
     pub fn next_place_beyond_reach(&self) -> bool {
         self.armed && self.ref_ground_nm > self.reach_nm
+    }
+
+    /// Whether the next partition must wait at its boundary: its place
+    /// lies beyond the next Hall edge's (the ground is not known to reach
+    /// it) and the belt, turning at `drum` r/min, came within
+    /// [`HOLD_LOOKAHEAD_MS`] of the boundary (module docs, "Holding at the
+    /// boundary"). Once holding, it holds until an edge shows the ground
+    /// at the place (a drum slowing down would otherwise see the boundary
+    /// recede, start again and creep over it).
+    pub fn must_hold(&mut self, drum: I16F16) -> bool {
+        if !self.next_place_beyond_reach() {
+            self.holding = false;
+            return false;
+        }
+        if self.holding {
+            return true;
+        }
+        let boundary = u64::from(self.left)
+            .saturating_add(1)
+            .saturating_mul(PARTITION_NM);
+        let to_boundary = boundary.saturating_sub(self.belt_nm);
+        // r/min (I16F16 bits, < 2³¹) × belt nm per r/min over the look-ahead
+        // (< 2¹⁸): < 2⁴⁹.
+        let rpm_bits = u64::try_from(drum.to_bits().max(0)).unwrap_or(0);
+        let ahead = rpm_bits.saturating_mul(HOLD_NM_PER_RPM) >> 16;
+        self.holding = to_boundary <= ahead.saturating_add(HOLD_MARGIN_NM);
+        self.holding
     }
 
     /// Partitions that left since Start.

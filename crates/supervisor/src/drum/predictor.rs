@@ -30,6 +30,18 @@ pub(super) struct Predictor {
 }
 
 impl Predictor {
+    /// The last two windows show the tractor slowing down: the newer one
+    /// more than 10 % below the one before (the terrain's own changes stay
+    /// within a few percent a gap; a chassis coming to rest with τ 0.5 s
+    /// loses 30–45 % a gap at Low 1–2). A late edge is then expected.
+    pub(super) fn slowing(&self) -> bool {
+        let Some((v, _)) = self.last else {
+            return false;
+        };
+        let (dv, _) = self.slope;
+        dv < 0 && dv.saturating_mul(-10) > v
+    }
+
     pub(super) fn predict(&mut self, m: &TravelMeasurement, now: Ticks) -> RevPerMin {
         match m.state {
             MotionState::Measured if m.edges > 0 => {

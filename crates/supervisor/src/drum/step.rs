@@ -352,11 +352,27 @@ impl Supervisor {
                         // at rest for it, so that no plant leaves for a place
                         // the ground may never reach (on the decaying speed
                         // the belt crept on and dropped plants anywhere).
-                        if est.m.state == MotionState::Decaying
-                            && est.m.since_edge_ticks / 4 > self.predictor.period
-                            && self.settings.placement == Placement::DistanceLocked
+                        // And the next plant never leaves for a place
+                        // beyond the ground known: the drum holds at its
+                        // boundary (crate::phase, "Holding at the boundary").
+                        let distance_locked = self.settings.placement == Placement::DistanceLocked
+                            && self.run == RunState::Running;
+                        let overdue = est.m.state == MotionState::Decaying;
+                        // Two gaps overdue at a steady speed (no chassis
+                        // stops that fast: the sensor may have died); four
+                        // while the tractor slows, where a late edge is
+                        // expected.
+                        let gaps = if self.predictor.slowing() { 4 } else { 2 };
+                        let late = overdue
+                            && est.m.since_edge_ticks.checked_div(gaps).unwrap_or(0)
+                                > self.predictor.period;
+                        let hold = late && self.phase.must_hold(self.k3_speed);
+                        if distance_locked
                             && self.phase.partitions_left() > 0
-                            && self.phase.next_place_beyond_reach()
+                            && ((overdue
+                                && est.m.since_edge_ticks / 4 > self.predictor.period
+                                && self.phase.next_place_beyond_reach())
+                                || hold)
                         {
                             I16F16::ZERO
                         } else {

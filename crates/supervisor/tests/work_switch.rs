@@ -286,6 +286,17 @@ impl Contact {
         self.toggles.push((at_us + us, true));
     }
 
+    /// When the contact last went from closed to open (its last bounce
+    /// before it settled open).
+    fn last_opening(&self) -> u64 {
+        self.toggles
+            .windows(2)
+            .filter(|w| w[0].1 && !w[1].1)
+            .map(|w| w[1].0)
+            .last()
+            .unwrap_or(0)
+    }
+
     fn closed(&self, t_us: u64) -> bool {
         self.toggles
             .iter()
@@ -302,8 +313,9 @@ impl Contact {
 /// bump), lifted at 12 m and lowered 1.5 m later (a stone: within the row),
 /// Stop at 20 m. Expected: exactly one pass per real lowering (two), none
 /// for the bump or the bounces; every plant after the lift (the contact's
-/// opening) drops within the documented bound, the lift time plus a period
-/// plus the ramp (eq. 7's drum speed / 250 r/min per s) plus the drive's
+/// opening) drops within the documented bound: from the contact's last
+/// bounce to open, the lift time plus a period plus the ramp (the drum's
+/// target when the lift is confirmed / 250 r/min per s) plus the drive's
 /// 30 ms (docs/firmware.md, "Work switch"); and the hole the lift leaves in
 /// the row, from the last plant before it to the first after the
 /// lowering, counts as a miss in the figures since Start, which match the
@@ -316,7 +328,7 @@ fn a_bouncing_switch_and_a_bump_give_one_pass_per_lowering_and_the_hole_is_a_mis
     // while each lift is confirmed.
     let mut after_lift = 0;
     for k in 0..5 {
-        after_lift += bouncing_row(12.0 + 0.014 * f64::from(k));
+        after_lift += bouncing_row(12.0 + 0.014 * f64::from(k), 8, 19);
     }
     assert!(
         after_lift > 0,
@@ -324,10 +336,25 @@ fn a_bouncing_switch_and_a_bump_give_one_pass_per_lowering_and_the_hole_is_a_mis
     );
 }
 
+/// The same rows on seeds the case above does not use: the machine's
+/// terrain (seeds 2, 5, 6) and the contact's bounces (seeds 3, 11, 42), the
+/// lift at five places between two plants.
+#[test]
+fn a_bouncing_switch_on_unseen_rows_gives_one_pass_per_lowering_within_the_bound() {
+    for machine in [2u64, 5, 6] {
+        for bounces in [3u64, 11, 42] {
+            for k in 0..5 {
+                bouncing_row(12.0 + 0.014 * f64::from(k) + 0.003, machine, bounces);
+            }
+        }
+    }
+}
+
 /// One row of [`a_bouncing_switch_and_a_bump_give_one_pass_per_lowering_and_the_hole_is_a_miss`]
-/// with the lift at `lift_at_m`; the plants that dropped after the contact
+/// with the lift at `lift_at_m`, the machine's seed `machine` and the
+/// bounces' seed `bounces`; the plants that dropped after the contact
 /// opened.
-fn bouncing_row(lift_at_m: f64) -> usize {
+fn bouncing_row(lift_at_m: f64, machine: u64, bounces: u64) -> usize {
     use supervisor::work_switch::{WorkChange, WorkSwitch, WORK_LIFT_CONFIRM_US};
     let x = 0.07;
     let settings = Settings {
@@ -340,7 +367,7 @@ fn bouncing_row(lift_at_m: f64) -> usize {
     };
     let mut rig = Rig::on(
         Config {
-            seed: 8,
+            seed: machine,
             plant_scatter_m: 0.0,
             ..Config::default()
         },
@@ -348,9 +375,12 @@ fn bouncing_row(lift_at_m: f64) -> usize {
     );
     let mut ws = WorkSwitch::new();
     let mut contact = Contact::new();
-    let mut rng = 19u64;
+    let mut rng = bounces;
     let mut lowered = 0;
     let mut lifted = 0;
+    // The drum's target when the lift was confirmed (r/min): the ramp to
+    // rest starts there.
+    let mut confirmed_rpm = 0.0;
     // Drop times, for the bound after the lift.
     let mut drop_times: Vec<(f64, u64)> = Vec::new();
     let mut period = |rig: &mut Rig, contact: &Contact, ws: &mut WorkSwitch| {
@@ -363,7 +393,10 @@ fn bouncing_row(lift_at_m: f64) -> usize {
         // The firmware samples the pin at the start of each period.
         match ws.sample(contact.closed(now), 10_000) {
             Some(WorkChange::Lowered) => lowered += 1,
-            Some(WorkChange::Lifted) => lifted += 1,
+            Some(WorkChange::Lifted) => {
+                lifted += 1;
+                confirmed_rpm = f64::from(rig.sup.snapshot().target_drum_rpm_x1000) / 1000.0;
+            }
             None => {}
         }
         rig.sup.set_work_switch(ws.is_down());
@@ -384,6 +417,9 @@ fn bouncing_row(lift_at_m: f64) -> usize {
     let (lift_m, lift_us) = (rig.m.ground_position_m(), rig.m.now_us());
     let v = f64::from(rig.m.travel_speed_m_s());
     contact.change(lift_us, false, &mut rng);
+    // The lift's 200 ms count from the contact's last bounce to open.
+    let settled_us = contact.last_opening();
+    assert!((lift_us..=lift_us + 40_000).contains(&settled_us));
     while rig.m.ground_position_m() < lift_m + 1.5 {
         period(&mut rig, &contact, &mut ws);
     }
@@ -398,17 +434,29 @@ fn bouncing_row(lift_at_m: f64) -> usize {
     println!("lowered {lowered}, lifted {lifted}");
     assert_eq!((lowered, lifted), (2, 1), "one pass per real lowering");
 
-    // After the lift: the last plant within the bound.
-    let ramp_s = machine_sim::reference::eq7_drum_speed(v, x) / f64::from(WORK_RAMP_RPM_PER_S);
-    let bound_us = f64::from(WORK_LIFT_CONFIRM_US) + 10_000.0 + (ramp_s + 0.03) * 1e6;
+    // After the lift: the last plant within the bound, the ramp from the
+    // drum's target when the lift was confirmed (eq. 7 at the speed then,
+    // with the phase loop's correction: up to 110 % of it).
+    assert!(confirmed_rpm > 0.0);
+    println!(
+        "drum at the confirmation {confirmed_rpm:.2} r/min (eq. 7 at the lift's speed {:.2})",
+        machine_sim::reference::eq7_drum_speed(v, x)
+    );
+    let ramp_s = confirmed_rpm / f64::from(WORK_RAMP_RPM_PER_S);
+    let bound_us = (settled_us - lift_us) as f64
+        + f64::from(WORK_LIFT_CONFIRM_US)
+        + 10_000.0
+        + (ramp_s + 0.03) * 1e6;
     let late: Vec<f64> = drop_times
         .iter()
         .filter(|&&(g, t)| g >= lift_m && g < lower2_m && t > lift_us)
         .map(|&(_, t)| (t - lift_us) as f64 / 1e3)
         .collect();
     println!(
-        "drops after the lift: {late:?} ms (bound {:.0} ms)",
-        bound_us / 1e3
+        "drops after the contact first opened: {late:?} ms (bound {:.0} ms: settled open \
+         after {} ms)",
+        bound_us / 1e3,
+        (settled_us - lift_us) / 1000
     );
     assert!(late.iter().all(|&ms| ms * 1e3 <= bound_us), "{late:?}");
     assert!(late.len() <= 2, "{late:?}");
@@ -455,6 +503,16 @@ fn bouncing_row(lift_at_m: f64) -> usize {
         "{got_m} vs {}",
         want[1]
     );
-    assert!((i64::from(shown.plants) - (pass1.len() + pass2.len()) as i64).abs() <= 1);
+    // The count: every plant of the two passes, but those that left after
+    // the contact opened may not count (the unit is up once the lift is
+    // confirmed: not planted), and the figures may still wait for the
+    // newest one (they are live one tooth gap late).
+    let dropped = (pass1.len() + pass2.len()) as i64;
+    let shown_plants = i64::from(shown.plants);
+    assert!(
+        (dropped - late.len() as i64 - 1..=dropped).contains(&shown_plants),
+        "{shown_plants} shown, {dropped} dropped, {} after the contact opened",
+        late.len()
+    );
     late.len()
 }

@@ -291,10 +291,9 @@ impl Contact {
     fn last_opening(&self) -> u64 {
         self.toggles
             .windows(2)
-            .filter(|w| w[0].1 && !w[1].1)
-            .map(|w| w[1].0)
-            .last()
-            .unwrap_or(0)
+            .rev()
+            .find(|w| w[0].1 && !w[1].1)
+            .map_or(0, |w| w[1].0)
     }
 
     fn closed(&self, t_us: u64) -> bool {

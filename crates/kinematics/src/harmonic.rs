@@ -71,29 +71,26 @@ pub fn first_harmonic_q16(offsets: &[i16], z: usize) -> [i16; MAX_TEETH] {
     }
     let (rc, rs) = ROTATION_Q30.get(z).copied().unwrap_or((ONE_Q30, 0));
     // a = (2/z)·Σ d·cos, b = (2/z)·Σ d·sin; |d| < 2¹⁵, |cos| ≤ 2³⁰, 32
-    // teeth: the sums stay below 2⁵⁰.
+    // teeth: the sums stay below 2⁵⁰ (wrapping arithmetic cannot wrap).
     let (mut sum_c, mut sum_s) = (0i64, 0i64);
     let mut rot = Rotation::new(rc, rs);
     for &d in offsets.iter().take(z) {
         let (c, s) = rot.next();
-        sum_c = sum_c.saturating_add(i64::from(d).saturating_mul(c));
-        sum_s = sum_s.saturating_add(i64::from(d).saturating_mul(s));
+        sum_c = sum_c.wrapping_add(i64::from(d).wrapping_mul(c));
+        sum_s = sum_s.wrapping_add(i64::from(d).wrapping_mul(s));
     }
     let zi = i64::try_from(z).unwrap_or(1);
     // Q16 amplitudes: × 2 / z, then Q46 → Q16.
-    let a = div_round(sum_c.saturating_mul(2), zi.saturating_mul(ONE_Q30));
-    let b = div_round(sum_s.saturating_mul(2), zi.saturating_mul(ONE_Q30));
+    let a = div_round(sum_c.wrapping_mul(2), zi.wrapping_mul(ONE_Q30));
+    let b = div_round(sum_s.wrapping_mul(2), zi.wrapping_mul(ONE_Q30));
     let mut rot = Rotation::new(rc, rs);
     let mut total = 0i64;
     for slot in out.iter_mut().take(z) {
         let (c, s) = rot.next();
         // |a|, |b| < 2¹⁶: the products < 2⁴⁶.
-        let v = div_round(
-            a.saturating_mul(c).saturating_add(b.saturating_mul(s)),
-            ONE_Q30,
-        );
+        let v = div_round(a.wrapping_mul(c).wrapping_add(b.wrapping_mul(s)), ONE_Q30);
         let v = i16::try_from(v).unwrap_or(0);
-        total = total.saturating_add(i64::from(v));
+        total = total.wrapping_add(i64::from(v));
         *slot = v;
     }
     // The rounding's remainder (a few Q16 units at most): one unit off each
@@ -120,14 +117,16 @@ const fn round_q30(v: f64) -> i64 {
     }
 }
 
-/// `n / d` rounded half away from zero (`d` > 0).
+/// `n / d` rounded half away from zero, for the bounded values here (|n|
+/// < 2⁶², 0 < `d` < 2⁴⁰).
 fn div_round(n: i64, d: i64) -> i64 {
-    let half = d / 2;
-    if n >= 0 {
-        n.saturating_add(half).checked_div(d).unwrap_or(0)
+    let half = d >> 1;
+    let q = if n >= 0 {
+        n.wrapping_add(half).checked_div(d)
     } else {
-        n.saturating_sub(half).checked_div(d).unwrap_or(0)
-    }
+        n.wrapping_sub(half).checked_div(d)
+    };
+    q.unwrap_or(0)
 }
 
 /// The unit vector at 2πj/z for j = 0, 1, …: one rotation by the base
@@ -152,15 +151,16 @@ impl Rotation {
     /// The current vector, then one step on.
     fn next(&mut self) -> (i64, i64) {
         let now = (self.c, self.s);
-        // Q30 × Q30 < 2⁶¹.
+        // |c|, |s|, |rc|, |rs| ≤ 2³⁰ (+ the rounding's few units): each
+        // product < 2⁶¹, a sum of two < 2⁶² (wrapping cannot wrap).
         let c = self
             .c
-            .saturating_mul(self.rc)
-            .saturating_sub(self.s.saturating_mul(self.rs));
+            .wrapping_mul(self.rc)
+            .wrapping_sub(self.s.wrapping_mul(self.rs));
         let s = self
             .s
-            .saturating_mul(self.rc)
-            .saturating_add(self.c.saturating_mul(self.rs));
+            .wrapping_mul(self.rc)
+            .wrapping_add(self.c.wrapping_mul(self.rs));
         self.c = c >> 30;
         self.s = s >> 30;
         now

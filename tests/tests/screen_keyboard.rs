@@ -108,7 +108,7 @@ fn after_the_keyboard_the_page_shows_the_settings_in_force() {
             );
             // The status writes stop once the screen says its keyboard is
             // shown: one status write at most meets it (each instruction of
-            // it is answered `0x1A` and logged as a screen error).
+            // it is answered `0x1A`) ...
             let invalid = rig
                 .screen
                 .errors()
@@ -120,6 +120,14 @@ fn after_the_keyboard_the_page_shows_the_settings_in_force() {
                 invalid <= one_write,
                 "{case}: {invalid} instructions met the keyboard"
             );
+            // ... and the firmware hears of it once (one log line), not
+            // once an instruction.
+            let reported = rig
+                .events
+                .iter()
+                .filter(|(_, e)| matches!(e, Event::ScreenError(_)))
+                .count();
+            assert!(reported <= 1, "{case}: {reported} screen errors reported");
         }
     }
 }

@@ -787,11 +787,16 @@ impl Hmi {
                 // byte hit on the line): each is written again.
                 self.texts_shown = [None; StatusText::ALL.len()];
                 // Or the screen shows a page of its own (the numeric
-                // keyboard): asked, it says so.
+                // keyboard): asked, it says so. The errors that follow
+                // while the answer is awaited are the rest of the same
+                // status write (one `0x1A` per instruction): reported once.
+                let asking = self.probes > 0;
                 if self.page_known && !self.covered {
                     self.probe_page_at_most_every(COVER_POLL_MS);
                 }
-                self.event(Event::ScreenError(code));
+                if !asking {
+                    self.event(Event::ScreenError(code));
+                }
             }
             _ => {}
         }

@@ -30,7 +30,7 @@
 //! its twelve neighbours' times per pitch (a least-squares fit, the centre
 //! left out: a steady acceleration and a steady change of it cancel), when
 //! those neighbours lie within 10 % of each other (no stop, restart or
-//! speed step inside the window) and the sample within ±4 % of a pitch. A
+//! speed step inside the window) and the sample within ±6.25 % of a pitch. A
 //! tooth's share is the running mean of its samples, after 16 an IIR of
 //! 1/16, each step clipped to 0.25 % once the tooth has three samples (one
 //! bump of the terrain cannot undo what the others taught); the shares'
@@ -112,6 +112,10 @@ const LEARN_HALF: usize = 6;
 const LEARN_WEIGHTS: [i16; LEARN_HALF] = [4368, 3822, 2912, 1638, 0, -2002];
 /// The sum of the weights over both sides (n·Σx⁴ − (Σx²)² = 21 476).
 const LEARN_DIVISOR: u64 = 21_476;
+/// Tooth learning's gate on one sample: within ±1/16 (6.25 %) of a pitch,
+/// Q16 (room for a gap between two teeth ±2 % of a pitch off their places,
+/// ±4 %, with the terrain's noise on top).
+const SAMPLE_GATE_Q16: u32 = ONE_Q16 / 16;
 /// Tooth learning's gate: the neighbours' per-pitch times within 10 % of
 /// the reference (max − min). A stop, a restart or a speed step inside the
 /// thirteen gaps leaves no usable parabola.
@@ -1323,8 +1327,11 @@ impl MtEstimator {
             .and_then(|v| i32::try_from(v).ok())
             .unwrap_or(0);
         let one = i32::try_from(ONE_Q16).unwrap_or(0);
-        // ±4 % at most; the neighbours within SPREAD_GATE.
-        if sample.abs_diff(one) > ONE_Q16 / 25
+        // Within ±6.25 % of a pitch (a gap between two teeth each up to
+        // ±2 % of a pitch off their places is up to ±4 % long, and a
+        // gate at the edge of that range kept such a tooth unlearnt for
+        // minutes); the neighbours within SPREAD_GATE.
+        if sample.abs_diff(one) > SAMPLE_GATE_Q16
             || spread.wrapping_mul(SPREAD_GATE * LEARN_DIVISOR) > reference
         {
             return false;
@@ -1468,6 +1475,15 @@ impl MtEstimator {
             self.ref_stamp = newest;
             self.ref_edges = self.edges_total;
             self.ref_valid = true;
+            // A gap whose own tooth has not been learnt yet reads noisy
+            // too, whatever the rest of the table: its share is still
+            // nominal, up to twice the gear's tooth tolerance off, and the
+            // predictor must not carry that along as a slope.
+            if self.cfg.pitch_compensation
+                && self.samples.get(self.tooth).copied().unwrap_or(0) < LEARNT_SAMPLES
+            {
+                out.noisy = true;
+            }
             let window = newest.wrapping_sub(start);
             if m == 0 || window == 0 {
                 out.state = MotionState::Starting;

@@ -78,15 +78,18 @@ fn steps(v: &[f64], lag: usize) -> Vec<f64> {
 /// ±2 % tooth errors and 10 µs capture jitter on), the machine at its
 /// gear's speed from power-up and Start after 3 s, as on the move: the drum
 /// target's largest 10 ms step, from the pass's first plant for 30 m, at
-/// most 2 % (the ground's own: 0). Low 1 and Low 2, 7 and 18 cm, seeds 5–7.
-/// Before, the first revolutions' single-gap tooth errors, carried along
-/// their slope, stepped it by 20–26 % (measured on these runs).
+/// most 2 % (the ground's own: 0). Low 1 and Low 2, 7 and 18 cm, seeds 5–7
+/// and 11–22. Before, the first revolutions' single-gap tooth errors,
+/// carried along their slope, stepped it by 20–26 % (measured on seeds
+/// 5–7); and a gear with a gap near ±4 % of a pitch (seeds 17, 18, 21) kept
+/// that tooth unlearnt behind the learning's ±4 % gate, and its nominal
+/// share stepped the target by 4–11 % minutes into the run.
 #[test]
 fn on_flat_ground_the_drum_target_steps_at_most_2_percent() {
     let mut worst: f64 = 0.0;
     for gear in [Gear::Low1, Gear::Low2] {
         for spacing_mm in [70u16, 180] {
-            for seed in [5u64, 6, 7] {
+            for seed in [5u64, 6, 7].into_iter().chain(11..=22) {
                 let flat = Config {
                     seed,
                     terrain_amplitude: 0.0,

@@ -376,9 +376,10 @@ impl Phase {
     /// lies beyond the next Hall edge's (the ground is not known to reach
     /// it) and the belt, turning at `drum` r/min, came within
     /// [`HOLD_LOOKAHEAD_MS`] of the boundary (module docs, "Holding at the
-    /// boundary"). Once holding, it holds until an edge shows the ground
-    /// at the place (a drum slowing down would otherwise see the boundary
-    /// recede, start again and creep over it).
+    /// boundary"). Once the belt came that near, it holds until an edge
+    /// shows the ground at the place or the partition left (a drum slowing
+    /// down would otherwise see the boundary recede, start again and creep
+    /// over it). Ask it every control period.
     pub fn must_hold(&mut self, drum: I16F16) -> bool {
         if !self.next_place_beyond_reach() {
             self.holding = false;
@@ -557,6 +558,8 @@ impl Phase {
                 break;
             }
             self.left = self.left.saturating_add(1);
+            // A new boundary: not reached yet.
+            self.holding = false;
             // g0 + (g1 − g0)·(boundary − b0)/(b1 − b0): a step moves the
             // ground < 2²⁶ nm (67 m/s) and the belt < 2³² nm, so the
             // product < 2⁵⁸.
@@ -820,5 +823,41 @@ mod tests {
             }]
         );
         assert_eq!(p.partitions_left(), 1);
+    }
+
+    /// The hold at a boundary beyond the known ground: the belt 0.3 mm
+    /// short of it holds (at 10 r/min the look-ahead is 1.8 mm), a belt a
+    /// partition away does not, and once the belt has come near, a
+    /// slowing drum still holds; a partition that leaves starts afresh.
+    #[test]
+    fn the_hold_is_for_the_boundary_the_belt_came_near() {
+        // 47 200 counts a turn: 4659.14 nm a count, 50 mm = 10 731.5.
+        let mut p = Phase::new(47_200, 70);
+        p.start(0, 0);
+        // The first place 95.1 mm past the origin, the ground known to one
+        // pitch past it (25.1 mm): beyond reach.
+        p.realign(first_plant_place_um(70));
+        p.advance_ground(1, 1 << 16, 1 << 16, 0, 0, None);
+        assert!(p.next_place_beyond_reach());
+        let ten = I16F16::from_num(10);
+        // Far from the first boundary: no hold.
+        p.advance_belt(5_000, Coefficient::ONE);
+        assert!(!p.must_hold(ten));
+        // 0.3 mm short (10 731 counts): hold, and still at a crawl.
+        p.advance_belt(5_731, Coefficient::ONE);
+        assert!(p.must_hold(ten));
+        assert!(p.must_hold(I16F16::from_num(0.1)));
+        // The partition leaves anyway (the drum ran on): the next boundary
+        // is a partition away, and a slow drum is not near it.
+        p.advance_belt(2, Coefficient::ONE);
+        assert_eq!(p.partitions_left(), 1);
+        assert!(p.next_place_beyond_reach());
+        assert!(!p.must_hold(ten));
+        // An edge that shows the ground at the place ends any hold.
+        p.advance_belt(10_700, Coefficient::ONE);
+        assert!(p.must_hold(ten));
+        p.advance_ground(8, 8 << 16, 1 << 16, 0, mps(500), Some(1 << 30));
+        assert!(!p.next_place_beyond_reach());
+        assert!(!p.must_hold(ten));
     }
 }

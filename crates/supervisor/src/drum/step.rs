@@ -366,7 +366,10 @@ impl Supervisor {
                         let late = overdue
                             && est.m.since_edge_ticks.checked_div(gaps).unwrap_or(0)
                                 > self.predictor.period;
-                        let hold = late && self.phase.must_hold(self.k3_speed);
+                        // (Asked every period: it keeps track of the belt
+                        // nearing the boundary.)
+                        let near = self.phase.must_hold(self.k3_speed);
+                        let hold = late && near;
                         if distance_locked
                             && self.phase.partitions_left() > 0
                             && ((overdue

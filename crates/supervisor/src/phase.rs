@@ -324,9 +324,7 @@ impl Phase {
     /// reached with a sprint, module docs).
     #[inline(never)]
     pub fn realign(&mut self, at_um: u64) {
-        self.ref_belt_nm = u64::from(self.left)
-            .saturating_add(1)
-            .saturating_mul(PARTITION_NM);
+        self.ref_belt_nm = self.next_boundary_nm();
         self.ref_ground_nm = at_um.saturating_mul(1000);
         self.pass_started = false;
     }
@@ -388,16 +386,21 @@ impl Phase {
         if self.holding {
             return true;
         }
-        let boundary = u64::from(self.left)
-            .saturating_add(1)
-            .saturating_mul(PARTITION_NM);
-        let to_boundary = boundary.saturating_sub(self.belt_nm);
+        let to_boundary = self.next_boundary_nm().saturating_sub(self.belt_nm);
         // r/min (I16F16 bits, < 2³¹) × belt nm per r/min over the look-ahead
         // (< 2¹⁸): < 2⁴⁹.
         let rpm_bits = u64::try_from(drum.to_bits().max(0)).unwrap_or(0);
         let ahead = rpm_bits.saturating_mul(HOLD_NM_PER_RPM) >> 16;
         self.holding = to_boundary <= ahead.saturating_add(HOLD_MARGIN_NM);
         self.holding
+    }
+
+    /// The belt position at which the next partition leaves, nm (2³²
+    /// partitions of 50 mm < 2⁵⁸ nm).
+    fn next_boundary_nm(&self) -> u64 {
+        u64::from(self.left)
+            .saturating_add(1)
+            .saturating_mul(PARTITION_NM)
     }
 
     /// Partitions that left since Start.
@@ -550,10 +553,7 @@ impl Phase {
         let (g0, g1) = (self.step_ground_nm.min(self.ground_nm), self.ground_nm);
         self.step_ground_nm = g1;
         for _ in 0..MAX_EVENTS {
-            // (2³² partitions of 50 mm < 2⁵⁸ nm.)
-            let boundary = u64::from(self.left)
-                .wrapping_add(1)
-                .wrapping_mul(PARTITION_NM);
+            let boundary = self.next_boundary_nm();
             if self.belt_nm < boundary {
                 break;
             }

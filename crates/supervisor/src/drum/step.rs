@@ -320,9 +320,9 @@ impl Supervisor {
                             });
                         }
                         let n = n.min(cap);
-                        let correction = if self.settings.placement == Placement::DistanceLocked
-                            && self.run == RunState::Running
-                        {
+                        let distance_locked = self.settings.placement == Placement::DistanceLocked
+                            && self.run == RunState::Running;
+                        let correction = if distance_locked {
                             let c = self.phase.correction(n);
                             // Smoothed through the link, and while the Hall
                             // gaps read noisy (teeth not learnt yet): an
@@ -355,28 +355,23 @@ impl Supervisor {
                         // And the next plant never leaves for a place
                         // beyond the ground known: the drum holds at its
                         // boundary (crate::phase, "Holding at the boundary").
-                        let distance_locked = self.settings.placement == Placement::DistanceLocked
-                            && self.run == RunState::Running;
-                        let overdue = est.m.state == MotionState::Decaying;
-                        // Two gaps overdue at a steady speed (no chassis
-                        // stops that fast: the sensor may have died); four
-                        // while the tractor slows, where a late edge is
-                        // expected.
-                        let gaps = if self.predictor.slowing() { 4 } else { 2 };
-                        let late = overdue
-                            && est.m.since_edge_ticks.checked_div(gaps).unwrap_or(0)
-                                > self.predictor.period;
                         // (Asked every period: it keeps track of the belt
                         // nearing the boundary.)
                         let near = self.phase.must_hold(self.k3_speed);
-                        let hold = late && near;
-                        if distance_locked
-                            && self.phase.partitions_left() > 0
-                            && ((overdue
-                                && est.m.since_edge_ticks / 4 > self.predictor.period
-                                && self.phase.next_place_beyond_reach())
-                                || hold)
-                        {
+                        // The next edge more than `gaps` tooth periods late.
+                        let overdue_by = |gaps: u32| {
+                            est.m.state == MotionState::Decaying
+                                && est.m.since_edge_ticks.checked_div(gaps).unwrap_or(0)
+                                    > self.predictor.period
+                        };
+                        // Holding: two gaps late at a steady speed (no
+                        // chassis stops that fast: the sensor may have
+                        // died); four while the tractor slows, where a late
+                        // edge is expected.
+                        let hold_after = if self.predictor.slowing() { 4 } else { 2 };
+                        let wait = (overdue_by(4) && self.phase.next_place_beyond_reach())
+                            || (overdue_by(hold_after) && near);
+                        if distance_locked && self.phase.partitions_left() > 0 && wait {
                             I16F16::ZERO
                         } else {
                             n.saturating_add(correction).max(I16F16::ZERO).min(cap)

@@ -484,9 +484,17 @@ impl Hmi {
         // The `sendme` queued before it are answered with the page before.
         self.stale_answers = self.stale_answers.wrapping_add(self.probes);
         self.probes = 0;
-        // `page_instructions`, component by component (no list on the
-        // stack).
-        for comp in Component::on_page(page) {
+        self.write_page_values(true)
+    }
+
+    /// Writes the values of the page's components (`page_instructions`,
+    /// component by component: no list on the stack), the numeric entry
+    /// fields too when `inputs`.
+    fn write_page_values(&mut self, inputs: bool) -> Result<(), TxFull> {
+        for comp in Component::on_page(self.page) {
+            if !inputs && matches!(comp.role, Role::Input(_)) {
+                continue;
+            }
             if let Some(ins) = component_instruction(comp, &self.settings, self.version) {
                 self.send(&ins)?;
             }
@@ -590,16 +598,7 @@ impl Hmi {
     fn uncover(&mut self) {
         self.covered = false;
         self.texts_shown = [None; StatusText::ALL.len()];
-        for comp in Component::on_page(self.page) {
-            if matches!(comp.role, Role::Input(_)) {
-                continue;
-            }
-            if let Some(ins) = component_instruction(comp, &self.settings, self.version) {
-                if self.send(&ins).is_err() {
-                    break;
-                }
-            }
-        }
+        let _ = self.write_page_values(false);
     }
 
     fn send(&mut self, ins: &Instruction<'_>) -> Result<(), TxFull> {
